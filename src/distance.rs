@@ -1,0 +1,1 @@
+//! Sampled symmetric surface distance between two meshes, for tests and benchmarks.

@@ -1,0 +1,1 @@
+//! glb writer.

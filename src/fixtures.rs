@@ -1,0 +1,1 @@
+//! Deterministic procedural meshes for fixtures, tests and benchmarks.

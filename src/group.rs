@@ -1,0 +1,1 @@
+//! One grouping round: greedy merging of adjacent groups by the evaluation function.

@@ -1,0 +1,1 @@
+//! The group hierarchy: grouping rounds with relaxing thresholds, level by level.

@@ -1,0 +1,22 @@
+//! strata: preprocess a huge triangle mesh once into a hierarchical chunk file that a viewer
+//! streams coarse-to-fine, reading only what it needs.
+//!
+//! The pipeline, one module per stage:
+//! import ([`import`]) → clean ([`mesh`]) → group by normal cone ([`cone`], [`group`], [`hierarchy`])
+//! → simplify per level ([`simplify`]) → write the chunk file ([`format`]) → stream ([`stream`]).
+
+pub mod atomic;
+pub mod cone;
+pub mod distance;
+pub mod error;
+pub mod export;
+pub mod fixtures;
+pub mod group;
+pub mod hierarchy;
+pub mod import;
+pub mod mesh;
+pub mod simplify;
+
+pub use error::{Error, Location, Result};
+pub use import::{import, Format, Imported};
+pub use mesh::{Adjacency, CleanReport, Material, Mesh};
