@@ -7,6 +7,7 @@
 
 pub mod atomic;
 pub mod cone;
+pub mod culling;
 pub mod distance;
 pub mod error;
 pub mod export;
