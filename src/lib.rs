@@ -15,6 +15,7 @@ pub mod fixtures;
 pub mod group;
 pub mod hierarchy;
 pub mod import;
+pub mod levels;
 pub mod mesh;
 pub mod simplify;
 
