@@ -72,33 +72,50 @@ pub struct RoundParams {
     pub kn: f32,
 }
 
-/// The score of `u` as a merged group, or `None` when it breaks the round's limits.
-fn evaluate(u: &Unit, p: &RoundParams) -> Option<f32> {
-    if u.cone.half_angle > p.max_angle || u.faces > p.max_faces {
+/// The score of merging `a` and `b` without building the merged summary: the merged cone's
+/// half-angle is exact for the cone of two cones, and the projected area is taken along the merged
+/// area-weighted normal, which is within a few degrees of the merged cone's axis for any group the
+/// thresholds allow.
+fn evaluate_pair(a: &Unit, b: &Unit, p: &RoundParams) -> Option<f32> {
+    let faces = a.faces + b.faces;
+    if faces > p.max_faces {
         return None;
     }
-    let vc = (PI - u.cone.half_angle) / PI;
-    let circle = PI * u.radius * u.radius;
-    let vs = if circle > 0.0 { (u.area_normal.dot(u.cone.axis) / circle).clamp(0.0, 1.0) } else { 1.0 };
-    let vn = (p.max_faces - u.faces) as f32 / p.max_faces as f32;
+    let d = a.cone.axis.dot(b.cone.axis).clamp(-1.0, 1.0).acos();
+    let (ra, rb) = (a.cone.half_angle, b.cone.half_angle);
+    let half_angle = if d + rb <= ra {
+        ra
+    } else if d + ra <= rb {
+        rb
+    } else {
+        (0.5 * (d + ra + rb)).min(PI)
+    };
+    if half_angle > p.max_angle {
+        return None;
+    }
+    let (_, radius) = merge_spheres(a.center, a.radius, b.center, b.radius);
+    let circle = PI * radius * radius;
+    let projected = (a.area_normal + b.area_normal).length();
+    let vc = (PI - half_angle) / PI;
+    let vs = if circle > 0.0 { (projected / circle).min(1.0) } else { 1.0 };
+    let vn = (p.max_faces - faces) as f32 / p.max_faces as f32;
     Some(p.kc * vc + p.ks * vs + p.kn * vn)
 }
 
+/// A group's best merge, as a heap entry: valid while the group's stamp is unchanged.
 #[derive(PartialEq)]
 struct Candidate {
     score: f32,
-    a: u32,
-    b: u32,
-    stamp_a: u32,
-    stamp_b: u32,
+    group: u32,
+    stamp: u32,
 }
 
 impl Eq for Candidate {}
 
 impl Ord for Candidate {
     fn cmp(&self, other: &Self) -> Ordering {
-        // Highest score first; ties broken by unit indices so the result is deterministic.
-        self.score.total_cmp(&other.score).then_with(|| other.a.cmp(&self.a)).then_with(|| other.b.cmp(&self.b))
+        // Highest score first; ties broken by index so the result is deterministic.
+        self.score.total_cmp(&other.score).then_with(|| other.group.cmp(&self.group))
     }
 }
 
@@ -108,14 +125,73 @@ impl PartialOrd for Candidate {
     }
 }
 
+/// Mutable state of a round. Each live group keeps its best partner; the heap holds one entry per
+/// group. The globally best pair is the best of both its groups, so it is always in the heap.
+struct Round<'a> {
+    p: &'a RoundParams,
+    summary: Vec<Unit>,
+    /// Bumped whenever a group's summary or best partner changes; stale heap entries are skipped.
+    stamp: Vec<u32>,
+    /// Bumped whenever a group's summary changes, to detect a partner that changed since.
+    version: Vec<u32>,
+    best: Vec<(u32, u32)>,
+    /// Merged groups point at the group that absorbed them, always a lower index.
+    parent: Vec<u32>,
+    neighbors: Vec<Vec<u32>>,
+    heap: BinaryHeap<Candidate>,
+}
+
+impl Round<'_> {
+    /// Find `g`'s best partner and queue it.
+    fn refresh(&mut self, g: u32) {
+        self.stamp[g as usize] += 1;
+        let mine = &self.summary[g as usize];
+        let mut best: Option<(f32, u32)> = None;
+        for &x in &self.neighbors[g as usize] {
+            if let Some(score) = evaluate_pair(mine, &self.summary[x as usize], self.p) {
+                if best.is_none_or(|(s, b)| score > s || (score == s && x < b)) {
+                    best = Some((score, x));
+                }
+            }
+        }
+        if let Some((score, x)) = best {
+            self.best[g as usize] = (x, self.version[x as usize]);
+            self.heap.push(Candidate { score, group: g, stamp: self.stamp[g as usize] });
+        }
+    }
+
+    /// Absorb group `b` into group `a` (a < b).
+    fn merge(&mut self, a: u32, b: u32) {
+        let (ai, bi) = (a as usize, b as usize);
+        self.summary[ai] = self.summary[ai].merge(&self.summary[bi]);
+        self.parent[bi] = a;
+        self.version[ai] += 1;
+        self.stamp[bi] += 1;
+        let moved = std::mem::take(&mut self.neighbors[bi]);
+        let mut merged = std::mem::take(&mut self.neighbors[ai]);
+        merged.retain(|&y| y != b);
+        for &x in &moved {
+            if x == a {
+                continue;
+            }
+            let list = &mut self.neighbors[x as usize];
+            list.retain(|&y| y != b);
+            if !list.contains(&a) {
+                list.push(a);
+            }
+            if !merged.contains(&x) {
+                merged.push(x);
+            }
+        }
+        self.neighbors[ai] = merged;
+        self.refresh(a);
+    }
+}
+
 /// Run one round over `units` whose adjacency is `pairs` (each unordered pair once, any order).
 /// Returns a group label per unit, labels numbered 0.. in order of each group's lowest unit.
 pub fn group_round(units: &[Unit], pairs: &[[u32; 2]], p: &RoundParams) -> Vec<u32> {
     let n = units.len();
-    let mut summary = units.to_vec();
-    let mut stamp = vec![0u32; n];
-    // Merged units point at the unit that absorbed them (a union-find forest, always to a lower index).
-    let mut parent: Vec<u32> = (0..n as u32).collect();
     let mut neighbors: Vec<Vec<u32>> = vec![Vec::new(); n];
     for &[a, b] in pairs {
         if a != b {
@@ -127,65 +203,42 @@ pub fn group_round(units: &[Unit], pairs: &[[u32; 2]], p: &RoundParams) -> Vec<u
         list.sort_unstable();
         list.dedup();
     }
-
-    let mut heap = BinaryHeap::with_capacity(pairs.len());
-    for &[a, b] in pairs {
-        let (a, b) = (a.min(b), a.max(b));
-        if a == b {
-            continue;
-        }
-        if let Some(score) = evaluate(&summary[a as usize].merge(&summary[b as usize]), p) {
-            heap.push(Candidate { score, a, b, stamp_a: 0, stamp_b: 0 });
-        }
+    let mut r = Round {
+        p,
+        summary: units.to_vec(),
+        stamp: vec![0; n],
+        version: vec![0; n],
+        best: vec![(0, 0); n],
+        parent: (0..n as u32).collect(),
+        neighbors,
+        heap: BinaryHeap::with_capacity(n),
+    };
+    for g in 0..n as u32 {
+        r.refresh(g);
     }
-
-    while let Some(c) = heap.pop() {
-        let (a, b) = (c.a as usize, c.b as usize);
-        if parent[a] != c.a || parent[b] != c.b || stamp[a] != c.stamp_a || stamp[b] != c.stamp_b {
+    while let Some(c) = r.heap.pop() {
+        let g = c.group;
+        if r.parent[g as usize] != g || r.stamp[g as usize] != c.stamp {
             continue;
         }
-        // Absorb b into a (a < b), then re-evaluate a against its neighbours.
-        summary[a] = summary[a].merge(&summary[b]);
-        parent[b] = c.a;
-        stamp[a] += 1;
-        let moved = std::mem::take(&mut neighbors[b]);
-        for &x in &moved {
-            if x as usize == a {
-                continue;
-            }
-            let list = &mut neighbors[x as usize];
-            list.retain(|&y| y != c.b);
-            if !list.contains(&c.a) {
-                list.push(c.a);
-            }
+        let (x, seen_version) = r.best[g as usize];
+        if r.parent[x as usize] != x || r.version[x as usize] != seen_version {
+            r.refresh(g);
+            continue;
         }
-        let mut merged = std::mem::take(&mut neighbors[a]);
-        merged.retain(|&y| y != c.b);
-        for x in moved {
-            if x != c.a && !merged.contains(&x) {
-                merged.push(x);
-            }
-        }
-        for &x in &merged {
-            let (lo, hi) = (c.a.min(x), c.a.max(x));
-            let (sl, sh) = (stamp[lo as usize], stamp[hi as usize]);
-            if let Some(score) = evaluate(&summary[lo as usize].merge(&summary[hi as usize]), p) {
-                heap.push(Candidate { score, a: lo, b: hi, stamp_a: sl, stamp_b: sh });
-            }
-        }
-        neighbors[a] = merged;
+        r.merge(g.min(x), g.max(x));
     }
 
     // Parents always have lower indices, so one forward pass resolves every chain.
     let mut label = vec![0u32; n];
     let mut count = 0u32;
     for i in 0..n {
-        let r = parent[i] as usize;
-        if r == i {
+        let root = r.parent[i] as usize;
+        if root == i {
             label[i] = count;
             count += 1;
         } else {
-            label[i] = label[r];
+            label[i] = label[root];
         }
     }
     label

@@ -47,15 +47,15 @@ pub struct HierarchyParams {
 impl Default for HierarchyParams {
     fn default() -> Self {
         HierarchyParams {
-            cluster_faces: 64,
-            cluster_angle: 40f32.to_radians(),
+            cluster_faces: 32,
+            cluster_angle: 25f32.to_radians(),
             leaf_faces: 512,
             leaf_angle: 75f32.to_radians(),
             angle_step: 30f32.to_radians(),
             growth: 4,
             kc: 1.0,
-            ks: 0.25,
-            kn: 0.1,
+            ks: 0.1,
+            kn: 0.05,
             top_groups: 8,
         }
     }
@@ -193,7 +193,7 @@ pub fn build(mesh: &Mesh, adj: &Adjacency, p: &HierarchyParams) -> Hierarchy {
         .enumerate()
         .flat_map(|(f, n)| n.iter().filter(move |&&g| g != NO_FACE && (f as u32) < g).map(move |&g| [f as u32, g]))
         .collect();
-    let cluster_labels = group_round(&face_units, &face_pairs, &round(p.cluster_angle, p.cluster_faces.min(total)));
+    let cluster_labels = cluster_round(&face_units, &face_pairs, &round(p.cluster_angle, p.cluster_faces.min(total)));
     let mut clusters = make_level(mesh, cluster_labels, None, &[], p.cluster_angle, p.cluster_faces);
     let mut pairs = group_pairs(&face_pairs, &clusters.face_group);
     clusters.neighbors = Lists::from_pairs(&pairs, clusters.groups.len());
@@ -226,6 +226,66 @@ pub fn build(mesh: &Mesh, adj: &Adjacency, p: &HierarchyParams) -> Hierarchy {
         top.parent = vec![NO_PARENT; top.groups.len()];
     }
     Hierarchy { clusters, levels }
+}
+
+/// Faces per independent piece of the cluster round.
+const CLUSTER_PIECE: usize = 16384;
+
+/// The cluster round, run in parallel on pieces of about [`CLUSTER_PIECE`] faces that are
+/// contiguous in Morton order of their centroids: clusters never cross a piece's border, which
+/// costs little (clusters are small) and keeps every heap small and cache-resident. The pieces
+/// depend only on the mesh, so the result does not depend on the number of threads.
+fn cluster_round(units: &[Unit], pairs: &[[u32; 2]], p: &RoundParams) -> Vec<u32> {
+    let n = units.len();
+    if n <= CLUSTER_PIECE {
+        return group_round(units, pairs, p);
+    }
+    let (lo, hi) = units.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), u| (lo.min(u.center), hi.max(u.center)));
+    let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
+    let mut order: Vec<(u32, u32)> =
+        units.iter().enumerate().map(|(i, u)| (morton((u.center - lo) * scale), i as u32)).collect();
+    order.par_sort_unstable();
+    let mut rank = vec![0u32; n];
+    for (r, &(_, i)) in order.iter().enumerate() {
+        rank[i as usize] = r as u32;
+    }
+    let pieces = n.div_ceil(CLUSTER_PIECE);
+    let mut piece_pairs: Vec<Vec<[u32; 2]>> = vec![Vec::new(); pieces];
+    for &[a, b] in pairs {
+        let (ra, rb) = (rank[a as usize] as usize, rank[b as usize] as usize);
+        if ra / CLUSTER_PIECE == rb / CLUSTER_PIECE {
+            piece_pairs[ra / CLUSTER_PIECE].push([(ra % CLUSTER_PIECE) as u32, (rb % CLUSTER_PIECE) as u32]);
+        }
+    }
+    let local: Vec<Vec<u32>> = order
+        .par_chunks(CLUSTER_PIECE)
+        .zip(piece_pairs.par_iter())
+        .map(|(chunk, pp)| {
+            let piece_units: Vec<Unit> = chunk.iter().map(|&(_, i)| units[i as usize]).collect();
+            group_round(&piece_units, pp, p)
+        })
+        .collect();
+    let mut labels = vec![0u32; n];
+    let mut base = 0u32;
+    for (c, piece) in local.iter().enumerate() {
+        for (k, &l) in piece.iter().enumerate() {
+            labels[order[c * CLUSTER_PIECE + k].1 as usize] = base + l;
+        }
+        base += piece.iter().max().map_or(0, |&m| m + 1);
+    }
+    labels
+}
+
+/// Interleave the bits of three 10-bit coordinates.
+fn morton(q: Vec3) -> u32 {
+    fn spread(x: f32) -> u32 {
+        let mut v = (x.max(0.0) as u32).min(1023);
+        v = (v | (v << 16)) & 0x0300_00FF;
+        v = (v | (v << 8)) & 0x0300_F00F;
+        v = (v | (v << 4)) & 0x030C_30C3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(q.x) | (spread(q.y) << 1) | (spread(q.z) << 2)
 }
 
 fn face_unit(mesh: &Mesh, f: usize) -> Unit {

@@ -5,7 +5,7 @@
 //! has a material id into `materials`.
 
 use glam::{DVec3, Vec2, Vec3};
-use std::collections::HashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 /// Marks "no face" in adjacency arrays.
 pub const NO_FACE: u32 = u32::MAX;
@@ -137,7 +137,7 @@ impl Mesh {
         let mut report = CleanReport::default();
 
         // Weld: map every input vertex to the first vertex with the same position (+0 == -0).
-        let mut first_at: HashMap<[u32; 3], u32> = HashMap::with_capacity(self.positions.len());
+        let mut first_at: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(self.positions.len(), Default::default());
         let weld: Vec<u32> = self
             .positions
             .iter()
@@ -150,7 +150,7 @@ impl Mesh {
         drop(first_at);
 
         // Keep faces that are neither degenerate nor duplicates.
-        let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity(self.triangles.len());
+        let mut seen: FxHashSet<[u32; 3]> = FxHashSet::with_capacity_and_hasher(self.triangles.len(), Default::default());
         let mut keep = Vec::with_capacity(self.triangles.len());
         for (f, t) in self.triangles.iter_mut().enumerate() {
             *t = t.map(|v| weld[v as usize]);
@@ -160,7 +160,7 @@ impl Mesh {
             }
             let mut key = *t;
             key.sort_unstable();
-            if seen.insert(key, ()).is_some() {
+            if !seen.insert(key) {
                 report.duplicate_faces += 1;
                 continue;
             }
