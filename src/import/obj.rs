@@ -1,10 +1,637 @@
-//! obj import (placeholder until the reader lands).
+//! Wavefront OBJ import through `tobj`.
+//!
+//! Polygons are fan-triangulated, every object and group lands in one mesh, `usemtl` names become
+//! per-face material ids (a missing or broken .mtl only costs the colors, with a warning), and
+//! per-corner normals, UVs (as written, v up) and vertex colors come along when the file has them.
+//!
+//! tobj reports errors without a line number, takes a zero texture or normal index for a missing
+//! one and, in builds with overflow checks, panics on a far-negative one. So the file is first
+//! checked line by line here: the first malformed `v`/`vt`/`vn`/`f` line or out-of-range index is reported with
+//! its line number, and tobj only ever sees input that passed.
 
 use crate::error::{Error, Result};
-use crate::mesh::Mesh;
+use crate::mesh::{Material, Mesh};
+use glam::{Vec2, Vec3};
+use std::borrow::Cow;
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::io::{Cursor, Read};
 use std::path::Path;
 
-/// Read a obj file into a raw, uncleaned mesh.
-pub fn read(path: &Path, _warnings: &mut Vec<String>) -> Result<Mesh> {
-    Err(Error::invalid(path, None, "obj import is not implemented yet"))
+/// A material library name no file can have: tobj "loads" it from a leading virtual `mtllib` line,
+/// which gives every `usemtl` name its own material id even when no .mtl defines it.
+const USEMTL_TABLE: &str = "\0strata-usemtl-names";
+
+/// Read an OBJ file into a raw, uncleaned mesh.
+pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = String::from_utf8_lossy(&bytes);
+    if text.trim().is_empty() {
+        return Err(Error::invalid(path, None, "empty file"));
+    }
+    let scan = scan(&text).map_err(|(line, what)| Error::at_line(path, line, what))?;
+    if scan.faces == 0 {
+        return Err(Error::invalid(
+            path,
+            None,
+            format!("no faces: {} vertices but no `f` line with 3 or more vertices", scan.positions),
+        ));
+    }
+    scan.warn(warnings);
+
+    let text = tobj_input(text, &scan);
+    let prefix = if scan.usemtl_names.is_empty() { String::new() } else { format!("mtllib {USEMTL_TABLE}\n") };
+    let mut reader = Cursor::new(prefix.as_bytes()).chain(Cursor::new(text.as_bytes()));
+
+    let mtl_warnings = RefCell::new(Vec::<String>::new());
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let load_material_library = |lib: &Path| -> tobj::MTLLoadResult {
+        if lib == Path::new(USEMTL_TABLE) {
+            let materials: Vec<tobj::Material> =
+                scan.usemtl_names.iter().map(|n| tobj::Material { name: n.clone(), ..Default::default() }).collect();
+            let map = scan.usemtl_names.iter().enumerate().map(|(i, n)| (n.clone(), i)).collect();
+            return Ok((materials, map));
+        }
+        let full = dir.join(lib);
+        let result = tobj::load_mtl(&full);
+        if let Err(e) = &result {
+            let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
+            let mut ws = mtl_warnings.borrow_mut();
+            if !ws.contains(&w) {
+                ws.push(w);
+            }
+        }
+        result
+    };
+    let options = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, load_material_library)
+        .map_err(|e| Error::invalid(path, None, format!("OBJ parse error: {e}")))?;
+    warnings.extend(mtl_warnings.into_inner());
+    let materials = materials.unwrap_or_default();
+    build_mesh(path, &scan, &models, &materials, warnings)
+}
+
+/// The text tobj gets: line elements (`l`), which its fan triangulation would turn into polygons,
+/// blanked out, and colors dropped when only some vertices have them (tobj would misalign them).
+fn tobj_input<'t>(text: Cow<'t, str>, scan: &Scan) -> Cow<'t, str> {
+    let partial_colors = scan.colored > 0 && scan.colored < scan.positions;
+    if scan.lines == 0 && !partial_colors {
+        return text;
+    }
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        let mut words = line.split_ascii_whitespace();
+        match words.next() {
+            Some("l") => {}
+            Some("v") if partial_colors => {
+                out.push('v');
+                for w in words.take(3) {
+                    out.push(' ');
+                    out.push_str(w);
+                }
+            }
+            _ => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    Cow::Owned(out)
+}
+
+/// What the line check learned about the file.
+#[derive(Debug, Default)]
+struct Scan {
+    positions: usize,
+    texcoords: usize,
+    normals: usize,
+    /// Vertices that carry an RGB color after their coordinates.
+    colored: usize,
+    /// `f` lines with at least 3 vertices.
+    faces: usize,
+    /// `f` lines with 1 or 2 vertices (points, lines), skipped.
+    short_faces: usize,
+    /// `l` lines, skipped.
+    lines: usize,
+    /// Face corners without a texture / normal index.
+    corners_without_uv: usize,
+    corners_without_normal: usize,
+    /// Distinct `usemtl` names, in order of first use.
+    usemtl_names: Vec<String>,
+}
+
+impl Scan {
+    fn warn(&self, warnings: &mut Vec<String>) {
+        if self.short_faces > 0 {
+            warnings.push(format!("{} faces with fewer than 3 vertices skipped", self.short_faces));
+        }
+        if self.lines > 0 {
+            warnings.push(format!("{} line elements (`l`) skipped", self.lines));
+        }
+        if self.colored > 0 && self.colored < self.positions {
+            warnings.push(format!(
+                "only {} of {} vertices have colors; vertex colors ignored",
+                self.colored, self.positions
+            ));
+        }
+        if self.texcoords > 0 && self.corners_without_uv > 0 {
+            warnings.push(format!(
+                "{} face corners have no texture index and reuse the previous corner's UV",
+                self.corners_without_uv
+            ));
+        }
+        if self.normals > 0 && self.corners_without_normal > 0 {
+            warnings.push(format!(
+                "{} face corners have no normal index and reuse the previous corner's normal",
+                self.corners_without_normal
+            ));
+        }
+    }
+}
+
+/// A face index that points past the end of its array, found before the array's final length
+/// is known (OBJ allows positive indices to vertices defined further down).
+struct ForwardRef {
+    line: usize,
+    kind: usize,
+    index: usize,
+}
+
+const KIND_NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+
+/// Check every line tobj would act on; on the first bad one return its 1-based number and what
+/// is wrong with it.
+fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
+    let mut s = Scan::default();
+    let mut forward = Vec::<ForwardRef>::new();
+    for (i, line) in text.lines().enumerate() {
+        let n = i + 1;
+        let mut words = line.split_ascii_whitespace();
+        match words.next() {
+            Some("v") => {
+                let mut xyz = [0f32; 3];
+                for c in &mut xyz {
+                    *c = number(words.next(), "v", "3 coordinates").map_err(|e| (n, e))?;
+                }
+                if !xyz.iter().all(|c| c.is_finite()) {
+                    return Err((n, "vertex coordinate is NaN or infinite".into()));
+                }
+                let rest = [words.next(), words.next(), words.next(), words.next()];
+                match rest {
+                    [None, ..] => {}
+                    [Some(w), None, ..] => {
+                        if number(Some(w), "v", "a w weight").map_err(|e| (n, e))? == 0.0 {
+                            return Err((n, "vertex weight w is 0".into()));
+                        }
+                    }
+                    [Some(r), Some(g), Some(b), None] => {
+                        for c in [r, g, b] {
+                            number(Some(c), "v", "an RGB color").map_err(|e| (n, e))?;
+                        }
+                        s.colored += 1;
+                    }
+                    _ => {
+                        let k = 3 + rest.iter().flatten().count() + words.count();
+                        return Err((n, format!("v has {k} numbers; expected 3, 4 (x y z w) or 6 (x y z r g b)")));
+                    }
+                }
+                s.positions += 1;
+            }
+            Some("vt") => {
+                for _ in 0..2 {
+                    number(words.next(), "vt", "2 coordinates").map_err(|e| (n, e))?;
+                }
+                s.texcoords += 1;
+            }
+            Some("vn") => {
+                for _ in 0..3 {
+                    number(words.next(), "vn", "3 components").map_err(|e| (n, e))?;
+                }
+                s.normals += 1;
+            }
+            Some("f") => {
+                let counts = [s.positions, s.texcoords, s.normals];
+                let mut corners = 0;
+                for token in words {
+                    let mut split = token.split('/');
+                    let parts = [split.next(), split.next(), split.next()];
+                    if split.next().is_some() {
+                        return Err((n, format!("face vertex '{token}' has more than 3 '/'-separated indices")));
+                    }
+                    if parts[0].is_none_or(str::is_empty) {
+                        return Err((n, format!("face vertex '{token}' has no position index")));
+                    }
+                    for (kind, part) in parts.iter().enumerate() {
+                        let Some(part) = part.filter(|p| !p.is_empty()) else { continue };
+                        let what = KIND_NAMES[kind];
+                        let index: i64 =
+                            part.parse().map_err(|_| (n, format!("face {what} index '{part}' is not an integer")))?;
+                        if index == 0 {
+                            return Err((n, format!("face {what} index 0 (OBJ indices start at 1)")));
+                        }
+                        if index < 0 && index.unsigned_abs() > counts[kind] as u64 {
+                            return Err((
+                                n,
+                                format!(
+                                    "relative {what} index {index} reaches before the first of {} so far",
+                                    counts[kind]
+                                ),
+                            ));
+                        }
+                        if index > 0 && index as u64 > counts[kind] as u64 {
+                            forward.push(ForwardRef { line: n, kind, index: index as usize });
+                        }
+                    }
+                    s.corners_without_uv += usize::from(parts[1].is_none_or(str::is_empty));
+                    s.corners_without_normal += usize::from(parts[2].is_none_or(str::is_empty));
+                    corners += 1;
+                }
+                match corners {
+                    0 => return Err((n, "face with no vertices".into())),
+                    1 | 2 => s.short_faces += 1,
+                    _ => s.faces += 1,
+                }
+            }
+            Some("l") => s.lines += 1,
+            Some("usemtl") => {
+                // The name as tobj reads it: everything after the line's first space.
+                let name = line.split_once(' ').map_or("", |(_, rest)| rest).trim();
+                if name.is_empty() {
+                    return Err((n, "usemtl without a material name".into()));
+                }
+                if !s.usemtl_names.iter().any(|m| m == name) {
+                    s.usemtl_names.push(name.to_string());
+                }
+            }
+            _ => {}
+        }
+    }
+    let totals = [s.positions, s.texcoords, s.normals];
+    if let Some(f) = forward.iter().find(|f| f.index > totals[f.kind]) {
+        let what = KIND_NAMES[f.kind];
+        return Err((
+            f.line,
+            format!("face {what} index {} out of range: the file has {} {what}s", f.index, totals[f.kind]),
+        ));
+    }
+    Ok(s)
+}
+
+/// Parse one number of a `v`/`vt`/`vn` line, or say what was expected.
+fn number(word: Option<&str>, element: &str, expected: &str) -> std::result::Result<f32, String> {
+    match word {
+        None => Err(format!("{element} needs {expected}")),
+        Some(w) => w.parse().map_err(|_| format!("{element}: '{w}' is not a number")),
+    }
+}
+
+/// Concatenate tobj's models into one mesh, checking every index tobj produced.
+fn build_mesh(
+    path: &Path,
+    scan: &Scan,
+    models: &[tobj::Model],
+    materials: &[tobj::Material],
+    warnings: &mut Vec<String>,
+) -> Result<Mesh> {
+    let bad = |model: &str, what: &str| {
+        Error::at_element(path, format!("object '{model}'"), format!("inconsistent {what} from the OBJ parser"))
+    };
+    let faces: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
+    let with_normals = scan.normals > 0;
+    let with_uvs = scan.texcoords > 0;
+    let with_colors = scan.colored > 0 && scan.colored == scan.positions;
+    let mut mesh = Mesh {
+        triangles: Vec::with_capacity(faces),
+        normals: Vec::with_capacity(if with_normals { 3 * faces } else { 0 }),
+        uvs: Vec::with_capacity(if with_uvs { 3 * faces } else { 0 }),
+        colors: Vec::with_capacity(if with_colors { 3 * faces } else { 0 }),
+        face_materials: Vec::with_capacity(faces),
+        ..Mesh::default()
+    };
+    // Output material id per tobj material id (None = no usemtl), in order of first use.
+    let mut material_ids: HashMap<Option<usize>, u32> = HashMap::new();
+    let mut undefined = Vec::<&str>::new();
+
+    for model in models {
+        let m = &model.mesh;
+        let name = model.name.as_str();
+        if m.indices.len() % 3 != 0 || m.positions.len() % 3 != 0 {
+            return Err(bad(name, "triangle list"));
+        }
+        let vertex_count = m.positions.len() / 3;
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(m.positions.chunks_exact(3).map(Vec3::from_slice));
+        for t in m.indices.chunks_exact(3) {
+            if t.iter().any(|&v| v as usize >= vertex_count) {
+                return Err(bad(name, "vertex index"));
+            }
+            mesh.triangles.push([base + t[0], base + t[1], base + t[2]]);
+        }
+        if with_normals {
+            if m.normal_indices.len() != m.indices.len() {
+                return Err(bad(name, "normal indices"));
+            }
+            for &k in &m.normal_indices {
+                let k = 3 * k as usize;
+                let n = m.normals.get(k..k + 3).ok_or_else(|| bad(name, "normal index"))?;
+                mesh.normals.push(Vec3::from_slice(n));
+            }
+        }
+        if with_uvs {
+            if m.texcoord_indices.len() != m.indices.len() {
+                return Err(bad(name, "texture coordinate indices"));
+            }
+            for &k in &m.texcoord_indices {
+                let k = 2 * k as usize;
+                let uv = m.texcoords.get(k..k + 2).ok_or_else(|| bad(name, "texture coordinate index"))?;
+                mesh.uvs.push(Vec2::from_slice(uv));
+            }
+        }
+        if with_colors {
+            for &v in &m.indices {
+                let k = 3 * v as usize;
+                let c = m.vertex_color.get(k..k + 3).ok_or_else(|| bad(name, "vertex colors"))?;
+                mesh.colors.push([unit_to_u8(c[0]), unit_to_u8(c[1]), unit_to_u8(c[2]), 255]);
+            }
+        }
+
+        let next = material_ids.len() as u32;
+        let id = *material_ids.entry(m.material_id).or_insert_with(|| {
+            let material = match m.material_id.and_then(|i| materials.get(i)) {
+                None => Material::default(),
+                Some(t) => {
+                    if m.material_id.is_some_and(|i| i < scan.usemtl_names.len()) {
+                        undefined.push(&t.name);
+                    }
+                    material_from(t)
+                }
+            };
+            mesh.materials.push(material);
+            next
+        });
+        mesh.face_materials.extend(std::iter::repeat_n(id, m.indices.len() / 3));
+    }
+    if !undefined.is_empty() {
+        warnings.push(format!("materials without a definition in any loaded .mtl: {}", undefined.join(", ")));
+    }
+    Ok(mesh)
+}
+
+fn material_from(t: &tobj::Material) -> Material {
+    let default = Material::default();
+    let [r, g, b] = t.diffuse.unwrap_or([default.base_color[0], default.base_color[1], default.base_color[2]]);
+    Material {
+        name: t.name.clone(),
+        base_color: [r, g, b, t.dissolve.unwrap_or(1.0)],
+        texture: t.diffuse_texture.clone(),
+    }
+}
+
+fn unit_to_u8(c: f32) -> u8 {
+    (c.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::error::Location;
+    use std::path::PathBuf;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    /// A fresh directory under the system temp dir holding `files` (name, contents); removed on drop.
+    struct TempDir(PathBuf);
+
+    impl TempDir {
+        fn with(files: &[(&str, &str)]) -> Self {
+            static NEXT: AtomicUsize = AtomicUsize::new(0);
+            let dir = std::env::temp_dir().join(format!(
+                "strata-obj-test-{}-{}",
+                std::process::id(),
+                NEXT.fetch_add(1, Ordering::Relaxed)
+            ));
+            std::fs::create_dir_all(&dir).unwrap();
+            for (name, text) in files {
+                std::fs::write(dir.join(name), text).unwrap();
+            }
+            TempDir(dir)
+        }
+
+        fn read(&self, name: &str) -> (Result<Mesh>, Vec<String>) {
+            let mut warnings = Vec::new();
+            let mesh = read(&self.0.join(name), &mut warnings);
+            (mesh, warnings)
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn read_str(text: &str) -> (Result<Mesh>, Vec<String>) {
+        TempDir::with(&[("m.obj", text)]).read("m.obj")
+    }
+
+    fn ok(text: &str) -> Mesh {
+        let mesh = read_str(text).0.unwrap();
+        mesh.validate().unwrap();
+        mesh
+    }
+
+    fn error_line(text: &str) -> (usize, String) {
+        match read_str(text).0 {
+            Err(e @ Error::Invalid { .. }) => match e.location() {
+                Some(Location::Line(n)) => (*n, e.to_string()),
+                _ => panic!("error without a line: {e}"),
+            },
+            other => panic!("expected an error, got {other:?}"),
+        }
+    }
+
+    /// The corner positions of every triangle, so tests need not know tobj's vertex order.
+    fn corners(mesh: &Mesh) -> Vec<[[f32; 3]; 3]> {
+        mesh.triangles.iter().map(|t| t.map(|v| mesh.positions[v as usize].to_array())).collect()
+    }
+
+    const SQUARE: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\n";
+
+    #[test]
+    fn quads_and_ngons_are_fan_triangulated() {
+        let mesh = ok(&format!("{SQUARE}f 1 2 3 4\nf 1 2 3 5 4\n"));
+        let p = |i: usize| {
+            let v: Vec<f32> = SQUARE.lines().nth(i - 1).unwrap()[2..].split(' ').map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        };
+        let expected =
+            vec![[p(1), p(2), p(3)], [p(1), p(3), p(4)], [p(1), p(2), p(3)], [p(1), p(3), p(5)], [p(1), p(5), p(4)]];
+        assert_eq!(corners(&mesh), expected);
+        assert!(mesh.normals.is_empty() && mesh.uvs.is_empty() && mesh.colors.is_empty());
+    }
+
+    #[test]
+    fn negative_indices_are_relative_to_the_vertices_so_far() {
+        let relative = ok(&format!("{SQUARE}f -5 -4 -3 -2\nv 9 9 9\nf -1 -6 -5\n"));
+        let absolute = ok(&format!("{SQUARE}f 1 2 3 4\nv 9 9 9\nf 6 1 2\n"));
+        assert_eq!(corners(&relative), corners(&absolute));
+        assert_eq!(relative.face_count(), 3);
+    }
+
+    #[test]
+    fn objects_and_groups_merge_into_one_mesh() {
+        let mesh = ok(&format!("{SQUARE}o first\nf 1 2 3\ng second\nf 1 3 4\no third\ng\nf 2 3 5\n"));
+        assert_eq!(mesh.face_count(), 3);
+        assert_eq!(corners(&mesh)[2], [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.5, 1.5, 0.0]]);
+    }
+
+    #[test]
+    fn faces_may_come_before_their_vertices() {
+        let mesh = ok(&format!("f 1 2 3\n{SQUARE}"));
+        assert_eq!(corners(&mesh), vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]]);
+    }
+
+    #[test]
+    fn corner_normals_uvs_and_colors() {
+        let text = "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nvn 0 0 -1\n\
+                    f 1/1/1 2/2/1 3/3/2\nf 3/1/2 2/3/1 1/2/1\n";
+        let mesh = ok(text);
+        assert_eq!(mesh.face_count(), 2);
+        let z = Vec3::Z;
+        assert_eq!(mesh.normals, vec![z, z, -z, -z, z, z]);
+        let uv = |u, v| Vec2::new(u, v);
+        assert_eq!(mesh.uvs, vec![uv(0., 0.), uv(1., 0.), uv(0., 1.), uv(0., 0.), uv(0., 1.), uv(1., 0.)]);
+        let (r, g, b) = ([255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]);
+        assert_eq!(mesh.colors, vec![r, g, b, b, g, r]);
+    }
+
+    #[test]
+    fn colors_on_only_some_vertices_are_dropped() {
+        let (mesh, warnings) = read_str("v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
+        let mesh = mesh.unwrap();
+        assert!(mesh.colors.is_empty());
+        assert_eq!(mesh.positions, vec![Vec3::ZERO, Vec3::X, Vec3::Y]);
+        assert!(warnings[0].contains("only 2 of 3 vertices have colors"), "{warnings:?}");
+    }
+
+    #[test]
+    fn usemtl_with_mtl_gives_colors_and_textures() {
+        let mtl = "newmtl red\nKd 1 0 0\nmap_Kd tex/red skin.png\nnewmtl blue\nKd 0 0 1\nd 0.5\n";
+        let obj =
+            format!("mtllib m.mtl\n{SQUARE}f 1 2 3\nusemtl red\nf 1 3 4\nusemtl blue\nf 2 3 5\nusemtl red\nf 1 2 5\n");
+        let (mesh, warnings) = TempDir::with(&[("m.obj", &obj), ("m.mtl", mtl)]).read("m.obj");
+        let mesh = mesh.unwrap();
+        mesh.validate().unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        let names: Vec<&str> = mesh.face_materials.iter().map(|&m| mesh.materials[m as usize].name.as_str()).collect();
+        assert_eq!(names, ["default", "red", "blue", "red"]);
+        let red = &mesh.materials[mesh.face_materials[1] as usize];
+        assert_eq!(red.base_color, [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(red.texture.as_deref(), Some("tex/red skin.png"));
+        assert_eq!(mesh.materials[mesh.face_materials[2] as usize].base_color, [0.0, 0.0, 1.0, 0.5]);
+    }
+
+    #[test]
+    fn usemtl_without_mtl_keeps_materials_apart_and_warns() {
+        for header in ["mtllib missing.mtl\n", ""] {
+            let (mesh, warnings) =
+                read_str(&format!("{header}{SQUARE}usemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\nusemtl a\nf 2 3 5\n"));
+            let mesh = mesh.unwrap();
+            mesh.validate().unwrap();
+            let names: Vec<&str> =
+                mesh.face_materials.iter().map(|&m| mesh.materials[m as usize].name.as_str()).collect();
+            assert_eq!(names, ["a", "b", "a"]);
+            assert!(warnings.iter().any(|w| w.contains("a, b")), "{warnings:?}");
+            if !header.is_empty() {
+                assert!(warnings.iter().any(|w| w.contains("missing.mtl")), "{warnings:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn broken_mtl_is_a_warning() {
+        let obj = format!("mtllib m.mtl\n{SQUARE}usemtl a\nf 1 2 3\n");
+        let (mesh, warnings) = TempDir::with(&[("m.obj", &obj), ("m.mtl", "newmtl a\nKd 1 zero 0\n")]).read("m.obj");
+        let mesh = mesh.unwrap();
+        assert_eq!(mesh.materials[0].name, "a");
+        assert!(warnings.iter().any(|w| w.contains("m.mtl")), "{warnings:?}");
+    }
+
+    #[test]
+    fn lines_and_points_are_skipped_with_a_warning() {
+        let (mesh, warnings) = read_str(&format!("{SQUARE}l 1 2 3 4\nf 1 2\nf 1 2 3\n"));
+        assert_eq!(mesh.unwrap().face_count(), 1);
+        assert_eq!(warnings.len(), 2, "{warnings:?}");
+    }
+
+    #[test]
+    fn bad_lines_are_reported_with_their_line_number() {
+        let cases: &[(&str, usize, &str)] = &[
+            ("v 0 0 0\nv 1 0\nf 1 2 1\n", 2, "3 coordinates"),
+            ("v 0 0 0\nv 1 0 zero\n", 2, "'zero' is not a number"),
+            ("v 0 0 0\nv 1 0 0 0\n", 2, "weight w is 0"),
+            ("v 0 0 0\nv 1 0 0 1 1\n", 2, "5 numbers"),
+            ("v 0 0 0\nv nan 0 0\n", 2, "NaN"),
+            ("# c\nvt 0.5\n", 2, "vt needs 2"),
+            ("vn 0 1\n", 1, "vn needs 3"),
+            (&format!("{SQUARE}f 1 2 0\n"), 6, "index 0"),
+            (&format!("{SQUARE}f 1 2 x\n"), 6, "'x' is not an integer"),
+            (&format!("{SQUARE}f 1 2 3\nf 1 2 9\nf 1 2 10\n"), 7, "vertex index 9 out of range"),
+            (&format!("{SQUARE}f -6 1 2\n"), 6, "relative vertex index -6"),
+            (&format!("{SQUARE}vt 0 0\nf 1/1 2/2 3/1\n"), 7, "texture coordinate index 2"),
+            (&format!("{SQUARE}vt 0 0\nf 1/0 2/1 3/1\n"), 7, "texture coordinate index 0"),
+            (&format!("{SQUARE}vt 0 0\nf 1/-2 2/1 3/1\n"), 7, "relative texture coordinate index -2"),
+            (&format!("{SQUARE}vt 0 0\nf 1/-3 2/1 3/1\n"), 7, "relative texture coordinate index -3"),
+            (&format!("{SQUARE}vn 0 0 1\nf 1//1 2//-9 3//1\n"), 7, "relative normal index -9"),
+            (&format!("{SQUARE}vn 0 0 1\nf 1//1 2//1 3//0\n"), 7, "normal index 0"),
+            (&format!("{SQUARE}f 1/1/1/1 2 3\n"), 6, "more than 3"),
+            (&format!("{SQUARE}f /1 2 3\n"), 6, "no position index"),
+            (&format!("{SQUARE}f\n"), 6, "no vertices"),
+            (&format!("{SQUARE}usemtl\nf 1 2 3\n"), 6, "usemtl without"),
+        ];
+        for (text, line, what) in cases {
+            let (got, message) = error_line(text);
+            assert_eq!(got, *line, "{message}");
+            assert!(message.contains(what), "{message} should mention {what}");
+            assert!(message.contains("m.obj"), "{message}");
+        }
+    }
+
+    #[test]
+    fn empty_files_and_files_without_faces_are_errors() {
+        for (text, what) in [("", "empty"), ("  \n# nothing\n", "no faces"), (SQUARE, "no faces")] {
+            let e = read_str(text).0.unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+        }
+        let e = read(Path::new("/nonexistent/strata.obj"), &mut Vec::new()).unwrap_err();
+        assert!(matches!(e, Error::Io { .. }));
+    }
+
+    /// One face corner: a position index and optional texture and normal indices.
+    fn corner() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::strategy::Strategy;
+        let index = || proptest::sample::select(vec!["1", "2", "3", "-1", "-3", "-5", "0", "4", "x"]);
+        (index(), index(), index(), 0..4usize).prop_map(|(v, t, n, form)| match form {
+            0 => v.to_string(),
+            1 => format!("{v}/{t}"),
+            2 => format!("{v}//{n}"),
+            _ => format!("{v}/{t}/{n}"),
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(500))]
+
+        /// Faces with arbitrary index combinations, after three vertices, two texture coordinates
+        /// and a normal, never panic; what imports is a valid mesh.
+        #[test]
+        fn arbitrary_faces_never_panic(
+            faces in proptest::collection::vec(proptest::collection::vec(corner(), 0..6), 1..4),
+            other in proptest::sample::select(vec!["", "l 1 2 3", "v 1 2", "vt 0.5 0.5", "usemtl m", "o x", "f 1 2"]),
+        ) {
+            let body: String = faces.iter().map(|f| format!("f {}\n", f.join(" "))).collect();
+            let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 1\nvn 0 0 1\n{other}\n{body}");
+            if let (Ok(mesh), _) = read_str(&text) {
+                proptest::prop_assert!(mesh.validate().is_ok());
+                proptest::prop_assert!(mesh.face_count() > 0);
+            }
+        }
+    }
 }
