@@ -28,15 +28,15 @@ impl fmt::Display for Location {
 /// An error reading or writing a file.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: {cause}", path.display())]
+    Io { path: PathBuf, cause: std::io::Error },
     #[error("{}: {}{message}", path.display(), at.as_ref().map(|a| format!("{a}: ")).unwrap_or_default())]
     Invalid { path: PathBuf, at: Option<Location>, message: String },
 }
 
 impl Error {
     pub fn io(path: &Path, source: std::io::Error) -> Self {
-        Error::Io { path: path.to_path_buf(), source }
+        Error::Io { path: path.to_path_buf(), cause: source }
     }
 
     pub fn invalid(path: &Path, at: Option<Location>, message: impl Into<String>) -> Self {
