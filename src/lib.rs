@@ -12,6 +12,7 @@ pub mod distance;
 pub mod error;
 pub mod export;
 pub mod fixtures;
+pub mod format;
 pub mod group;
 pub mod hierarchy;
 pub mod import;

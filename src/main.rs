@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::hierarchy::{self, HierarchyParams, Level};
-use strata::{culling, import, mesh, Format};
+use strata::{culling, format, import, mesh, Format};
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -21,6 +21,48 @@ enum Command {
     Info(InfoArgs),
     /// Group faces by normal cone into a hierarchy and measure hierarchical back-face culling.
     Groups(GroupsArgs),
+    /// Show a strata file: header, chunks, levels, and nodes on request.
+    Inspect(InspectArgs),
+    /// Check every checksum and structural rule of a strata file; exit non-zero on any problem.
+    Verify(VerifyArgs),
+    /// Write one level of a strata file as a mesh (.obj, .ply or .glb).
+    Extract(ExtractArgs),
+}
+
+#[derive(Args)]
+struct InspectArgs {
+    /// A .strata file.
+    file: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+    /// List the node tree from the top level down D levels.
+    #[arg(long, value_name = "D")]
+    depth: Option<u32>,
+    /// List every node of level L.
+    #[arg(long, value_name = "L")]
+    level: Option<u32>,
+    /// Show node N and the chunks of its geometry.
+    #[arg(long, value_name = "N")]
+    node: Option<u32>,
+}
+
+#[derive(Args)]
+struct VerifyArgs {
+    /// A .strata file.
+    file: PathBuf,
+}
+
+#[derive(Args)]
+struct ExtractArgs {
+    /// A .strata file.
+    file: PathBuf,
+    /// Level to write (0 = full detail).
+    #[arg(long, default_value_t = 0)]
+    level: u32,
+    /// Output mesh: .obj, .ply or .glb.
+    #[arg(short, long)]
+    output: PathBuf,
 }
 
 /// Where a mesh comes from.
@@ -132,6 +174,9 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Info(a) => info(a),
         Command::Groups(a) => groups(a),
+        Command::Inspect(a) => inspect(a),
+        Command::Verify(a) => verify(a),
+        Command::Extract(a) => extract(a),
     }
 }
 
@@ -276,4 +321,74 @@ fn groups(a: GroupsArgs) -> Result<()> {
 fn group_color(g: u32) -> [u8; 4] {
     let h = (g as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
     [(h >> 16) as u8 | 0x30, (h >> 32) as u8 | 0x30, (h >> 48) as u8 | 0x30, 255]
+}
+
+fn inspect(a: InspectArgs) -> Result<()> {
+    let mut rd = format::Reader::open_path(&a.file)?;
+    let select = format::inspect::Selection { depth: a.depth, level: a.level, node: a.node };
+    let v = format::inspect::inspect(&mut rd, select)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&v)?);
+        return Ok(());
+    }
+    let h = &v.header;
+    println!("strata file {} (format {}, {} bytes, written by {})", a.file.display(), v.version, h.file_size, h.tool);
+    let units = if h.metres_per_unit > 0.0 { format!("{} m per unit", h.metres_per_unit) } else { "unknown units".into() };
+    println!("input     {} vertices, {} faces, {units}", h.input_vertices, h.input_faces);
+    println!("bounds    {:?} .. {:?}", h.min, h.max);
+    println!("contents  {} levels, {} nodes, {} culling clusters, attributes {:?}", h.levels, h.nodes, h.clusters, h.attributes);
+    println!("materials {}", h.materials.join(", "));
+    println!("chunks");
+    for c in &v.chunks {
+        println!("  {}{} at {} ({} bytes, flags {})", "  ".repeat(c.depth as usize), c.id, c.offset, c.size, c.flags);
+    }
+    for l in v.levels.iter().rev() {
+        println!("  GEOM x{} level {} at {}..{} ({} bytes)", l.nodes, l.level, l.start, l.end, l.bytes);
+    }
+    println!("{:>5} {:>6} {:>10} {:>10} {:>11} {:>10} {:>9} {:>10}", "level", "nodes", "faces", "vertices", "bytes", "bytes/face", "cone max", "error max");
+    for l in v.levels.iter().rev() {
+        println!(
+            "{:>5} {:>6} {:>10} {:>10} {:>11} {:>10.2} {:>8.1}° {:>10.4}",
+            l.level, l.nodes, l.faces, l.vertices, l.bytes, l.bytes as f64 / l.faces.max(1) as f64, l.cone_deg_max, l.error_max
+        );
+    }
+    if !v.nodes.is_empty() {
+        println!("{:>7} {:>5} {:>7} {:>7} {:>8} {:>7} {:>10} {:>9} children", "node", "level", "parent", "faces", "vertices", "cone", "error", "bytes");
+    }
+    for n in &v.nodes {
+        let parent = n.parent.map_or("-".to_string(), |p| p.to_string());
+        let children = match (n.children.first(), n.children.last()) {
+            (Some(f), Some(l)) => format!("{f}..={l}"),
+            _ => "-".into(),
+        };
+        println!(
+            "{}{:>7} {:>5} {:>7} {:>7} {:>8} {:>6.1}° {:>10.4} {:>9} {children}",
+            "  ".repeat(n.depth as usize), n.node, n.level, parent, n.faces, n.vertices, n.cone_deg, n.error, n.bytes
+        );
+        for c in &n.chunks {
+            println!("    {}{} at {} ({} bytes, flags {})", "  ".repeat(c.depth as usize), c.id, c.offset, c.size, c.flags);
+        }
+    }
+    Ok(())
+}
+
+fn verify(a: VerifyArgs) -> Result<()> {
+    let v = format::verify_path(&a.file);
+    if v.is_sound() {
+        println!("{}: sound ({} chunks, {} nodes checked)", a.file.display(), v.chunks, v.nodes);
+        return Ok(());
+    }
+    for p in v.problems.iter().take(20) {
+        eprintln!("problem: {p}");
+    }
+    let more = if v.problems.len() >= format::verify::MAX_PROBLEMS { " or more" } else { "" };
+    anyhow::bail!("{}: {} problem(s){more} found", a.file.display(), v.problems.len())
+}
+
+fn extract(a: ExtractArgs) -> Result<()> {
+    let mut rd = format::Reader::open_path(&a.file)?;
+    let mesh = format::to_mesh(&mut rd, a.level)?;
+    strata::export::write(&a.output, &mesh)?;
+    println!("wrote level {} ({} faces, {} vertices) to {}", a.level, mesh.face_count(), mesh.vertex_count(), a.output.display());
+    Ok(())
 }

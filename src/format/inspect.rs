@@ -1,0 +1,172 @@
+//! What `strata inspect` shows of a file: header, chunk tree, a summary per level, and on request
+//! node rows (a level, one node, or the tree from the top down to a depth). Built from the
+//! skeleton alone, except for one node's sub-chunks when a single node is asked for.
+
+use super::read::ChunkInfo;
+use super::{Reader, NO_PARENT};
+use crate::error::{Error, Result};
+use std::io::{Read, Seek};
+
+/// Which nodes to list.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Selection {
+    /// The node tree from the top level down this many levels.
+    pub depth: Option<u32>,
+    /// Every node of this level.
+    pub level: Option<u32>,
+    /// This node, with its geometry's sub-chunks.
+    pub node: Option<u32>,
+}
+
+/// The `HEAD` chunk, for display.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HeaderView {
+    pub file_size: u64,
+    pub metres_per_unit: f64,
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+    pub attributes: super::Attributes,
+    pub levels: u32,
+    pub nodes: u32,
+    pub materials: Vec<String>,
+    pub input_vertices: u64,
+    pub input_faces: u64,
+    pub clusters: u32,
+    pub params: crate::hierarchy::HierarchyParams,
+    pub level_ratio: f32,
+    pub tool: String,
+}
+
+/// One level's totals.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct LevelView {
+    pub level: u32,
+    pub nodes: u32,
+    pub faces: u64,
+    pub vertices: u64,
+    pub bytes: u64,
+    /// Offsets of the level's first `GEOM` chunk and of the byte after its last.
+    pub start: u64,
+    pub end: u64,
+    pub cone_deg_max: f32,
+    pub error_max: f32,
+}
+
+/// One node.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NodeView {
+    pub node: u32,
+    /// Depth in the listed tree (0 = top level); 0 for other listings.
+    pub depth: u32,
+    pub level: u32,
+    pub parent: Option<u32>,
+    pub children: Vec<u32>,
+    pub neighbors: usize,
+    pub faces: u32,
+    pub vertices: u32,
+    pub cone_deg: f32,
+    pub radius: f32,
+    pub error: f32,
+    pub offset: u64,
+    pub bytes: u32,
+    /// The geometry's sub-chunks, when one node is asked for.
+    pub chunks: Vec<ChunkInfo>,
+}
+
+/// Everything `inspect` shows.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Inspection {
+    pub version: String,
+    pub header: HeaderView,
+    /// Chunks read at open (`HEAD`, `SKEL` and its sub-chunks); geometry chunks are summarized per
+    /// level in `levels`.
+    pub chunks: Vec<ChunkInfo>,
+    /// Finest level first.
+    pub levels: Vec<LevelView>,
+    pub nodes: Vec<NodeView>,
+}
+
+/// Describe an open file; nodes as `select` asks.
+pub fn inspect<R: Read + Seek>(rd: &mut Reader<R>, select: Selection) -> Result<Inspection> {
+    let h = rd.header().clone();
+    let header = HeaderView {
+        file_size: h.file_size,
+        metres_per_unit: h.metres_per_unit,
+        min: h.min.to_array(),
+        max: h.max.to_array(),
+        attributes: h.attributes,
+        levels: h.levels,
+        nodes: h.nodes,
+        materials: rd.materials().iter().map(|m| m.name.clone()).collect(),
+        input_vertices: h.input_vertices,
+        input_faces: h.input_faces,
+        clusters: h.clusters,
+        params: h.params,
+        level_ratio: h.level_ratio,
+        tool: h.tool.clone(),
+    };
+    let levels = rd
+        .levels()
+        .iter()
+        .enumerate()
+        .map(|(l, r)| {
+            let nodes = &rd.nodes()[r.first_node as usize..(r.first_node + r.nodes) as usize];
+            LevelView {
+                level: l as u32,
+                nodes: r.nodes,
+                faces: r.faces,
+                vertices: r.vertices,
+                bytes: r.bytes,
+                start: nodes.first().map_or(0, |n| n.offset),
+                end: nodes.first().map_or(0, |n| n.offset) + r.bytes,
+                cone_deg_max: nodes.iter().map(|n| n.cone.half_angle.to_degrees()).fold(0.0, f32::max),
+                error_max: nodes.iter().map(|n| n.error).fold(0.0, f32::max),
+            }
+        })
+        .collect();
+    let mut nodes = Vec::new();
+    if let Some(l) = select.level {
+        if l >= h.levels {
+            return Err(Error::invalid(rd.path(), None, format!("level {l} does not exist (the file has levels 0..{})", h.levels - 1)));
+        }
+        nodes.extend(rd.level_nodes(l).map(|i| view(rd, i, 0)));
+    }
+    if let Some(depth) = select.depth.filter(|&d| d > 0) {
+        let mut stack: Vec<(u32, u32)> = rd.level_nodes(h.levels - 1).rev().map(|i| (i, 0)).collect();
+        while let Some((i, d)) = stack.pop() {
+            nodes.push(view(rd, i, d));
+            if d + 1 < depth {
+                stack.extend(rd.children(i).rev().map(|c| (c, d + 1)));
+            }
+        }
+    }
+    if let Some(i) = select.node {
+        if i >= h.nodes {
+            return Err(Error::invalid(rd.path(), None, format!("node {i} does not exist (the file has {} nodes)", h.nodes)));
+        }
+        let mut v = view(rd, i, 0);
+        v.chunks = rd.node_chunks(i)?;
+        nodes.push(v);
+    }
+    Ok(Inspection { version: format!("{}.{}", h.major, h.minor), header, chunks: rd.skeleton_chunks().to_vec(), levels, nodes })
+}
+
+fn view<R: Read + Seek>(rd: &Reader<R>, i: u32, depth: u32) -> NodeView {
+    let n = rd.nodes()[i as usize];
+    NodeView {
+        node: i,
+        depth,
+        level: n.level,
+        parent: (n.parent != NO_PARENT).then_some(n.parent),
+        children: rd.children(i).collect(),
+        neighbors: rd.neighbors(i).len(),
+        faces: n.faces,
+        vertices: n.vertices,
+        cone_deg: n.cone.half_angle.to_degrees(),
+        radius: n.radius,
+        error: n.error,
+        offset: n.offset,
+        bytes: n.size,
+        chunks: Vec::new(),
+    }
+}

@@ -1,0 +1,211 @@
+//! The strata chunk file (METHOD.md §5), specified byte by byte in `format-spec/strata-v1.md`.
+//!
+//! A 16-byte prologue (magic, version) is followed by chunks: `HEAD` (what the file holds), `SKEL`
+//! (the skeleton: levels, node table, neighbours, materials) and one `GEOM` chunk per node, coarsest
+//! level first, so that a prefix of the file is a coarse model. A viewer reads the prologue, `HEAD`
+//! and `SKEL` at [`Reader::open`] and each node's geometry on demand with [`Reader::read_node`].
+//!
+//! - [`chunk`]: the frame every chunk shares (ID, flags, size, payload, CRC-32, padding);
+//! - [`octa`]: the octahedral normal code;
+//! - [`write`](mod@write): [`write`] and [`write_to`] turn a hierarchy and its level meshes into a file;
+//! - [`read`]: [`Reader`], the lazy reader;
+//! - [`assemble`]: [`to_mesh`], one level of a file as one [`Mesh`](crate::mesh::Mesh);
+//! - [`verify`](mod@verify): [`verify`], every checksum and structural rule of a file;
+//! - [`inspect`](mod@inspect): [`inspect()`](inspect::inspect), what `strata inspect` shows.
+
+pub mod assemble;
+pub mod chunk;
+pub mod inspect;
+pub mod octa;
+pub mod read;
+pub mod verify;
+pub mod write;
+
+pub use assemble::to_mesh;
+pub use read::Reader;
+pub use verify::{verify, verify_path, Verification};
+pub use write::{write, write_to, LevelSummary, WriteOptions, WriteSummary};
+
+use crate::cone::Cone;
+use crate::hierarchy::HierarchyParams;
+use glam::{Vec2, Vec3};
+
+/// Major format version: a reader refuses files with a larger major version.
+pub const MAJOR: u16 = 1;
+/// Minor format version: a newer minor only adds chunk kinds, which older readers skip.
+pub const MINOR: u16 = 0;
+/// The format version as the spec writes it.
+pub const VERSION: &str = "1.0";
+
+/// The first 8 bytes of every strata file.
+pub const MAGIC: [u8; 8] = *b"\x89STRATA\n";
+/// Bytes of the prologue: magic, major, minor, CRC-32 of the first 12 bytes.
+pub const PROLOGUE_BYTES: u64 = 16;
+
+/// Marks "no parent" in the node table: a top-level node, child of the virtual root.
+pub const NO_PARENT: u32 = u32::MAX;
+
+/// Bytes of one node record in the `NODE` chunk.
+pub const NODE_RECORD_BYTES: u64 = 100;
+/// Bytes of one level record in the `LEVL` chunk.
+pub const LEVEL_RECORD_BYTES: u64 = 32;
+/// Bytes of the fixed part of the `HEAD` payload (the tool string follows).
+pub const HEAD_FIXED_BYTES: u64 = 124;
+/// Longest tool string, in bytes.
+pub const MAX_TOOL_BYTES: u64 = 1024;
+/// Bytes of one cluster record in the `CLUS` chunk.
+pub const CLUSTER_RECORD_BYTES: u64 = 40;
+/// Bytes of one material range in the `MATR` chunk.
+pub const RANGE_RECORD_BYTES: u64 = 12;
+
+/// Chunk IDs.
+pub mod id {
+    pub const HEAD: [u8; 4] = *b"HEAD";
+    pub const SKEL: [u8; 4] = *b"SKEL";
+    pub const GEOM: [u8; 4] = *b"GEOM";
+    pub const LEVL: [u8; 4] = *b"LEVL";
+    pub const NODE: [u8; 4] = *b"NODE";
+    pub const NBRS: [u8; 4] = *b"NBRS";
+    pub const MATL: [u8; 4] = *b"MATL";
+    pub const VPOS: [u8; 4] = *b"VPOS";
+    pub const VNRM: [u8; 4] = *b"VNRM";
+    pub const VTEX: [u8; 4] = *b"VTEX";
+    pub const VCOL: [u8; 4] = *b"VCOL";
+    pub const INDX: [u8; 4] = *b"INDX";
+    pub const MATR: [u8; 4] = *b"MATR";
+    pub const CLUS: [u8; 4] = *b"CLUS";
+}
+
+/// Which corner attributes every vertex of the file carries besides its position.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Attributes {
+    pub normals: bool,
+    pub uvs: bool,
+    pub colors: bool,
+}
+
+impl Attributes {
+    /// The `HEAD` attribute bits: 1 normals, 2 UVs, 4 colors.
+    pub fn bits(self) -> u32 {
+        self.normals as u32 | (self.uvs as u32) << 1 | (self.colors as u32) << 2
+    }
+
+    pub fn from_bits(bits: u32) -> Attributes {
+        Attributes { normals: bits & 1 != 0, uvs: bits & 2 != 0, colors: bits & 4 != 0 }
+    }
+}
+
+/// The `HEAD` chunk: what the file holds and how it was built.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Header {
+    pub major: u16,
+    pub minor: u16,
+    /// Size of the whole file in bytes.
+    pub file_size: u64,
+    /// Metres per model unit; 0 when the unit is unknown.
+    pub metres_per_unit: f64,
+    /// Bounds of every level's geometry.
+    pub min: Vec3,
+    pub max: Vec3,
+    pub attributes: Attributes,
+    pub levels: u32,
+    pub nodes: u32,
+    pub materials: u32,
+    /// Vertices and faces of the input mesh (level 0).
+    pub input_vertices: u64,
+    pub input_faces: u64,
+    /// Culling clusters over all level-0 nodes.
+    pub clusters: u32,
+    /// Parameters the hierarchy was built with.
+    pub params: HierarchyParams,
+    /// Target ratio of faces between a level and the one below.
+    pub level_ratio: f32,
+    /// Name and version of the program that wrote the file.
+    pub tool: String,
+}
+
+/// One entry of the `LEVL` chunk: level ℓ's nodes are `first_node .. first_node + nodes`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct LevelRecord {
+    pub first_node: u32,
+    pub nodes: u32,
+    /// Faces and vertices over the level's nodes.
+    pub faces: u64,
+    pub vertices: u64,
+    /// Bytes of the level's `GEOM` chunks, padding included.
+    pub bytes: u64,
+}
+
+/// One entry of the node table. Nodes are numbered in file order: top level first, and within a
+/// level by parent, so a node's children are consecutive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeRecord {
+    /// Level ℓ (0 = full detail); not stored, implied by the `LEVL` ranges.
+    pub level: u32,
+    /// Parent node, or [`NO_PARENT`] for a top-level node.
+    pub parent: u32,
+    /// Children are nodes `first_child .. first_child + child_count` of level ℓ − 1.
+    pub first_child: u32,
+    pub child_count: u32,
+    /// Neighbours are `neighbors[neighbor_first .. neighbor_first + neighbor_count]`; `neighbor_first`
+    /// is not stored, the lists follow one another in node order.
+    pub neighbor_first: u32,
+    pub neighbor_count: u32,
+    /// Contains every face normal of this node and every cone of its descendants.
+    pub cone: Cone,
+    /// Bounding sphere and box of this node's vertices and of its descendants' bounds.
+    pub center: Vec3,
+    pub radius: f32,
+    pub min: Vec3,
+    pub max: Vec3,
+    /// Geometric error in model units, never smaller than a child's.
+    pub error: f32,
+    pub faces: u32,
+    pub vertices: u32,
+    /// Where the node's `GEOM` chunk starts, its bytes from ID to CRC (padding excluded), and the
+    /// CRC-32 of its payload.
+    pub offset: u64,
+    pub size: u32,
+    pub crc: u32,
+}
+
+/// A run of indices drawn with one material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaterialRange {
+    pub material: u32,
+    pub first_index: u32,
+    pub index_count: u32,
+}
+
+/// A culling cluster inside a level-0 node: faces `first_face .. first_face + face_count` of the
+/// node, all facing within `cone`, all inside the sphere.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cluster {
+    pub cone: Cone,
+    pub center: Vec3,
+    pub radius: f32,
+    pub first_face: u32,
+    pub face_count: u32,
+}
+
+/// One node's geometry, decoded: node-local vertices and triangles over them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NodeGeometry {
+    pub positions: Vec<Vec3>,
+    /// Unit normals per vertex, or empty when the file has none.
+    pub normals: Vec<Vec3>,
+    pub uvs: Vec<Vec2>,
+    pub colors: Vec<[u8; 4]>,
+    /// Three per face, each below `positions.len()`.
+    pub indices: Vec<u32>,
+    /// Consecutive runs covering `indices`.
+    pub material_ranges: Vec<MaterialRange>,
+    /// Level-0 nodes only: consecutive runs covering the faces.
+    pub clusters: Vec<Cluster>,
+}
+
+impl NodeGeometry {
+    pub fn face_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}

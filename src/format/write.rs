@@ -1,0 +1,686 @@
+//! Write a group hierarchy and its level meshes as a strata file (format-spec/strata-v1.md).
+//!
+//! Nodes are numbered breadth-first from the top level, children of a node consecutive, and their
+//! geometry chunks follow the skeleton in that order, so a prefix of the file is a coarse model.
+//! Bounds and cones are the hierarchy's, widened to cover each node's own (simplified) geometry and
+//! its descendants, so that culling a node by them is safe for everything below it.
+
+use super::chunk;
+use super::{id, octa, Attributes, Header, LevelRecord, NodeRecord, MAGIC, MAJOR, MAX_TOOL_BYTES, MINOR, NO_PARENT};
+use crate::atomic::AtomicFile;
+use crate::cone::Cone;
+use crate::error::{Error, Result};
+use crate::hierarchy::{self, Hierarchy, HierarchyParams};
+use crate::levels::LevelMeshes;
+use crate::mesh::{triangle_cross, Material, Mesh};
+use glam::Vec3;
+use std::collections::HashMap;
+use std::io::{Seek, SeekFrom, Write};
+use std::path::Path;
+
+/// What the writer records besides the hierarchy and the meshes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WriteOptions {
+    /// Metres per model unit, 0 when unknown (glTF is in metres; OBJ and PLY do not say).
+    pub metres_per_unit: f64,
+    /// Parameters the hierarchy was built with.
+    pub params: HierarchyParams,
+    /// Target ratio of faces between a level and the one below.
+    pub level_ratio: f32,
+    /// Name and version of the writing program, at most 1024 bytes.
+    pub tool: String,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions {
+            metres_per_unit: 0.0,
+            params: HierarchyParams::default(),
+            level_ratio: 0.5,
+            tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+}
+
+/// What one level of the written file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct LevelSummary {
+    pub level: u32,
+    pub nodes: u32,
+    pub faces: u64,
+    pub vertices: u64,
+    /// Bytes of the level's geometry chunks.
+    pub bytes: u64,
+}
+
+/// What was written.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct WriteSummary {
+    pub file_bytes: u64,
+    /// Bytes a reader reads to open the file: prologue, `HEAD` and `SKEL`.
+    pub skeleton_bytes: u64,
+    pub input_faces: u64,
+    pub nodes: u32,
+    pub clusters: u32,
+    /// Finest level first.
+    pub levels: Vec<LevelSummary>,
+}
+
+impl WriteSummary {
+    /// File bytes per face of the input mesh.
+    pub fn bytes_per_face(&self) -> f64 {
+        self.file_bytes as f64 / self.input_faces.max(1) as f64
+    }
+}
+
+/// Write the file for hierarchy `h` and level meshes `lv` to `path`, all or nothing (a temporary
+/// file renamed on success). Inconsistent inputs are an error naming the level and group.
+pub fn write(path: &Path, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> Result<WriteSummary> {
+    let mut file = AtomicFile::create(path)?;
+    let summary = write_named(file.writer(), path, h, lv, opts)?;
+    file.commit()?;
+    Ok(summary)
+}
+
+/// [`write`] into any seekable writer, from its current position (which becomes file offset 0).
+pub fn write_to<W: Write + Seek>(w: &mut W, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> Result<WriteSummary> {
+    write_named(w, Path::new("<output>"), h, lv, opts)
+}
+
+fn write_named<W: Write + Seek>(
+    w: &mut W,
+    path: &Path,
+    h: &Hierarchy,
+    lv: &LevelMeshes,
+    opts: &WriteOptions,
+) -> Result<WriteSummary> {
+    let io = |e: std::io::Error| Error::io(path, e);
+    let bad = |msg: String| Error::invalid(path, None, msg);
+    let attributes = check_inputs(h, lv, opts).map_err(bad)?;
+    let materials = material_table(&lv.levels[0].mesh);
+    let plan = plan(h, lv);
+    let mut records = bounds(h, lv, &plan).map_err(bad)?;
+    let (neighbor_counts, neighbors) = neighbor_lists(h, &plan);
+    for (r, &c) in records.iter_mut().zip(&neighbor_counts) {
+        r.neighbor_count = c;
+    }
+
+    let nl = plan.level_first.len();
+    let mut header = Header {
+        major: MAJOR,
+        minor: MINOR,
+        file_size: 0,
+        metres_per_unit: opts.metres_per_unit,
+        min: Vec3::ZERO,
+        max: Vec3::ZERO,
+        attributes,
+        levels: nl as u32,
+        nodes: records.len() as u32,
+        materials: materials.len() as u32,
+        input_vertices: lv.levels[0].mesh.vertex_count() as u64,
+        input_faces: lv.levels[0].mesh.face_count() as u64,
+        clusters: 0,
+        params: opts.params,
+        level_ratio: opts.level_ratio,
+        tool: opts.tool.clone(),
+    };
+    let mut levels = vec![LevelRecord::default(); nl];
+    for (l, rec) in levels.iter_mut().enumerate() {
+        rec.first_node = plan.level_first[l];
+        rec.nodes = plan.level_nodes[l];
+    }
+
+    let base = w.stream_position().map_err(io)?;
+    let mut prologue = Vec::with_capacity(16);
+    prologue.extend_from_slice(&MAGIC);
+    prologue.extend_from_slice(&MAJOR.to_le_bytes());
+    prologue.extend_from_slice(&MINOR.to_le_bytes());
+    let crc = chunk::crc32(&prologue);
+    prologue.extend_from_slice(&crc.to_le_bytes());
+    w.write_all(&prologue).map_err(io)?;
+    let reserved = head_chunk(&header).len() + skel_chunk(&levels, &records, &neighbors, &materials).len();
+    w.write_all(&vec![0u8; reserved]).map_err(io)?;
+
+    let mut pos = prologue.len() as u64 + reserved as u64;
+    let mut buf = Vec::new();
+    for (n, &(l, g)) in plan.nodes.iter().enumerate() {
+        let mesh = &lv.levels[l as usize].mesh;
+        let faces = plan.faces[l as usize].get(g as usize);
+        if faces.len() > (u32::MAX / 3) as usize {
+            return Err(bad(format!("level {l} group {g}: {} faces in one node", faces.len())));
+        }
+        let clusters = (l == 0).then_some(&h.clusters);
+        buf.clear();
+        let enc = encode_node(mesh, faces, clusters, attributes, &mut buf);
+        let span = enc.span;
+        let rec = &mut records[n];
+        rec.offset = pos;
+        rec.size = u32::try_from(span).map_err(|_| bad(format!("level {l} group {g}: geometry of {span} bytes exceeds 4 GiB")))?;
+        rec.crc = chunk::crc32(&buf[16..span as usize - 4]);
+        rec.vertices = enc.vertices;
+        rec.faces = faces.len() as u32;
+        header.clusters += enc.clusters;
+        let level = &mut levels[l as usize];
+        level.faces += faces.len() as u64;
+        level.vertices += enc.vertices as u64;
+        level.bytes += buf.len() as u64;
+        w.write_all(&buf).map_err(io)?;
+        pos += buf.len() as u64;
+    }
+
+    header.file_size = pos;
+    let top = &records[..plan.level_nodes[nl - 1] as usize];
+    header.min = top.iter().fold(Vec3::splat(f32::MAX), |m, r| m.min(r.min));
+    header.max = top.iter().fold(Vec3::splat(f32::MIN), |m, r| m.max(r.max));
+    let mut skeleton = head_chunk(&header);
+    skeleton.extend(skel_chunk(&levels, &records, &neighbors, &materials));
+    if skeleton.len() != reserved {
+        return Err(bad(format!("internal error: skeleton of {} bytes in {reserved} reserved", skeleton.len())));
+    }
+    w.seek(SeekFrom::Start(base + prologue.len() as u64)).map_err(io)?;
+    w.write_all(&skeleton).map_err(io)?;
+    w.seek(SeekFrom::Start(base + pos)).map_err(io)?;
+    w.flush().map_err(io)?;
+
+    Ok(WriteSummary {
+        file_bytes: pos,
+        skeleton_bytes: prologue.len() as u64 + reserved as u64,
+        input_faces: header.input_faces,
+        nodes: header.nodes,
+        clusters: header.clusters,
+        levels: levels
+            .iter()
+            .enumerate()
+            .map(|(l, r)| LevelSummary { level: l as u32, nodes: r.nodes, faces: r.faces, vertices: r.vertices, bytes: r.bytes })
+            .collect(),
+    })
+}
+
+/// The material table: level 0's, or one default material if it has none.
+fn material_table(mesh: &Mesh) -> Vec<Material> {
+    if mesh.materials.is_empty() {
+        vec![Material::default()]
+    } else {
+        mesh.materials.clone()
+    }
+}
+
+fn material_of(mesh: &Mesh, f: usize) -> u32 {
+    mesh.face_materials.get(f).copied().unwrap_or(0)
+}
+
+/// Check what the writer relies on; return the corner attributes every level carries.
+fn check_inputs(h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> std::result::Result<Attributes, String> {
+    if opts.tool.len() as u64 > MAX_TOOL_BYTES {
+        return Err(format!("tool string of {} bytes exceeds {MAX_TOOL_BYTES}", opts.tool.len()));
+    }
+    let nl = h.levels.len();
+    if nl == 0 || lv.levels.len() != nl {
+        return Err(format!("{nl} hierarchy levels but {} level meshes; need the same number, at least 1", lv.levels.len()));
+    }
+    if nl >= u32::MAX as usize {
+        return Err(format!("{nl} levels"));
+    }
+    let m0 = &lv.levels[0].mesh;
+    if m0.face_count() == 0 {
+        return Err("nothing to write: level 0 has no faces".into());
+    }
+    if h.clusters.face_group.len() != m0.face_count() {
+        return Err(format!("clusters label {} faces but level 0 has {}", h.clusters.face_group.len(), m0.face_count()));
+    }
+    if let Some(f) = h.clusters.face_group.iter().position(|&c| c as usize >= h.clusters.groups.len()) {
+        return Err(format!("face {f} is in cluster {} of {}", h.clusters.face_group[f], h.clusters.groups.len()));
+    }
+    let has = |m: &Mesh| Attributes { normals: !m.normals.is_empty(), uvs: !m.uvs.is_empty(), colors: !m.colors.is_empty() };
+    let attributes = has(m0);
+    let materials = material_table(m0).len();
+    let mut total_nodes = 0usize;
+    for (l, (hl, ml)) in h.levels.iter().zip(&lv.levels).enumerate() {
+        let m = &ml.mesh;
+        let nf = m.face_count();
+        let ng = hl.groups.len();
+        total_nodes += ng;
+        let ctx = |msg: String| format!("level {l}: {msg}");
+        if has(m) != attributes {
+            return Err(ctx(format!("corner attributes {:?} differ from level 0's {attributes:?}", has(m))));
+        }
+        for (name, len) in [("normals", m.normals.len()), ("uvs", m.uvs.len()), ("colors", m.colors.len())] {
+            if len != 0 && len != 3 * nf {
+                return Err(ctx(format!("{len} {name} for {nf} faces")));
+            }
+        }
+        if !m.face_materials.is_empty() && m.face_materials.len() != nf {
+            return Err(ctx(format!("{} face materials for {nf} faces", m.face_materials.len())));
+        }
+        if let Some(f) = (0..nf).find(|&f| material_of(m, f) as usize >= materials) {
+            return Err(ctx(format!("face {f} has material {} of {materials}", material_of(m, f))));
+        }
+        if let Some(f) = m.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= m.vertex_count())) {
+            return Err(ctx(format!("face {f} indexes past {} vertices", m.vertex_count())));
+        }
+        if ml.face_group.len() != nf {
+            return Err(ctx(format!("{} face groups for {nf} faces", ml.face_group.len())));
+        }
+        if let Some(f) = ml.face_group.iter().position(|&g| g as usize >= ng) {
+            return Err(ctx(format!("face {f} is in group {} of {ng}", ml.face_group[f])));
+        }
+        if ml.group_error.len() != ng {
+            return Err(ctx(format!("{} group errors for {ng} groups", ml.group_error.len())));
+        }
+        if let Some(g) = ml.group_error.iter().position(|e| !e.is_finite()) {
+            return Err(ctx(format!("group {g} has error {}", ml.group_error[g])));
+        }
+        if hl.parent.len() != ng {
+            return Err(ctx(format!("{} parents for {ng} groups", hl.parent.len())));
+        }
+        let above = h.levels.get(l + 1).map(|a| a.groups.len());
+        for (g, &p) in hl.parent.iter().enumerate() {
+            let ok = match above {
+                Some(na) => (p as usize) < na,
+                None => p == hierarchy::NO_PARENT,
+            };
+            if !ok {
+                return Err(ctx(format!("group {g} has parent {p}")));
+            }
+        }
+        if hl.neighbors.len() != ng || hl.neighbors.items.iter().any(|&x| x as usize >= ng) {
+            return Err(ctx("neighbour lists do not match the groups".into()));
+        }
+        if let Some(g) = hl.groups.iter().position(|gi| !(gi.center.is_finite() && gi.radius.is_finite() && gi.cone.axis.is_finite())) {
+            return Err(ctx(format!("group {g} has non-finite bounds or cone")));
+        }
+    }
+    if total_nodes >= NO_PARENT as usize {
+        return Err(format!("{total_nodes} nodes"));
+    }
+    Ok(attributes)
+}
+
+/// A list of lists as offsets into one array.
+struct Csr {
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Csr {
+    /// Items `0..labels.len()` by label, in increasing order within a list.
+    fn by_label(labels: &[u32], n: usize) -> Csr {
+        let mut offsets = vec![0u32; n + 1];
+        for &k in labels {
+            offsets[k as usize + 1] += 1;
+        }
+        for i in 0..n {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut fill = offsets.clone();
+        let mut items = vec![0u32; labels.len()];
+        for (i, &k) in labels.iter().enumerate() {
+            items[fill[k as usize] as usize] = i as u32;
+            fill[k as usize] += 1;
+        }
+        Csr { offsets, items }
+    }
+
+    fn get(&self, i: usize) -> &[u32] {
+        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
+}
+
+/// The node numbering and each group's faces.
+struct Plan {
+    /// (level, group) of each node, in file order.
+    nodes: Vec<(u32, u32)>,
+    /// Node of each group, per level.
+    node_of: Vec<Vec<u32>>,
+    /// Per level (finest first): first node and node count.
+    level_first: Vec<u32>,
+    level_nodes: Vec<u32>,
+    /// Per level: faces of the level mesh in each group.
+    faces: Vec<Csr>,
+    /// Per node: first child and child count.
+    children: Vec<(u32, u32)>,
+}
+
+/// Number the nodes breadth-first: the top groups in order, then level by level the children of
+/// each node in turn.
+fn plan(h: &Hierarchy, lv: &LevelMeshes) -> Plan {
+    let nl = h.levels.len();
+    let mut nodes: Vec<(u32, u32)> = Vec::new();
+    let mut node_of: Vec<Vec<u32>> = h.levels.iter().map(|l| vec![u32::MAX; l.groups.len()]).collect();
+    let mut level_first = vec![0u32; nl];
+    let mut level_nodes = vec![0u32; nl];
+    let mut children: Vec<(u32, u32)> = Vec::new();
+    for l in (0..nl).rev() {
+        let ng = h.levels[l].groups.len();
+        level_first[l] = nodes.len() as u32;
+        level_nodes[l] = ng as u32;
+        let mut order: Vec<u32> = (0..ng as u32).collect();
+        if l + 1 < nl {
+            let parent_node = |g: u32| node_of[l + 1][h.levels[l].parent[g as usize] as usize];
+            order.sort_by_key(|&g| (parent_node(g), g));
+        }
+        for &g in &order {
+            node_of[l][g as usize] = nodes.len() as u32;
+            nodes.push((l as u32, g));
+        }
+        if l + 1 < nl {
+            let above = level_first[l + 1] as usize..(level_first[l + 1] + level_nodes[l + 1]) as usize;
+            let mut ranges = vec![(0u32, 0u32); above.len()];
+            for (i, &g) in order.iter().enumerate() {
+                let p = node_of[l + 1][h.levels[l].parent[g as usize] as usize] as usize - above.start;
+                if ranges[p].1 == 0 {
+                    ranges[p].0 = level_first[l] + i as u32;
+                }
+                ranges[p].1 += 1;
+            }
+            children[above].copy_from_slice(&ranges);
+        }
+        children.resize(nodes.len(), (0, 0));
+    }
+    let faces = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Csr::by_label(&m.face_group, hl.groups.len())).collect();
+    Plan { nodes, node_of, level_first, level_nodes, faces, children }
+}
+
+/// Angle between two directions, in f64.
+fn angle(a: Vec3, b: Vec3) -> f64 {
+    let (a, b) = (a.as_dvec3(), b.as_dvec3());
+    a.cross(b).length().atan2(a.dot(b))
+}
+
+/// A half-angle that covers `needed` radians despite rounding to f32.
+fn cover(current: f32, needed: f64) -> f32 {
+    if needed <= current as f64 {
+        current
+    } else {
+        ((needed + 1e-6) as f32).min(std::f32::consts::PI)
+    }
+}
+
+/// Node records with structure, bounds, cones and errors; geometry fields are filled while writing.
+/// Bottom-up, so each node's cone and bounds cover its descendants'.
+fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan) -> std::result::Result<Vec<NodeRecord>, String> {
+    let mut records: Vec<NodeRecord> = Vec::with_capacity(plan.nodes.len());
+    for (n, &(l, _)) in plan.nodes.iter().enumerate() {
+        let (first_child, child_count) = plan.children[n];
+        records.push(NodeRecord {
+            level: l,
+            parent: NO_PARENT,
+            first_child,
+            child_count,
+            neighbor_first: 0,
+            neighbor_count: 0,
+            cone: Cone { axis: Vec3::Z, half_angle: 0.0 },
+            center: Vec3::ZERO,
+            radius: 0.0,
+            min: Vec3::ZERO,
+            max: Vec3::ZERO,
+            error: 0.0,
+            faces: 0,
+            vertices: 0,
+            offset: 0,
+            size: 0,
+            crc: 0,
+        });
+    }
+    for l in 0..h.levels.len() {
+        let hl = &h.levels[l];
+        let mesh = &lv.levels[l].mesh;
+        for (g, info) in hl.groups.iter().enumerate() {
+            let n = plan.node_of[l][g] as usize;
+            let mut cone = info.cone;
+            cone.axis = cone.axis.normalize_or(Vec3::Z);
+            let (mut lo, mut hi, mut radius) = (info.min, info.max, info.radius);
+            let mut error = lv.levels[l].group_error[g];
+            for &f in plan.faces[l].get(g) {
+                let t = &mesh.triangles[f as usize];
+                for &v in t {
+                    let p = mesh.positions[v as usize];
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                    radius = radius.max(info.center.distance(p) * (1.0 + 1e-6));
+                }
+                let c = triangle_cross(&mesh.positions, t);
+                if c.length_squared() > 0.0 {
+                    cone.half_angle = cover(cone.half_angle, angle(cone.axis, c.normalize().as_vec3()));
+                }
+            }
+            let (first, count) = plan.children[n];
+            for c in first..first + count {
+                let child = records[c as usize];
+                cone.half_angle = cover(cone.half_angle, angle(cone.axis, child.cone.axis) + child.cone.half_angle as f64);
+                lo = lo.min(child.min);
+                hi = hi.max(child.max);
+                radius = radius.max((info.center.distance(child.center) + child.radius) * (1.0 + 1e-6));
+                error = error.max(child.error);
+                records[c as usize].parent = n as u32;
+            }
+            if !(lo.is_finite() && hi.is_finite() && radius.is_finite()) {
+                return Err(format!("level {l} group {g}: bounds are not finite"));
+            }
+            let r = &mut records[n];
+            r.cone = cone;
+            r.center = info.center;
+            r.radius = radius;
+            r.min = lo;
+            r.max = hi;
+            r.error = error;
+        }
+    }
+    Ok(records)
+}
+
+/// Per node, its same-level neighbours as node numbers, ascending; and all lists end to end.
+fn neighbor_lists(h: &Hierarchy, plan: &Plan) -> (Vec<u32>, Vec<u32>) {
+    let mut counts = Vec::with_capacity(plan.nodes.len());
+    let mut items = Vec::new();
+    for &(l, g) in &plan.nodes {
+        let l = l as usize;
+        let start = items.len();
+        let list = h.levels[l].neighbors.get(g as usize);
+        items.extend(list.iter().filter(|&&x| x != g).map(|&x| plan.node_of[l][x as usize]));
+        items[start..].sort_unstable();
+        let mut kept = start;
+        for i in start..items.len() {
+            if kept == start || items[i] != items[kept - 1] {
+                items[kept] = items[i];
+                kept += 1;
+            }
+        }
+        items.truncate(kept);
+        counts.push((items.len() - start) as u32);
+    }
+    (counts, items)
+}
+
+/// What encoding a node produced.
+struct Encoded {
+    /// Bytes of the chunk from ID to CRC.
+    span: u64,
+    vertices: u32,
+    clusters: u32,
+}
+
+/// Append the `GEOM` chunk of `faces` of `mesh` to `out` (at an aligned position). Faces are
+/// ordered by culling cluster (level 0), then material; vertices are deduplicated corners in order
+/// of first use. Cluster cones and spheres are the hierarchy's, widened where rounding left a face
+/// outside.
+fn encode_node(mesh: &Mesh, faces: &[u32], clusters: Option<&hierarchy::Level>, attrs: Attributes, out: &mut Vec<u8>) -> Encoded {
+    let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
+    let mut order: Vec<u32> = faces.to_vec();
+    order.sort_by_key(|&f| (cluster_of(f), material_of(mesh, f as usize), f));
+
+    type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
+    let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());
+    let (mut pos, mut nrm, mut tex, mut col) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut indices: Vec<u32> = Vec::with_capacity(order.len() * 3);
+    for &f in &order {
+        for k in 0..3 {
+            let corner = 3 * f as usize + k;
+            let p = mesh.positions[mesh.triangles[f as usize][k] as usize];
+            let n = if attrs.normals { octa::encode(mesh.normals[corner]) } else { [0; 2] };
+            let uv = if attrs.uvs { mesh.uvs[corner].to_array().map(f32::to_bits) } else { [0; 2] };
+            let c = if attrs.colors { mesh.colors[corner] } else { [0; 4] };
+            let key = (p.to_array().map(f32::to_bits), n, uv, c);
+            let next = index_of.len() as u32;
+            let i = *index_of.entry(key).or_insert_with(|| {
+                pos.extend(p.to_array().iter().flat_map(|x| x.to_le_bytes()));
+                nrm.extend(n.iter().flat_map(|x| x.to_le_bytes()));
+                tex.extend(uv.iter().flat_map(|x| x.to_le_bytes()));
+                col.extend_from_slice(&c);
+                next
+            });
+            indices.push(i);
+        }
+    }
+    let vertices = index_of.len() as u32;
+
+    let mut payload = Vec::new();
+    chunk::put(&mut payload, id::VPOS, 0, &pos);
+    if attrs.normals {
+        chunk::put(&mut payload, id::VNRM, 0, &nrm);
+    }
+    if attrs.uvs {
+        chunk::put(&mut payload, id::VTEX, 0, &tex);
+    }
+    if attrs.colors {
+        chunk::put(&mut payload, id::VCOL, 0, &col);
+    }
+    let index_bytes: Vec<u8> = if vertices <= 1 << 16 {
+        indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect()
+    } else {
+        indices.iter().flat_map(|&i| i.to_le_bytes()).collect()
+    };
+    chunk::put(&mut payload, id::INDX, if vertices <= 1 << 16 { 2 } else { 4 }, &index_bytes);
+
+    let mut ranges = Vec::new();
+    let mut first = 0u32;
+    for run in order.chunk_by(|&a, &b| material_of(mesh, a as usize) == material_of(mesh, b as usize)) {
+        ranges.extend_from_slice(&material_of(mesh, run[0] as usize).to_le_bytes());
+        ranges.extend_from_slice(&(3 * first).to_le_bytes());
+        ranges.extend_from_slice(&(3 * run.len() as u32).to_le_bytes());
+        first += run.len() as u32;
+    }
+    chunk::put(&mut payload, id::MATR, 0, &ranges);
+
+    let mut cluster_count = 0;
+    if let Some(cl) = clusters {
+        let mut table = Vec::new();
+        let mut first = 0u32;
+        for run in order.chunk_by(|&a, &b| cluster_of(a) == cluster_of(b)) {
+            let g = &cl.groups[cluster_of(run[0]) as usize];
+            let axis = g.cone.axis.normalize_or(Vec3::Z);
+            let (mut half, mut radius) = (g.cone.half_angle, g.radius);
+            for &f in run {
+                let t = &mesh.triangles[f as usize];
+                let c = triangle_cross(&mesh.positions, t);
+                if c.length_squared() > 0.0 {
+                    half = cover(half, angle(axis, c.normalize().as_vec3()));
+                }
+                for &v in t {
+                    radius = radius.max(g.center.distance(mesh.positions[v as usize]) * (1.0 + 1e-6));
+                }
+            }
+            let mut fields = axis.to_array().to_vec();
+            fields.push(half);
+            fields.extend(g.center.to_array());
+            fields.push(radius);
+            table.extend(fields.iter().flat_map(|x| x.to_le_bytes()));
+            table.extend_from_slice(&first.to_le_bytes());
+            table.extend_from_slice(&(run.len() as u32).to_le_bytes());
+            first += run.len() as u32;
+            cluster_count += 1;
+        }
+        chunk::put(&mut payload, id::CLUS, 0, &table);
+    }
+    chunk::put(out, id::GEOM, 0, &payload);
+    Encoded { span: payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, vertices, clusters: cluster_count }
+}
+
+/// The `HEAD` chunk.
+fn head_chunk(h: &Header) -> Vec<u8> {
+    let mut p = Vec::with_capacity(160);
+    p.extend_from_slice(&h.file_size.to_le_bytes());
+    p.extend_from_slice(&h.metres_per_unit.to_le_bytes());
+    for x in h.min.to_array().into_iter().chain(h.max.to_array()) {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    for x in [h.attributes.bits(), h.levels, h.nodes, h.materials] {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&h.input_vertices.to_le_bytes());
+    p.extend_from_slice(&h.input_faces.to_le_bytes());
+    p.extend_from_slice(&h.clusters.to_le_bytes());
+    let q = &h.params;
+    p.extend_from_slice(&q.cluster_faces.to_le_bytes());
+    p.extend_from_slice(&q.cluster_angle.to_le_bytes());
+    p.extend_from_slice(&q.leaf_faces.to_le_bytes());
+    p.extend_from_slice(&q.leaf_angle.to_le_bytes());
+    p.extend_from_slice(&q.angle_step.to_le_bytes());
+    p.extend_from_slice(&q.growth.to_le_bytes());
+    for x in [q.kc, q.ks, q.kn] {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&(q.top_groups.min(u32::MAX as usize) as u32).to_le_bytes());
+    p.extend_from_slice(&h.level_ratio.to_le_bytes());
+    p.extend_from_slice(&(h.tool.len() as u32).to_le_bytes());
+    p.extend_from_slice(h.tool.as_bytes());
+    let mut out = Vec::with_capacity(p.len() + 32);
+    chunk::put(&mut out, id::HEAD, 0, &p);
+    out
+}
+
+/// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`.
+fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], neighbors: &[u32], materials: &[Material]) -> Vec<u8> {
+    let mut payload = Vec::new();
+    let mut p = Vec::with_capacity(levels.len() * 32);
+    for l in levels {
+        p.extend_from_slice(&l.first_node.to_le_bytes());
+        p.extend_from_slice(&l.nodes.to_le_bytes());
+        p.extend_from_slice(&l.faces.to_le_bytes());
+        p.extend_from_slice(&l.vertices.to_le_bytes());
+        p.extend_from_slice(&l.bytes.to_le_bytes());
+    }
+    chunk::put(&mut payload, id::LEVL, 0, &p);
+
+    p.clear();
+    for r in records {
+        for x in [r.parent, r.first_child, r.child_count, r.neighbor_count] {
+            p.extend_from_slice(&x.to_le_bytes());
+        }
+        let floats = [
+            r.cone.axis.x, r.cone.axis.y, r.cone.axis.z, r.cone.half_angle,
+            r.center.x, r.center.y, r.center.z, r.radius,
+            r.min.x, r.min.y, r.min.z, r.max.x, r.max.y, r.max.z, r.error,
+        ];
+        for x in floats {
+            p.extend_from_slice(&x.to_le_bytes());
+        }
+        p.extend_from_slice(&r.faces.to_le_bytes());
+        p.extend_from_slice(&r.vertices.to_le_bytes());
+        p.extend_from_slice(&r.offset.to_le_bytes());
+        p.extend_from_slice(&r.size.to_le_bytes());
+        p.extend_from_slice(&r.crc.to_le_bytes());
+    }
+    chunk::put(&mut payload, id::NODE, 0, &p);
+
+    p.clear();
+    p.extend(neighbors.iter().flat_map(|x| x.to_le_bytes()));
+    chunk::put(&mut payload, id::NBRS, 0, &p);
+
+    p.clear();
+    for m in materials {
+        p.extend_from_slice(&(m.name.len() as u32).to_le_bytes());
+        p.extend_from_slice(m.name.as_bytes());
+        for x in m.base_color {
+            p.extend_from_slice(&x.to_le_bytes());
+        }
+        let tex = m.texture.as_deref().unwrap_or("");
+        p.extend_from_slice(&(tex.len() as u32).to_le_bytes());
+        p.extend_from_slice(tex.as_bytes());
+    }
+    chunk::put(&mut payload, id::MATL, 0, &p);
+
+    let mut out = Vec::with_capacity(payload.len() + 24);
+    chunk::put(&mut out, id::SKEL, 0, &payload);
+    out
+}

@@ -1,0 +1,124 @@
+//! Shared helpers of the format tests: small procedural meshes, their hierarchy, and level meshes
+//! that reuse the input at every level (valid, if unsimplified).
+
+#![allow(dead_code)]
+
+use glam::{Vec2, Vec3};
+use std::collections::HashMap;
+use strata::hierarchy::{self, Hierarchy, HierarchyParams};
+use strata::levels::{LevelMesh, LevelMeshes};
+use strata::mesh::{Adjacency, Material, Mesh};
+
+/// An icosphere of radius 1 subdivided `depth` times (20·4^depth faces), with smooth normals,
+/// spherical UVs, colors from the position, and two materials split at z = 0.
+pub fn icosphere(depth: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
+        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
+        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut triangles: Vec<[u32; 3]> = vec![
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    ];
+    for _ in 0..depth {
+        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut next = Vec::with_capacity(triangles.len() * 4);
+        for t in &triangles {
+            let mut m = [0u32; 3];
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    positions.push((positions[a as usize] + positions[b as usize]).normalize());
+                    positions.len() as u32 - 1
+                });
+            }
+            next.extend([[t[0], m[0], m[2]], [t[1], m[1], m[0]], [t[2], m[2], m[1]], [m[0], m[1], m[2]]]);
+        }
+        triangles = next;
+    }
+    let corners: Vec<Vec3> = triangles.iter().flat_map(|t| t.map(|v| positions[v as usize])).collect();
+    let face_materials = triangles
+        .iter()
+        .map(|t| (t.iter().map(|&v| positions[v as usize].z).sum::<f32>() > 0.0) as u32)
+        .collect();
+    let mesh = Mesh {
+        normals: corners.clone(),
+        uvs: corners.iter().map(|p| Vec2::new(p.y.atan2(p.x), p.z.clamp(-1.0, 1.0).acos())).collect(),
+        colors: corners.iter().map(|p| [(p.x * 127.0 + 128.0) as u8, (p.y * 127.0 + 128.0) as u8, (p.z * 127.0 + 128.0) as u8, 255]).collect(),
+        face_materials,
+        materials: vec![
+            Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()) },
+            Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None },
+        ],
+        positions,
+        triangles,
+        ..Mesh::default()
+    };
+    mesh.clean().expect("finite").0
+}
+
+/// A wavy `n`×`n`-cell grid (2n² faces), open, without corner attributes.
+pub fn grid(n: u32) -> Mesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+            positions.push(Vec3::new(x, y, 0.1 * (6.0 * x).sin() * (4.0 * y).cos()));
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let v = j * (n + 1) + i;
+            triangles.push([v, v + 1, v + n + 2]);
+            triangles.push([v, v + n + 2, v + n + 1]);
+        }
+    }
+    Mesh { positions, triangles, ..Mesh::default() }.clean().expect("finite").0
+}
+
+/// Hierarchy parameters small enough for several levels on a few thousand faces.
+pub fn small_params() -> HierarchyParams {
+    HierarchyParams { cluster_faces: 16, leaf_faces: 96, growth: 3, top_groups: 2, ..HierarchyParams::default() }
+}
+
+/// The hierarchy of `mesh` and level meshes that reuse `mesh` at every level, with errors growing
+/// by level.
+pub fn build(mesh: &Mesh, params: &HierarchyParams) -> (Hierarchy, LevelMeshes) {
+    let adj = Adjacency::build(mesh);
+    let h = hierarchy::build(mesh, &adj, params);
+    let levels = h
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(l, level)| LevelMesh {
+            mesh: mesh.clone(),
+            face_group: level.face_group.clone(),
+            group_error: vec![0.01 * l as f32; level.groups.len()],
+        })
+        .collect();
+    (h, LevelMeshes { levels })
+}
+
+/// Bytes of a file written from `mesh` with `params`, in memory.
+pub fn written(mesh: &Mesh, params: &HierarchyParams) -> (Vec<u8>, strata::format::WriteSummary) {
+    let (h, lv) = build(mesh, params);
+    let mut cur = std::io::Cursor::new(Vec::new());
+    let opts = strata::format::WriteOptions { params: *params, tool: "strata test".into(), ..Default::default() };
+    let summary = strata::format::write_to(&mut cur, &h, &lv, &opts).expect("write");
+    (cur.into_inner(), summary)
+}
+
+/// A face as the positions of its corners (bit patterns), rotated to start at the smallest while
+/// keeping the winding; and its corner order under that rotation.
+pub fn face_key(mesh: &Mesh, f: usize) -> ([[u32; 3]; 3], [usize; 3]) {
+    let p = mesh.triangles[f].map(|v| mesh.positions[v as usize].to_array().map(f32::to_bits));
+    let s = (0..3).min_by_key(|&k| p[k]).unwrap_or(0);
+    let order = [s, (s + 1) % 3, (s + 2) % 3];
+    (order.map(|k| p[k]), order)
+}

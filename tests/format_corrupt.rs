@@ -1,0 +1,175 @@
+//! Damaged files: every flipped byte is reported by `verify`, every truncation is an error, counts
+//! and sizes set to huge values are refused before anything that large is allocated, and no damage
+//! makes the reader, the assembler or `inspect` panic.
+
+mod common;
+
+use common::{icosphere, written};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::io::Cursor;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use strata::format::{self, inspect, Reader};
+use strata::hierarchy::HierarchyParams;
+
+/// Records the largest single allocation of the test process.
+struct Watch;
+
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Watch {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        unsafe { System.alloc_zeroed(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new_size: usize) -> *mut u8 {
+        LARGEST.fetch_max(new_size, Ordering::Relaxed);
+        unsafe { System.realloc(p, l, new_size) }
+    }
+}
+
+#[global_allocator]
+static WATCH: Watch = Watch;
+
+/// No allocation in these tests needs more than this.
+const ALLOCATION_LIMIT: usize = 64 << 20;
+
+/// A small file with every attribute, several levels and nodes.
+fn small_file() -> Vec<u8> {
+    let params = HierarchyParams { cluster_faces: 6, leaf_faces: 20, growth: 2, top_groups: 2, ..HierarchyParams::default() };
+    let (bytes, summary) = written(&icosphere(1), &params);
+    assert!(summary.levels.len() >= 2 && summary.nodes >= 6, "{summary:?}");
+    bytes
+}
+
+/// Exercise every reading path; results are ignored, panics are not.
+fn read_everything(bytes: &[u8]) {
+    if let Ok(mut rd) = Reader::open(Cursor::new(bytes)) {
+        for i in 0..rd.nodes().len() as u32 {
+            let _ = rd.read_node(i);
+            let _ = rd.node_chunks(i);
+        }
+        for l in 0..rd.levels().len() as u32 {
+            let _ = format::to_mesh(&mut rd, l);
+        }
+        let _ = rd.chunks();
+        let select = inspect::Selection { depth: Some(9), level: Some(0), node: Some(0) };
+        let _ = inspect::inspect(&mut rd, select);
+    }
+}
+
+#[test]
+fn every_flipped_byte_is_reported() {
+    let good = small_file();
+    assert!(format::verify(Cursor::new(&good), Path::new("good")).is_sound());
+    let mut bytes = good.clone();
+    for at in 0..good.len() {
+        for mask in [0xFFu8, 0x01] {
+            bytes[at] ^= mask;
+            let v = format::verify(Cursor::new(&bytes), Path::new("flipped"));
+            assert!(!v.is_sound(), "flipping byte {at} with {mask:#x} went unnoticed");
+            read_everything(&bytes);
+            bytes[at] ^= mask;
+        }
+    }
+    assert!(LARGEST.load(Ordering::Relaxed) < ALLOCATION_LIMIT);
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let good = small_file();
+    for len in 0..good.len() {
+        let cut = &good[..len];
+        assert!(Reader::open(Cursor::new(cut)).is_err(), "truncated to {len} bytes and still opened");
+        assert!(!format::verify(Cursor::new(cut), Path::new("cut")).is_sound());
+        read_everything(cut);
+    }
+}
+
+/// Recompute the CRC of the chunk whose ID is at `at`.
+fn reseal(bytes: &mut [u8], at: usize) {
+    let size = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes")) as usize;
+    let crc = crc32fast::hash(&bytes[at + 16..at + 16 + size]);
+    bytes[at + 16 + size..at + 20 + size].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Offsets of the chunks read at open, by ID.
+fn offsets(bytes: &[u8]) -> impl Fn(&str) -> usize {
+    let rd = Reader::open(Cursor::new(bytes)).expect("open");
+    let chunks = rd.skeleton_chunks().to_vec();
+    move |id: &str| chunks.iter().find(|c| c.id == id).expect("chunk present").offset as usize
+}
+
+/// Patch `value` at `at`, reseal the chunks at `seal` (innermost first), and return the error of
+/// opening the file and reading every node.
+fn damaged(good: &[u8], at: usize, value: &[u8], seal: &[usize]) -> String {
+    let mut bytes = good.to_vec();
+    bytes[at..at + value.len()].copy_from_slice(value);
+    for &s in seal {
+        reseal(&mut bytes, s);
+    }
+    let before = LARGEST.load(Ordering::Relaxed);
+    let result = Reader::open(Cursor::new(&bytes)).and_then(|mut rd| {
+        for i in 0..rd.nodes().len() as u32 {
+            rd.read_node(i)?;
+        }
+        Ok(())
+    });
+    assert!(LARGEST.load(Ordering::Relaxed) < ALLOCATION_LIMIT.max(before), "a huge allocation was attempted");
+    match result {
+        Ok(()) => panic!("patching {value:?} at {at} went unnoticed"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
+    let good = small_file();
+    let at = offsets(&good);
+    let (head, skel, node, nbrs) = (at("HEAD"), at("SKEL"), at("NODE"), at("NBRS"));
+    let max32 = u32::MAX.to_le_bytes();
+    let max64 = u64::MAX.to_le_bytes();
+    let hp = head + 16;
+    // (what, where, new bytes, chunks to reseal, expected in the message)
+    type Case = (&'static str, usize, Vec<u8>, Vec<usize>, &'static str);
+    let cases: Vec<Case> = vec![
+        ("HEAD levels", hp + 44, max32.to_vec(), vec![head], "levels"),
+        ("HEAD nodes", hp + 48, max32.to_vec(), vec![head], "nodes"),
+        ("HEAD nodes - 1", hp + 48, (u32::MAX - 1).to_le_bytes().to_vec(), vec![head], "HEAD says"),
+        ("HEAD materials", hp + 52, max32.to_vec(), vec![head], "MATL"),
+        ("HEAD tool length", hp + 120, max32.to_vec(), vec![head], "tool string"),
+        ("HEAD size", head + 8, max64.to_vec(), vec![], "HEAD"),
+        ("SKEL size", skel + 8, max64.to_vec(), vec![], "SKEL"),
+        ("NODE size", node + 8, max64.to_vec(), vec![skel], "NODE"),
+        ("NBRS size", nbrs + 8, (u32::MAX as u64).to_le_bytes().to_vec(), vec![skel], "NBRS"),
+        ("node 0 child count", node + 16 + 8, max32.to_vec(), vec![node, skel], "children"),
+        ("node 0 neighbour count", node + 16 + 12, max32.to_vec(), vec![node, skel], "neighbours"),
+        ("node 0 faces", node + 16 + 76, max32.to_vec(), vec![node, skel], "INDX"),
+        ("node 0 vertices", node + 16 + 80, max32.to_vec(), vec![node, skel], "vertices need"),
+        ("node 0 offset", node + 16 + 84, max64.to_vec(), vec![node, skel], "geometry"),
+        ("node 0 size", node + 16 + 92, max32.to_vec(), vec![node, skel], "geometry"),
+    ];
+    for (what, pos, value, seal, expect) in cases {
+        let msg = damaged(&good, pos, &value, &seal);
+        assert!(msg.contains(expect), "{what}: {msg}");
+        assert!(msg.contains("byte offset"), "{what}: the error names no byte offset: {msg}");
+    }
+
+    // A sub-chunk of node 0's geometry claiming a huge size: GEOM and the node table resealed.
+    let rd = Reader::open(Cursor::new(&good)).expect("open");
+    let geom = rd.nodes()[0].offset as usize;
+    let mut bytes = good.clone();
+    bytes[geom + 16 + 8..geom + 16 + 16].copy_from_slice(&max64);
+    reseal(&mut bytes, geom);
+    let size = u64::from_le_bytes(bytes[geom + 8..geom + 16].try_into().expect("8 bytes")) as usize;
+    let crc = bytes[geom + 16 + size..geom + 20 + size].to_vec();
+    let msg = damaged(&bytes, node + 16 + 96, &crc, &[node, skel]);
+    assert!(msg.contains("VPOS") && msg.contains("parent has"), "{msg}");
+}

@@ -1,0 +1,372 @@
+//! A tiny file built byte by byte from the rules of format-spec/strata-v1.md (with byteorder, not
+//! through the writer): it must equal the spec's worked hex example and the writer's output for
+//! the same input, read back through the reader, and stay readable with unknown chunks inserted.
+//! Version rules: a newer major is refused, a newer minor is read.
+//!
+//! `STRATA_PRINT_EXAMPLE=1 cargo test --test format_handmade -- --nocapture` prints the annotated
+//! dump that the spec quotes.
+
+use byteorder::{LittleEndian as LE, WriteBytesExt};
+use glam::Vec3;
+use std::io::Cursor;
+use strata::cone::Cone;
+use strata::format::{self, Reader, WriteOptions, MAJOR, MINOR};
+use strata::hierarchy::{GroupInfo, Hierarchy, HierarchyParams, Level, Lists, NO_PARENT};
+use strata::levels::{LevelMesh, LevelMeshes};
+use strata::mesh::{Material, Mesh};
+
+const SPEC: &str = include_str!("../format-spec/strata-v1.md");
+
+/// Bytes with a note per field, and the chunks opened so far.
+#[derive(Default)]
+struct Doc {
+    bytes: Vec<u8>,
+    notes: Vec<(usize, usize, String)>,
+    /// Start of each chunk, in the order they were closed (children before parents).
+    closed: Vec<usize>,
+    open: Vec<usize>,
+}
+
+impl Doc {
+    fn note(&mut self, start: usize, label: &str) {
+        self.notes.push((start, self.bytes.len(), label.to_string()));
+    }
+    fn raw(&mut self, b: &[u8], label: &str) {
+        let s = self.bytes.len();
+        self.bytes.extend_from_slice(b);
+        self.note(s, label);
+    }
+    fn u16(&mut self, v: u16, label: &str) {
+        let s = self.bytes.len();
+        self.bytes.write_u16::<LE>(v).unwrap();
+        self.note(s, label);
+    }
+    fn u32(&mut self, v: u32, label: &str) {
+        let s = self.bytes.len();
+        self.bytes.write_u32::<LE>(v).unwrap();
+        self.note(s, label);
+    }
+    fn u64(&mut self, v: u64, label: &str) {
+        let s = self.bytes.len();
+        self.bytes.write_u64::<LE>(v).unwrap();
+        self.note(s, label);
+    }
+    fn f32s(&mut self, v: &[f32], label: &str) {
+        let s = self.bytes.len();
+        for &x in v {
+            self.bytes.write_f32::<LE>(x).unwrap();
+        }
+        self.note(s, label);
+    }
+    fn f64(&mut self, v: f64, label: &str) {
+        let s = self.bytes.len();
+        self.bytes.write_f64::<LE>(v).unwrap();
+        self.note(s, label);
+    }
+    /// Frame of a chunk: ID, flags, size (patched by `end`).
+    fn begin(&mut self, id: &[u8; 4], flags: u32) {
+        self.open.push(self.bytes.len());
+        let name = String::from_utf8_lossy(id).to_string();
+        self.raw(id, &format!("{name} id"));
+        self.u32(flags, &format!("{name} flags"));
+        self.u64(0, &format!("{name} payload size"));
+    }
+    /// Patch the size, append the CRC (sealed later) and zero padding to a multiple of 8.
+    fn end(&mut self) {
+        let start = self.open.pop().unwrap();
+        let size = (self.bytes.len() - start - 16) as u64;
+        self.bytes[start + 8..start + 16].copy_from_slice(&size.to_le_bytes());
+        let name = String::from_utf8_lossy(&self.bytes[start..start + 4]).to_string();
+        self.u32(0, &format!("{name} CRC-32 of the payload"));
+        let pad = (8 - self.bytes.len() % 8) % 8;
+        if pad > 0 {
+            self.raw(&vec![0; pad], "padding");
+        }
+        self.closed.push(start);
+    }
+    fn patch(&mut self, at: usize, b: &[u8]) {
+        self.bytes[at..at + b.len()].copy_from_slice(b);
+    }
+    /// Compute every chunk's CRC, children before parents.
+    fn seal(&mut self) {
+        for &start in &self.closed.clone() {
+            let size = u64::from_le_bytes(self.bytes[start + 8..start + 16].try_into().unwrap()) as usize;
+            let crc = crc32fast::hash(&self.bytes[start + 16..start + 16 + size]);
+            self.patch(start + 16 + size, &crc.to_le_bytes());
+        }
+    }
+    fn chunk(&mut self, id: &[u8; 4], payload: &[u8]) {
+        self.begin(id, 0);
+        self.raw(payload, "unknown payload");
+        self.end();
+    }
+    /// The annotated dump quoted by the spec: `offset  bytes | note`.
+    fn dump(&self) -> String {
+        let mut out = String::new();
+        for (s, e, label) in &self.notes {
+            for (k, piece) in self.bytes[*s..*e].chunks(16).enumerate() {
+                let hex: Vec<String> = piece.iter().map(|b| format!("{b:02x}")).collect();
+                let note = if k == 0 { label.as_str() } else { "" };
+                out += &format!("{:08x}  {:<47} | {note}\n", s + 16 * k, hex.join(" "));
+            }
+        }
+        out
+    }
+}
+
+/// The quad of the example: two triangles in the z = 0 plane.
+fn quad() -> Mesh {
+    let mut m = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        face_materials: vec![0, 0],
+        materials: vec![Material::default()],
+        ..Mesh::default()
+    };
+    m.compute_face_geometry();
+    m
+}
+
+fn group() -> GroupInfo {
+    GroupInfo {
+        cone: Cone { axis: Vec3::Z, half_angle: 0.0 },
+        center: Vec3::new(0.5, 0.5, 0.0),
+        radius: 0.75,
+        min: Vec3::ZERO,
+        max: Vec3::new(1.0, 1.0, 0.0),
+        faces: 2,
+        area: 1.0,
+        area_normal: Vec3::Z,
+    }
+}
+
+/// The example's hierarchy: one culling cluster, one level with one group.
+fn hierarchy() -> Hierarchy {
+    let empty = Lists { offsets: vec![0, 0], items: vec![] };
+    let clusters = Level { face_group: vec![0, 0], groups: vec![group()], parent: vec![0], neighbors: empty.clone(), ..Level::default() };
+    let level = Level {
+        face_group: vec![0, 0],
+        groups: vec![group()],
+        children: Lists { offsets: vec![0, 1], items: vec![0] },
+        parent: vec![NO_PARENT],
+        neighbors: empty,
+        max_angle: 1.0,
+        max_faces: 512,
+    };
+    Hierarchy { clusters, levels: vec![level] }
+}
+
+fn options() -> WriteOptions {
+    WriteOptions { metres_per_unit: 1.0, params: HierarchyParams::default(), level_ratio: 0.5, tool: "strata test".into() }
+}
+
+/// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
+fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
+    let mut d = Doc::default();
+    let p = HierarchyParams::default();
+    // Prologue.
+    d.raw(b"\x89STRATA\n", "magic");
+    d.u16(major, "major version");
+    d.u16(minor, "minor version");
+    let crc = crc32fast::hash(&d.bytes[..12]);
+    d.u32(crc, "CRC-32 of bytes 0..12");
+
+    // HEAD.
+    d.begin(b"HEAD", 0);
+    let file_size_at = d.bytes.len();
+    d.u64(0, "file size");
+    d.f64(1.0, "metres per unit");
+    d.f32s(&[0.0, 0.0, 0.0], "bounds min");
+    d.f32s(&[1.0, 1.0, 0.0], "bounds max");
+    d.u32(0, "attributes (none)");
+    d.u32(1, "levels");
+    d.u32(1, "nodes");
+    d.u32(1, "materials");
+    d.u64(4, "input vertices");
+    d.u64(2, "input faces");
+    d.u32(1, "culling clusters");
+    d.u32(p.cluster_faces, "params: cluster_faces");
+    d.f32s(&[p.cluster_angle], "params: cluster_angle");
+    d.u32(p.leaf_faces, "params: leaf_faces");
+    d.f32s(&[p.leaf_angle, p.angle_step], "params: leaf_angle, angle_step");
+    d.u32(p.growth, "params: growth");
+    d.f32s(&[p.kc, p.ks, p.kn], "params: kc, ks, kn");
+    d.u32(p.top_groups as u32, "params: top_groups");
+    d.f32s(&[0.5], "level ratio");
+    d.u32(11, "tool length");
+    d.raw(b"strata test", "tool");
+    d.end();
+
+    if extra {
+        d.chunk(b"XTRA", b"skip me");
+    }
+
+    // SKEL.
+    d.begin(b"SKEL", 0);
+    d.begin(b"LEVL", 0);
+    d.u32(0, "level 0: first node");
+    d.u32(1, "level 0: nodes");
+    d.u64(2, "level 0: faces");
+    d.u64(4, "level 0: vertices");
+    let level_bytes_at = d.bytes.len();
+    d.u64(0, "level 0: geometry bytes");
+    d.end();
+    if extra {
+        d.chunk(b"xsub", b"unknown sub-chunk");
+    }
+    d.begin(b"NODE", 0);
+    d.u32(NO_PARENT, "node 0: parent (none)");
+    d.u32(0, "node 0: first child");
+    d.u32(0, "node 0: child count");
+    d.u32(0, "node 0: neighbour count");
+    d.f32s(&[0.0, 0.0, 1.0, 0.0], "node 0: cone axis, half-angle");
+    d.f32s(&[0.5, 0.5, 0.0, 0.75], "node 0: sphere center, radius");
+    d.f32s(&[0.0, 0.0, 0.0], "node 0: box min");
+    d.f32s(&[1.0, 1.0, 0.0], "node 0: box max");
+    d.f32s(&[0.0], "node 0: geometric error");
+    d.u32(2, "node 0: faces");
+    d.u32(4, "node 0: vertices");
+    let node_geom_at = d.bytes.len();
+    d.u64(0, "node 0: GEOM offset");
+    d.u32(0, "node 0: GEOM bytes (ID to CRC)");
+    d.u32(0, "node 0: GEOM CRC-32");
+    d.end();
+    d.begin(b"NBRS", 0);
+    d.end();
+    d.begin(b"MATL", 0);
+    d.u32(7, "material 0: name length");
+    d.raw(b"default", "material 0: name");
+    d.f32s(&[0.8, 0.8, 0.8, 1.0], "material 0: base color");
+    d.u32(0, "material 0: texture length (none)");
+    d.end();
+    d.end();
+
+    if extra {
+        d.chunk(b"XTR2", b"");
+    }
+
+    // GEOM of node 0.
+    let geom = d.bytes.len();
+    d.begin(b"GEOM", 0);
+    if extra {
+        d.chunk(b"VTAN", b"a future attribute");
+    }
+    d.begin(b"VPOS", 0);
+    for (k, p) in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]].iter().enumerate() {
+        d.f32s(p, &format!("vertex {k}"));
+    }
+    d.end();
+    d.begin(b"INDX", 2);
+    let s = d.bytes.len();
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        d.bytes.write_u16::<LE>(i).unwrap();
+    }
+    d.note(s, "indices (u16)");
+    d.end();
+    d.begin(b"MATR", 0);
+    d.u32(0, "range 0: material");
+    d.u32(0, "range 0: first index");
+    d.u32(6, "range 0: index count");
+    d.end();
+    d.begin(b"CLUS", 0);
+    d.f32s(&[0.0, 0.0, 1.0, 0.0], "cluster 0: cone axis, half-angle");
+    d.f32s(&[0.5, 0.5, 0.0, 0.75], "cluster 0: sphere center, radius");
+    d.u32(0, "cluster 0: first face");
+    d.u32(2, "cluster 0: face count");
+    d.end();
+    d.end();
+    let geom_span = 16 + u64::from_le_bytes(d.bytes[geom + 8..geom + 16].try_into().unwrap()) + 4;
+    let geom_end = d.bytes.len() as u64;
+
+    if extra {
+        d.chunk(b"XEND", b"trailing unknown chunk");
+    }
+
+    let len = d.bytes.len() as u64;
+    d.patch(file_size_at, &len.to_le_bytes());
+    d.patch(level_bytes_at, &(geom_end - geom as u64).to_le_bytes());
+    d.patch(node_geom_at, &(geom as u64).to_le_bytes());
+    d.patch(node_geom_at + 8, &(geom_span as u32).to_le_bytes());
+    d.seal();
+    let payload_end = geom + geom_span as usize - 4;
+    let geom_crc = crc32fast::hash(&d.bytes[geom + 16..payload_end]);
+    d.patch(node_geom_at + 12, &geom_crc.to_le_bytes());
+    d.seal();
+    d
+}
+
+/// The bytes of the spec's ```hex block.
+fn spec_bytes() -> Vec<u8> {
+    let start = SPEC.find("```hex\n").expect("the spec has a ```hex block") + 7;
+    let end = start + SPEC[start..].find("```").expect("closed block");
+    let mut out = Vec::new();
+    for line in SPEC[start..end].lines() {
+        let data = line.split('|').next().unwrap_or("");
+        let mut tokens = data.split_whitespace();
+        let offset = usize::from_str_radix(tokens.next().unwrap_or(""), 16).expect("offset");
+        assert_eq!(offset, out.len(), "spec dump offset");
+        out.extend(tokens.map(|t| u8::from_str_radix(t, 16).expect("hex byte")));
+    }
+    out
+}
+
+#[test]
+fn handmade_file_matches_spec_and_writer() {
+    let d = handmade(MAJOR, MINOR, false);
+    if std::env::var_os("STRATA_PRINT_EXAMPLE").is_some() {
+        print!("{}", d.dump());
+    }
+    assert_eq!(spec_bytes(), d.bytes, "the spec's worked example is the handmade file");
+    let mesh = quad();
+    let lv = LevelMeshes { levels: vec![LevelMesh { mesh, face_group: vec![0, 0], group_error: vec![0.0] }] };
+    let mut cur = Cursor::new(Vec::new());
+    format::write_to(&mut cur, &hierarchy(), &lv, &options()).expect("write");
+    assert_eq!(cur.into_inner(), d.bytes, "the writer follows the spec");
+    assert!(SPEC.contains(&format!("version {}", format::VERSION)), "the spec names the version the code writes");
+    assert_eq!(format::VERSION, format!("{MAJOR}.{MINOR}"));
+}
+
+fn check_reads(bytes: &[u8]) {
+    let mut rd = Reader::open(Cursor::new(bytes)).expect("open");
+    let h = rd.header().clone();
+    assert_eq!((h.levels, h.nodes, h.materials, h.input_faces, h.clusters), (1, 1, 1, 2, 1));
+    assert_eq!(h.tool, "strata test");
+    assert_eq!(h.metres_per_unit, 1.0);
+    assert_eq!(h.max, Vec3::new(1.0, 1.0, 0.0));
+    assert_eq!(rd.materials(), &[Material::default()]);
+    let n = rd.nodes()[0];
+    assert_eq!((n.parent, n.faces, n.vertices, n.radius), (format::NO_PARENT, 2, 4, 0.75));
+    let g = rd.read_node(0).expect("node");
+    assert_eq!(g.positions, quad().positions);
+    assert_eq!(g.indices, vec![0, 1, 2, 0, 2, 3]);
+    assert_eq!(g.material_ranges, vec![format::MaterialRange { material: 0, first_index: 0, index_count: 6 }]);
+    assert_eq!(g.clusters.len(), 1);
+    assert_eq!((g.clusters[0].first_face, g.clusters[0].face_count), (0, 2));
+    let m = format::to_mesh(&mut rd, 0).expect("level 0");
+    assert_eq!(m.triangles, quad().triangles);
+    let v = format::verify(Cursor::new(bytes), std::path::Path::new("handmade"));
+    assert!(v.is_sound(), "{:?}", v.problems);
+}
+
+#[test]
+fn handmade_file_reads() {
+    check_reads(&handmade(MAJOR, MINOR, false).bytes);
+}
+
+#[test]
+fn unknown_chunks_are_skipped() {
+    let d = handmade(MAJOR, MINOR, true);
+    check_reads(&d.bytes);
+    let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
+    let ids: Vec<&str> = rd.skeleton_chunks().iter().map(|c| c.id.as_str()).collect();
+    assert_eq!(ids, ["HEAD", "XTRA", "SKEL", "LEVL", "xsub", "NODE", "NBRS", "MATL"]);
+}
+
+#[test]
+fn newer_major_is_refused_newer_minor_is_read() {
+    let err = Reader::open(Cursor::new(handmade(MAJOR + 1, 0, false).bytes)).err().expect("refused");
+    let msg = err.to_string();
+    assert!(msg.contains(&format!("version {}.0 is newer", MAJOR + 1)), "{msg}");
+    assert_eq!(err.location(), Some(&strata::Location::Byte(8)));
+    check_reads(&handmade(MAJOR, MINOR + 1, true).bytes);
+}
