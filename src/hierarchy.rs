@@ -50,7 +50,7 @@ impl Default for HierarchyParams {
             cluster_faces: 32,
             cluster_angle: 25f32.to_radians(),
             leaf_faces: 512,
-            leaf_angle: 75f32.to_radians(),
+            leaf_angle: 120f32.to_radians(),
             angle_step: 30f32.to_radians(),
             growth: 4,
             kc: 1.0,
