@@ -156,14 +156,31 @@ fn hierarchy() -> Hierarchy {
     Hierarchy { clusters, levels: vec![level] }
 }
 
+/// The build parameters the spec's example records: fixed here, so that changing the defaults
+/// does not change the example.
+fn example_params() -> HierarchyParams {
+    HierarchyParams {
+        cluster_faces: 64,
+        cluster_angle: 40f32.to_radians(),
+        leaf_faces: 512,
+        leaf_angle: 75f32.to_radians(),
+        angle_step: 30f32.to_radians(),
+        growth: 4,
+        kc: 1.0,
+        ks: 0.25,
+        kn: 0.1,
+        top_groups: 8,
+    }
+}
+
 fn options() -> WriteOptions {
-    WriteOptions { metres_per_unit: 1.0, params: HierarchyParams::default(), level_ratio: 0.5, tool: "strata test".into() }
+    WriteOptions { metres_per_unit: 1.0, params: example_params(), level_ratio: 0.5, tool: "strata test".into() }
 }
 
 /// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
 fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     let mut d = Doc::default();
-    let p = HierarchyParams::default();
+    let p = example_params();
     // Prologue.
     d.raw(b"\x89STRATA\n", "magic");
     d.u16(major, "major version");
