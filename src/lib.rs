@@ -7,6 +7,7 @@
 
 pub mod atomic;
 pub mod cone;
+pub mod culling;
 pub mod distance;
 pub mod error;
 pub mod export;
@@ -14,6 +15,7 @@ pub mod fixtures;
 pub mod group;
 pub mod hierarchy;
 pub mod import;
+pub mod levels;
 pub mod mesh;
 pub mod simplify;
 

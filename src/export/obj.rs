@@ -1,1 +1,279 @@
-//! obj writer.
+//! Write Wavefront OBJ, plus a sibling .mtl when the mesh has materials beyond a single default.
+//!
+//! Numbers are printed in the shortest form that parses back to the same f32, so positions survive
+//! exactly. Identical normals and UVs are written once. Per-corner colors use the common
+//! `v x y z r g b` extension (alpha is dropped); a position whose corners carry different colors gets
+//! one `v` line per color. Face order is kept, with a `usemtl` at the start of every material run.
+
+use super::check;
+use crate::atomic::AtomicFile;
+use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh};
+use std::collections::{HashMap, HashSet};
+use std::fmt;
+use std::hash::Hash;
+use std::io::{self, Write};
+use std::path::Path;
+
+/// Write `mesh` to `path` and, when [`needs_mtl`], its materials to `path` with extension `.mtl`.
+pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
+    let mtl_path = needs_mtl(mesh).then(|| path.with_extension("mtl"));
+    let mtllib = mtl_path.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned());
+    let mut file = AtomicFile::create(path)?;
+    write_obj(file.writer(), mesh, mtllib.as_deref()).map_err(|e| Error::io(path, e))?;
+    if let Some(mtl_path) = &mtl_path {
+        let mut mtl = AtomicFile::create(mtl_path)?;
+        write_mtl(mtl.writer(), mesh).map_err(|e| Error::io(mtl_path, e))?;
+        mtl.commit()?;
+    }
+    file.commit()
+}
+
+/// Whether the mesh carries materials worth a .mtl file: anything but none or one default material.
+pub fn needs_mtl(mesh: &Mesh) -> bool {
+    !(mesh.materials.is_empty() || (mesh.materials.len() == 1 && mesh.materials[0] == Material::default()))
+}
+
+/// Write the OBJ text of `mesh`, naming `mtllib` as its material library when given.
+pub fn write_obj<W: Write>(mut out: W, mesh: &Mesh, mtllib: Option<&str>) -> io::Result<()> {
+    check(mesh)?;
+    let corners = 3 * mesh.face_count();
+    writeln!(out, "# written by strata: {} faces", mesh.face_count())?;
+    if let Some(lib) = mtllib {
+        writeln!(out, "mtllib {lib}")?;
+    }
+
+    let vertex_of_corner: Vec<u32> = if mesh.colors.is_empty() {
+        for p in &mesh.positions {
+            writeln!(out, "v {} {} {}", Num(p.x), Num(p.y), Num(p.z))?;
+        }
+        mesh.triangles.iter().flatten().copied().collect()
+    } else {
+        let (index, firsts) = dedup((0..corners).map(|c| (mesh.triangles[c / 3][c % 3], mesh.colors[c])));
+        for c in firsts {
+            let p = mesh.positions[mesh.triangles[c / 3][c % 3] as usize];
+            let [r, g, b, _] = mesh.colors[c].map(|x| Num(f32::from(x) / 255.0));
+            writeln!(out, "v {} {} {} {r} {g} {b}", Num(p.x), Num(p.y), Num(p.z))?;
+        }
+        index
+    };
+    let (uv_of_corner, firsts) = dedup(mesh.uvs.iter().map(|t| t.to_array().map(f32::to_bits)));
+    for c in firsts {
+        writeln!(out, "vt {} {}", Num(mesh.uvs[c].x), Num(mesh.uvs[c].y))?;
+    }
+    let (normal_of_corner, firsts) = dedup(mesh.normals.iter().map(|n| n.to_array().map(f32::to_bits)));
+    for c in firsts {
+        let n = mesh.normals[c];
+        writeln!(out, "vn {} {} {}", Num(n.x), Num(n.y), Num(n.z))?;
+    }
+
+    let names = needs_mtl(mesh).then(|| material_names(&mesh.materials));
+    let mut current = None;
+    for (f, face) in vertex_of_corner.chunks_exact(3).enumerate() {
+        if let Some(names) = &names {
+            let m = mesh.face_materials[f];
+            if current != Some(m) {
+                writeln!(out, "usemtl {}", names[m as usize])?;
+                current = Some(m);
+            }
+        }
+        out.write_all(b"f")?;
+        for (k, v) in face.iter().enumerate() {
+            let c = 3 * f + k;
+            write!(out, " {}", v + 1)?;
+            match (uv_of_corner.get(c), normal_of_corner.get(c)) {
+                (Some(t), Some(n)) => write!(out, "/{}/{}", t + 1, n + 1)?,
+                (Some(t), None) => write!(out, "/{}", t + 1)?,
+                (None, Some(n)) => write!(out, "//{}", n + 1)?,
+                (None, None) => {}
+            }
+        }
+        out.write_all(b"\n")?;
+    }
+    out.flush()
+}
+
+/// Write the .mtl text for the materials of `mesh`: diffuse color, opacity and diffuse texture.
+pub fn write_mtl<W: Write>(mut out: W, mesh: &Mesh) -> io::Result<()> {
+    writeln!(out, "# written by strata: {} materials", mesh.materials.len())?;
+    for (m, name) in mesh.materials.iter().zip(material_names(&mesh.materials)) {
+        let [r, g, b, a] = m.base_color.map(Num);
+        writeln!(out, "\nnewmtl {name}\nKd {r} {g} {b}\nd {a}")?;
+        if let Some(texture) = &m.texture {
+            writeln!(out, "map_Kd {texture}")?;
+        }
+    }
+    out.flush()
+}
+
+/// Material names usable in `newmtl`/`usemtl`: whitespace becomes `_`, an empty name becomes
+/// `material`, and a name already taken gets the material's index appended.
+fn material_names(materials: &[Material]) -> Vec<String> {
+    let mut taken = HashSet::new();
+    materials
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let mut name: String = m.name.chars().map(|c| if c.is_whitespace() { '_' } else { c }).collect();
+            if name.is_empty() {
+                name = "material".into();
+            }
+            while !taken.insert(name.clone()) {
+                name = format!("{name}_{i}");
+            }
+            name
+        })
+        .collect()
+}
+
+/// Number distinct keys in order of first appearance: the number of every key, and the position
+/// of the first occurrence of each distinct key.
+fn dedup<K: Hash + Eq>(keys: impl Iterator<Item = K>) -> (Vec<u32>, Vec<usize>) {
+    let mut seen = HashMap::new();
+    let mut firsts = Vec::new();
+    let index = keys
+        .enumerate()
+        .map(|(i, k)| {
+            *seen.entry(k).or_insert_with(|| {
+                firsts.push(i);
+                (firsts.len() - 1) as u32
+            })
+        })
+        .collect();
+    (index, firsts)
+}
+
+/// An f32 printed in its shortest exact form, with an exponent when it is very small or large.
+struct Num(f32);
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = self.0.abs();
+        if a != 0.0 && !(1e-4..1e9).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures;
+
+    fn obj_text(mesh: &Mesh, mtllib: Option<&str>) -> String {
+        let mut out = Vec::new();
+        write_obj(&mut out, mesh, mtllib).unwrap();
+        String::from_utf8(out).unwrap()
+    }
+
+    fn lines<'a>(text: &'a str, tag: &str) -> Vec<&'a str> {
+        text.lines().filter(|l| l.split_whitespace().next() == Some(tag)).collect()
+    }
+
+    #[test]
+    fn numbers_round_trip_exactly() {
+        for x in [0.1f32, -0.0, 1.0 / 3.0, 1e-7, -2.5e-30, f32::MAX, f32::MIN_POSITIVE, 1e-45, 123456.79, 7e9] {
+            let s = Num(x).to_string();
+            assert_eq!(s.parse::<f32>().unwrap().to_bits(), x.to_bits(), "{x} printed as {s}");
+            assert!(s.len() <= 15, "{s}");
+        }
+        assert_eq!(Num(1.0).to_string(), "1");
+        assert_eq!(Num(-0.25).to_string(), "-0.25");
+    }
+
+    #[test]
+    fn cube_positions_exact_and_normals_deduplicated() {
+        let cube = fixtures::cube();
+        let text = obj_text(&cube, None);
+        let v = lines(&text, "v");
+        assert_eq!(v.len(), 8);
+        for (line, p) in v.iter().zip(&cube.positions) {
+            let xyz: Vec<f32> = line.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect();
+            assert_eq!(xyz.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), p.to_array().map(f32::to_bits));
+        }
+        assert_eq!(lines(&text, "vn").len(), 6);
+        assert!(lines(&text, "vt").is_empty());
+        let f = lines(&text, "f");
+        assert_eq!(f.len(), 12);
+        assert!(f.iter().all(|l| l.split_whitespace().skip(1).all(|c| c.contains("//"))), "{f:?}");
+        assert!(!text.contains("usemtl") && !text.contains("mtllib"));
+        assert!(!needs_mtl(&cube));
+    }
+
+    #[test]
+    fn faces_index_what_they_should() {
+        let m = fixtures::two_material_box();
+        let text = obj_text(&m, None);
+        let v: Vec<Vec<f32>> = lines(&text, "v").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        let vt: Vec<Vec<f32>> = lines(&text, "vt").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        let vn: Vec<Vec<f32>> = lines(&text, "vn").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        assert_eq!(vt.len(), 4, "the box maps every face to the unit square");
+        for (f, line) in lines(&text, "f").iter().enumerate() {
+            for (k, corner) in line.split_whitespace().skip(1).enumerate() {
+                let idx: Vec<usize> = corner.split('/').map(|s| s.parse().unwrap()).collect();
+                let c = 3 * f + k;
+                assert_eq!(v[idx[0] - 1], m.positions[m.triangles[f][k] as usize].to_array());
+                assert_eq!(vt[idx[1] - 1], m.uvs[c].to_array());
+                assert_eq!(vn[idx[2] - 1], m.normals[c].to_array());
+            }
+        }
+    }
+
+    #[test]
+    fn materials_get_runs_and_a_library() {
+        let mut m = fixtures::two_material_box();
+        m.materials[1].texture = Some("tex/top.png".into());
+        assert!(needs_mtl(&m));
+        let text = obj_text(&m, Some("box.mtl"));
+        assert_eq!(text.lines().nth(1), Some("mtllib box.mtl"));
+        let runs = 1 + m.face_materials.windows(2).filter(|w| w[0] != w[1]).count();
+        assert_eq!(lines(&text, "usemtl").len(), runs);
+        assert!(runs >= 2);
+        let mut mtl = Vec::new();
+        write_mtl(&mut mtl, &m).unwrap();
+        let mtl = String::from_utf8(mtl).unwrap();
+        assert_eq!(lines(&mtl, "newmtl"), ["newmtl sides", "newmtl top"]);
+        assert_eq!(lines(&mtl, "Kd").len(), 2);
+        assert_eq!(lines(&mtl, "map_Kd"), ["map_Kd tex/top.png"]);
+        let c = m.materials[1].base_color;
+        assert!(mtl.contains(&format!("Kd {} {} {}\nd {}", c[0], c[1], c[2], c[3])));
+    }
+
+    #[test]
+    fn material_names_are_usable_and_unique() {
+        let named = |n: &str| Material { name: n.into(), ..Material::default() };
+        let names = material_names(&[named("my mat"), named("my_mat"), named(""), named("my_mat")]);
+        assert_eq!(names, ["my_mat", "my_mat_1", "material", "my_mat_3"]);
+    }
+
+    #[test]
+    fn colors_extend_vertex_lines() {
+        let m = fixtures::colored_sphere(1);
+        let text = obj_text(&m, None);
+        let v = lines(&text, "v");
+        assert!(v.len() >= m.vertex_count());
+        for (f, line) in lines(&text, "f").iter().enumerate() {
+            for (k, corner) in line.split_whitespace().skip(1).enumerate() {
+                let i: usize = corner.split('/').next().unwrap().parse().unwrap();
+                let rgb: Vec<f32> = v[i - 1].split_whitespace().skip(4).map(|s| s.parse().unwrap()).collect();
+                let expect = &m.colors[3 * f + k][..3];
+                assert_eq!(rgb.iter().map(|x| (x * 255.0).round() as u8).collect::<Vec<_>>(), expect);
+            }
+        }
+    }
+
+    #[test]
+    fn write_creates_obj_and_mtl() {
+        let dir = std::env::temp_dir().join(format!("strata-obj-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write(&dir.join("box.obj"), &fixtures::two_material_box()).unwrap();
+        let text = std::fs::read_to_string(dir.join("box.obj")).unwrap();
+        assert!(text.contains("mtllib box.mtl\n"));
+        assert!(std::fs::read_to_string(dir.join("box.mtl")).unwrap().contains("newmtl top"));
+        write(&dir.join("cube.obj"), &fixtures::cube()).unwrap();
+        assert!(!dir.join("cube.mtl").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
