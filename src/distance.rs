@@ -5,7 +5,7 @@
 //! of a BVH over its triangles.
 
 use crate::mesh::Mesh;
-use glam::{Vec3, Vec3A};
+use glam::Vec3A;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle;

@@ -18,6 +18,7 @@ pub mod hierarchy;
 pub mod import;
 pub mod levels;
 pub mod mesh;
+pub mod pipeline;
 pub mod simplify;
 
 pub use error::{Error, Location, Result};

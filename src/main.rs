@@ -17,8 +17,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Convert a mesh into a strata chunk file: import, group, simplify per level, write.
+    Convert(ConvertArgs),
     /// Import a mesh and print what it holds: counts, attributes, bounds, topology, cleaning.
     Info(InfoArgs),
+    /// Simplify a mesh by quadric-error edge collapse (no groups) and write it.
+    Simplify(SimplifyArgs),
     /// Group faces by normal cone into a hierarchy and measure hierarchical back-face culling.
     Groups(GroupsArgs),
     /// Show a strata file: header, chunks, levels, and nodes on request.
@@ -27,6 +31,50 @@ enum Command {
     Verify(VerifyArgs),
     /// Write one level of a strata file as a mesh (.obj, .ply or .glb).
     Extract(ExtractArgs),
+}
+
+#[derive(Args)]
+struct ConvertArgs {
+    #[command(flatten)]
+    input: MeshInput,
+    /// The .strata file to write (written to a temporary name, renamed when complete).
+    output: PathBuf,
+    #[command(flatten)]
+    grouping: GroupingArgs,
+    /// Target ratio of faces between a level mesh and the one below.
+    #[arg(long, default_value_t = 0.5)]
+    level_ratio: f32,
+    /// No progress bars.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+#[command(group(clap::ArgGroup::new("target").required(true).args(["ratio", "faces", "error"])))]
+struct SimplifyArgs {
+    #[command(flatten)]
+    input: MeshInput,
+    /// Keep this fraction of the faces.
+    #[arg(long)]
+    ratio: Option<f32>,
+    /// Keep this many faces.
+    #[arg(long)]
+    faces: Option<usize>,
+    /// Simplify as far as the error estimate stays under this fraction of the bounding-box diagonal.
+    #[arg(long)]
+    error: Option<f32>,
+    /// Output mesh (.obj, .ply or .glb).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also measure the sampled surface distance between input and output.
+    #[arg(long)]
+    measure: bool,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -145,6 +193,12 @@ struct GroupsArgs {
     /// View directions for the culling measure, spread evenly on the sphere.
     #[arg(long, default_value_t = 256)]
     views: usize,
+    /// Also build the level meshes and report each one's faces, error and sampled distance to the input.
+    #[arg(long)]
+    levels: bool,
+    /// Target ratio of faces between a level mesh and the one below (with --levels).
+    #[arg(long, default_value_t = 0.5)]
+    level_ratio: f32,
     /// Write the mesh colored by its groups of level L (-1 for the culling clusters) to a PLY.
     #[arg(long, num_args = 2, value_names = ["L", "OUT"], allow_hyphen_values = true)]
     write_groups: Option<Vec<String>>,
@@ -155,7 +209,11 @@ struct GroupsArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let _ = ctrlc_cleanup();
+    // On Ctrl-C, remove temporary output files before exiting.
+    let _ = ctrlc::set_handler(|| {
+        strata::atomic::remove_pending();
+        std::process::exit(130);
+    });
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -165,14 +223,11 @@ fn main() -> ExitCode {
     }
 }
 
-/// On Ctrl-C, remove temporary output files before exiting.
-fn ctrlc_cleanup() -> Result<()> {
-    Ok(())
-}
-
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Convert(a) => convert(a),
         Command::Info(a) => info(a),
+        Command::Simplify(a) => simplify(a),
         Command::Groups(a) => groups(a),
         Command::Inspect(a) => inspect(a),
         Command::Verify(a) => verify(a),
@@ -279,6 +334,21 @@ fn groups(a: GroupsArgs) -> Result<()> {
     }
     let mut rows = vec![level_summary("clusters", &h.clusters)];
     rows.extend(h.levels.iter().enumerate().map(|(i, l)| level_summary(&i.to_string(), l)));
+    let level_meshes = a.levels.then(|| {
+        let start = Instant::now();
+        let lv = strata::levels::build(m, &h, a.level_ratio, &mut |_| {});
+        (lv, start.elapsed().as_secs_f64() * 1e3)
+    });
+    if let Some((lv, _)) = &level_meshes {
+        for (row, level) in rows.iter_mut().skip(1).zip(&lv.levels) {
+            let d = strata::distance::surface_distance(m, &level.mesh, 100_000, 1);
+            row["mesh_faces"] = level.mesh.face_count().into();
+            row["node_error_max"] = level.group_error.iter().copied().fold(0.0f32, f32::max).into();
+            row["distance_max_over_diagonal"] = (d.max / d.diagonal).into();
+            row["distance_mean_over_diagonal"] = (d.mean / d.diagonal).into();
+        }
+    }
+    let levels_ms = level_meshes.as_ref().map(|l| l.1);
     if a.json {
         let v = serde_json::json!({
             "file": a.input.mesh.display().to_string(),
@@ -286,6 +356,7 @@ fn groups(a: GroupsArgs) -> Result<()> {
             "levels": rows,
             "culling": stats,
             "hierarchy_ms": hierarchy_ms,
+            "level_meshes_ms": levels_ms,
             "import_ms": imp.import_ms,
         });
         println!("{v}");
@@ -305,6 +376,20 @@ fn groups(a: GroupsArgs) -> Result<()> {
             r["cone_deg_median"].as_f64().unwrap_or(0.0),
             r["cone_deg_max"].as_f64().unwrap_or(0.0),
         );
+    }
+    if let Some(ms) = levels_ms {
+        println!("level meshes built in {ms:.1} ms");
+        println!("{:>9} {:>9} {:>12} {:>14} {:>15}", "level", "faces", "node error", "max dist/diag", "mean dist/diag");
+        for r in rows.iter().skip(1) {
+            println!(
+                "{:>9} {:>9} {:>12.6} {:>14.6} {:>15.6}",
+                r["level"].as_str().unwrap_or(""),
+                r["mesh_faces"],
+                r["node_error_max"].as_f64().unwrap_or(0.0),
+                r["distance_max_over_diagonal"].as_f64().unwrap_or(0.0),
+                r["distance_mean_over_diagonal"].as_f64().unwrap_or(0.0),
+            );
+        }
     }
     println!(
         "culling over {} views: cost {:.3} of per-face culling, {:.1}% faces culled of {:.1}% back-facing, {:.0} tests per view",
@@ -390,5 +475,139 @@ fn extract(a: ExtractArgs) -> Result<()> {
     let mesh = format::to_mesh(&mut rd, a.level)?;
     strata::export::write(&a.output, &mesh)?;
     println!("wrote level {} ({} faces, {} vertices) to {}", a.level, mesh.face_count(), mesh.vertex_count(), a.output.display());
+    Ok(())
+}
+
+/// Progress bars on a terminal, one per stage; nothing when quiet or piped.
+struct Bars {
+    visible: bool,
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Bars {
+    fn new(quiet: bool) -> Bars {
+        use std::io::IsTerminal;
+        Bars { visible: !quiet && std::io::stderr().is_terminal(), bar: None }
+    }
+}
+
+impl strata::pipeline::Progress for Bars {
+    fn stage(&mut self, name: &str, steps: u64) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish();
+        }
+        if !self.visible {
+            return;
+        }
+        let bar = if steps > 0 {
+            let b = indicatif::ProgressBar::new(steps);
+            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+            b
+        } else {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} {spinner} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()));
+            b.enable_steady_tick(std::time::Duration::from_millis(100));
+            b
+        };
+        bar.set_prefix(name.to_string());
+        self.bar = Some(bar);
+    }
+
+    fn step(&mut self) {
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+        }
+    }
+}
+
+impl Drop for Bars {
+    fn drop(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish();
+        }
+    }
+}
+
+fn convert(a: ConvertArgs) -> Result<()> {
+    let opts = strata::pipeline::ConvertOptions { hierarchy: a.grouping.params(), level_ratio: a.level_ratio };
+    let mut bars = Bars::new(a.quiet || a.json);
+    let c = strata::pipeline::convert(&a.input.mesh, a.input.format, &a.output, &opts, &mut bars)?;
+    drop(bars);
+    for w in &c.warnings {
+        eprintln!("warning: {}: {w}", a.input.mesh.display());
+    }
+    let s = &c.summary;
+    if a.json {
+        println!("{}", serde_json::json!({ "summary": s, "times": c.times, "bytes_per_face": s.bytes_per_face() }));
+        return Ok(());
+    }
+    println!("wrote {} ({} bytes, {:.1} bytes per input face)", a.output.display(), s.file_bytes, s.bytes_per_face());
+    println!("{} input faces, {} levels, {} nodes, {} clusters, skeleton {} bytes", s.input_faces, s.levels.len(), s.nodes, s.clusters, s.skeleton_bytes);
+    println!("{:>6} {:>7} {:>9} {:>11}", "level", "nodes", "faces", "bytes");
+    for l in s.levels.iter().rev() {
+        println!("{:>6} {:>7} {:>9} {:>11}", l.level, l.nodes, l.faces, l.bytes);
+    }
+    let t = c.times;
+    println!(
+        "time: import {:.0} ms, group {:.0} ms, simplify {:.0} ms, write {:.0} ms, total {:.0} ms",
+        t.import_ms,
+        t.group_ms,
+        t.simplify_ms,
+        t.write_ms,
+        t.import_ms + t.group_ms + t.simplify_ms + t.write_ms
+    );
+    Ok(())
+}
+
+fn simplify(a: SimplifyArgs) -> Result<()> {
+    let imp = load(&a.input)?;
+    let m = &imp.mesh;
+    let diagonal = m.diagonal();
+    let mut opts = strata::simplify::SimplifyOptions::default();
+    if let Some(r) = a.ratio {
+        anyhow::ensure!((0.0..=1.0).contains(&r), "--ratio must be between 0 and 1, not {r}");
+        opts.target_faces = (m.face_count() as f64 * r as f64).round() as usize;
+    }
+    if let Some(f) = a.faces {
+        opts.target_faces = f;
+    }
+    if let Some(e) = a.error {
+        anyhow::ensure!(e >= 0.0, "--error must not be negative, not {e}");
+        opts.max_error = Some(e * diagonal);
+    }
+    let start = Instant::now();
+    let out = strata::simplify::simplify(m, None, &opts);
+    let simplify_ms = start.elapsed().as_secs_f64() * 1e3;
+    strata::export::write(&a.output, &out.mesh)?;
+    let distance = a.measure.then(|| strata::distance::surface_distance(m, &out.mesh, 200_000, 1));
+    if a.json {
+        let mut v = serde_json::json!({
+            "faces_in": m.face_count(),
+            "faces_out": out.mesh.face_count(),
+            "simplify_ms": simplify_ms,
+            "error_estimate": out.error,
+            "error_estimate_over_diagonal": out.error / diagonal.max(f32::MIN_POSITIVE),
+        });
+        if let Some(d) = distance {
+            v["distance"] = serde_json::json!({
+                "max": d.max, "mean": d.mean, "rms": d.rms, "diagonal": d.diagonal,
+                "max_over_diagonal": d.max / d.diagonal, "mean_over_diagonal": d.mean / d.diagonal,
+            });
+        }
+        println!("{v}");
+        return Ok(());
+    }
+    println!("{} -> {} faces in {simplify_ms:.1} ms, wrote {}", m.face_count(), out.mesh.face_count(), a.output.display());
+    println!("error estimate {:.6} ({:.6} of the diagonal)", out.error, out.error / diagonal.max(f32::MIN_POSITIVE));
+    if let Some(d) = distance {
+        println!(
+            "sampled distance: max {:.6} ({:.6} of the diagonal), mean {:.6} ({:.6}), rms {:.6}",
+            d.max,
+            d.max / d.diagonal,
+            d.mean,
+            d.mean / d.diagonal,
+            d.rms
+        );
+    }
     Ok(())
 }

@@ -1,0 +1,100 @@
+//! The conversion, top-down in one place: import → group → simplify per level → write.
+
+use crate::error::Result;
+use crate::format::{self, WriteOptions, WriteSummary};
+use crate::hierarchy::{self, HierarchyParams};
+use crate::import::{import, Format};
+use crate::levels;
+use crate::mesh::Adjacency;
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// What a conversion is built with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConvertOptions {
+    pub hierarchy: HierarchyParams,
+    /// Target ratio of faces between a level mesh and the one below.
+    pub level_ratio: f32,
+}
+
+impl Default for ConvertOptions {
+    fn default() -> Self {
+        ConvertOptions { hierarchy: HierarchyParams::default(), level_ratio: 0.5 }
+    }
+}
+
+/// Progress of a long conversion, reported stage by stage.
+pub trait Progress {
+    /// A stage begins; `steps` is how many [`Progress::step`] calls it will make (0 if unknown).
+    fn stage(&mut self, name: &str, steps: u64);
+    fn step(&mut self);
+}
+
+/// Progress that reports nothing.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn stage(&mut self, _: &str, _: u64) {}
+    fn step(&mut self) {}
+}
+
+/// Wall-clock milliseconds per stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    pub import_ms: f64,
+    pub group_ms: f64,
+    pub simplify_ms: f64,
+    pub write_ms: f64,
+}
+
+/// What a conversion did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Converted {
+    pub summary: WriteSummary,
+    pub times: StageTimes,
+    pub warnings: Vec<String>,
+}
+
+/// Convert the mesh file `input` into the chunk file `output`, which appears only when complete.
+pub fn convert(
+    input: &Path,
+    format: Option<Format>,
+    output: &Path,
+    opts: &ConvertOptions,
+    progress: &mut dyn Progress,
+) -> Result<Converted> {
+    let mut times = StageTimes::default();
+    let mut clock = Instant::now();
+    let mut lap = |slot: &mut f64| {
+        *slot = clock.elapsed().as_secs_f64() * 1e3;
+        clock = Instant::now();
+    };
+
+    progress.stage("import", 0);
+    let imported = import(input, format)?;
+    let mesh = &imported.mesh;
+    lap(&mut times.import_ms);
+
+    progress.stage("group", 0);
+    let adjacency = Adjacency::build(mesh);
+    let h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
+    lap(&mut times.group_ms);
+
+    progress.stage("simplify", h.levels.len() as u64);
+    let lv = levels::build(mesh, &h, opts.level_ratio, &mut |_| progress.step());
+    lap(&mut times.simplify_ms);
+
+    progress.stage("write", 0);
+    let is_gltf = format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
+    let write_opts = WriteOptions {
+        metres_per_unit: if is_gltf { 1.0 } else { 0.0 },
+        params: opts.hierarchy,
+        level_ratio: opts.level_ratio,
+        ..WriteOptions::default()
+    };
+    let summary = format::write(output, &h, &lv, &write_opts)?;
+    lap(&mut times.write_ms);
+
+    Ok(Converted { summary, times, warnings: imported.warnings })
+}
