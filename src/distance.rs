@@ -230,6 +230,7 @@ impl SplitMix {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn sphere(n: u32, r: f32) -> Mesh {
         // A UV sphere: n rings by 2n segments, poles welded.

@@ -99,18 +99,18 @@ impl Lists {
         self.len() == 0
     }
 
-    /// Group `keys[i] = list` entries into lists `0..n`, items in increasing `i` order.
-    fn from_labels(keys: &[u32], n: usize) -> Lists {
+    /// Lists `0..n` where list `k` holds, in increasing order, every `i` with `labels[i] == k`.
+    pub fn from_labels(labels: &[u32], n: usize) -> Lists {
         let mut offsets = vec![0u32; n + 1];
-        for &k in keys {
+        for &k in labels {
             offsets[k as usize + 1] += 1;
         }
         for i in 0..n {
             offsets[i + 1] += offsets[i];
         }
         let mut fill = offsets.clone();
-        let mut items = vec![0u32; keys.len()];
-        for (i, &k) in keys.iter().enumerate() {
+        let mut items = vec![0u32; labels.len()];
+        for (i, &k) in labels.iter().enumerate() {
             items[fill[k as usize] as usize] = i as u32;
             fill[k as usize] += 1;
         }

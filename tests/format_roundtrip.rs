@@ -188,7 +188,9 @@ fn measure(rel: &str) -> Option<(format::WriteSummary, f64, f64)> {
 #[test]
 fn real_mesh_sizes() {
     if let Some((_, per_face, skeleton_share)) = measure("scans/ajc_horse.ply") {
-        assert!(per_face <= 18.0, "level 0 takes {per_face} bytes per face");
+        // f32 positions, octahedral normals, u16 indices, border vertices and one 40-byte record per
+        // culling cluster of about 20 faces.
+        assert!(per_face <= 20.0, "level 0 takes {per_face} bytes per face");
         assert!(skeleton_share <= 0.02, "the skeleton is {:.2}% of the file", 100.0 * skeleton_share);
     }
 }

@@ -10,7 +10,7 @@ use super::{id, octa, Attributes, Header, LevelRecord, NodeRecord, MAGIC, MAJOR,
 use crate::atomic::AtomicFile;
 use crate::cone::Cone;
 use crate::error::{Error, Result};
-use crate::hierarchy::{self, Hierarchy, HierarchyParams};
+use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
 use crate::mesh::{triangle_cross, Material, Mesh};
 use glam::Vec3;
@@ -296,36 +296,6 @@ fn check_inputs(h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> std::re
     Ok(attributes)
 }
 
-/// A list of lists as offsets into one array.
-struct Csr {
-    offsets: Vec<u32>,
-    items: Vec<u32>,
-}
-
-impl Csr {
-    /// Items `0..labels.len()` by label, in increasing order within a list.
-    fn by_label(labels: &[u32], n: usize) -> Csr {
-        let mut offsets = vec![0u32; n + 1];
-        for &k in labels {
-            offsets[k as usize + 1] += 1;
-        }
-        for i in 0..n {
-            offsets[i + 1] += offsets[i];
-        }
-        let mut fill = offsets.clone();
-        let mut items = vec![0u32; labels.len()];
-        for (i, &k) in labels.iter().enumerate() {
-            items[fill[k as usize] as usize] = i as u32;
-            fill[k as usize] += 1;
-        }
-        Csr { offsets, items }
-    }
-
-    fn get(&self, i: usize) -> &[u32] {
-        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
-    }
-}
-
 /// The node numbering and each group's faces.
 struct Plan {
     /// (level, group) of each node, in file order.
@@ -336,7 +306,7 @@ struct Plan {
     level_first: Vec<u32>,
     level_nodes: Vec<u32>,
     /// Per level: faces of the level mesh in each group.
-    faces: Vec<Csr>,
+    faces: Vec<Lists>,
     /// Per node: first child and child count.
     children: Vec<(u32, u32)>,
 }
@@ -377,7 +347,7 @@ fn plan(h: &Hierarchy, lv: &LevelMeshes) -> Plan {
         }
         children.resize(nodes.len(), (0, 0));
     }
-    let faces = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Csr::by_label(&m.face_group, hl.groups.len())).collect();
+    let faces = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
     Plan { nodes, node_of, level_first, level_nodes, faces, children }
 }
 
