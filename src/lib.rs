@@ -6,6 +6,7 @@
 //! → simplify per level ([`simplify`]) → write the chunk file ([`format`]) → stream ([`stream`]).
 
 pub mod atomic;
+pub mod camera;
 pub mod cone;
 pub mod culling;
 pub mod distance;
