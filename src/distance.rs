@@ -5,7 +5,7 @@
 //! of a BVH over its triangles.
 
 use crate::mesh::Mesh;
-use glam::{Vec3, Vec3A};
+use glam::Vec3A;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle;
@@ -230,6 +230,7 @@ impl SplitMix {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn sphere(n: u32, r: f32) -> Mesh {
         // A UV sphere: n rings by 2n segments, poles welded.
