@@ -208,6 +208,12 @@ struct GroupsArgs {
 }
 
 fn main() -> ExitCode {
+    // Printing into a closed pipe (`strata inspect f | head`) ends the process quietly, as other
+    // command-line tools do, instead of panicking.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     // On Ctrl-C, remove temporary output files before exiting.
     let _ = ctrlc::set_handler(|| {
