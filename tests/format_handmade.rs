@@ -191,14 +191,14 @@ fn options() -> WriteOptions {
     WriteOptions { metres_per_unit: 1.0, params: example_params(), level_ratio: 0.5, tool: "strata test".into() }
 }
 
-/// The example's grid step: the smallest power of two with 1 / step ≤ 2^21 − 1.
-const STEP: f64 = 1.0 / (1u64 << 20) as f64;
+/// The example's grid step: the smallest power of two with 1 / step ≤ 2^20 − 1.
+const STEP: f64 = 1.0 / (1u64 << 19) as f64;
 /// Grid coordinates of 1 and 0.5.
-const ONE: u64 = 1 << 20;
-const HALF: u64 = 1 << 19;
-/// Radius code of both spheres: the needed 0.75 (the hierarchy's radius) is 786,432 steps, times
-/// the writer's 1 + 10⁻⁶ margin, rounded up to 11 bits of mantissa: 1537 · 2^9 = 786,944 steps.
-const RADIUS: u16 = 1537 | 9 << 11;
+const ONE: u64 = 1 << 19;
+const HALF: u64 = 1 << 18;
+/// Radius code of both spheres: the needed 0.75 (the hierarchy's radius) is 393,216 steps, times
+/// the writer's 1 + 10⁻⁶ margin, rounded up to 11 bits of mantissa: 1537 · 2^8 = 393,472 steps.
+const RADIUS: u16 = 1537 | 8 << 11;
 
 /// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
 fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
@@ -236,8 +236,8 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.f64(0.0, "grid origin x");
     d.f64(0.0, "grid origin y");
     d.f64(0.0, "grid origin z");
-    d.f64(STEP, "grid step (2^-20)");
-    d.u32(21, "grid bits");
+    d.f64(STEP, "grid step (2^-19)");
+    d.u32(20, "grid bits");
     d.u32(11, "tool length");
     d.raw(b"strata test", "tool");
     d.end();
@@ -264,10 +264,10 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.u16(0, "node 0: neighbour count");
     d.u16s(&[0, 0], "node 0: cone axis (+z)");
     d.u16(0, "node 0: cone half-angle (0)");
-    d.u16(RADIUS, "node 0: sphere radius (1537·2^9 steps)");
+    d.u16(RADIUS, "node 0: sphere radius (1537·2^8 steps)");
     d.u64(0, "node 0: box min (0, 0, 0)");
-    d.u64(ONE | ONE << 21, "node 0: box max (2^20, 2^20, 0)");
-    d.u64(HALF | HALF << 21, "node 0: sphere center (2^19, 2^19, 0)");
+    d.u64(ONE | ONE << 21, "node 0: box max (2^19, 2^19, 0)");
+    d.u64(HALF | HALF << 21, "node 0: sphere center (2^18, 2^18, 0)");
     d.f32s(&[(STEP * 3f64.sqrt() / 2.0) as f32], "node 0: geometric error (√3/2 step)");
     d.u32(2, "node 0: faces");
     d.u32(4, "node 0: vertices");
@@ -275,7 +275,7 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.u32(0, "node 0: GEOM bytes (ID to CRC)");
     d.u32(0, "node 0: GEOM CRC-32");
     d.end();
-    d.begin(b"NBRS", 0);
+    d.begin(b"NBRS", 2);
     d.end();
     d.begin(b"MATL", 0);
     d.u32(7, "material 0: name length");
@@ -291,10 +291,14 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     if extra {
         d.chunk(b"VTAN", b"a future attribute");
     }
-    d.begin(b"VPOS", 4);
+    d.begin(b"VPOS", 3);
     d.u32s(&[0, 0, 0], "base");
     for (k, p) in [[0, 0, 0], [ONE, 0, 0], [ONE, ONE, 0], [0, ONE, 0]].iter().enumerate() {
-        d.u32s(&p.map(|x| x as u32), &format!("vertex {k} (u32 offsets)"));
+        let s = d.bytes.len();
+        for x in p {
+            d.bytes.write_u24::<LE>(*x as u32).unwrap();
+        }
+        d.note(s, &format!("vertex {k} (u24 offsets)"));
     }
     d.end();
     d.begin(b"INDX", 2);
@@ -309,11 +313,11 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.u32(0, "range 0: first index");
     d.u32(6, "range 0: index count");
     d.end();
-    d.begin(b"CLUS", 5);
+    d.begin(b"CLUS", 4);
     d.u16s(&[0, 0], "cluster 0: cone axis (+z)");
     d.u16(0, "cluster 0: cone half-angle (0)");
     d.u16(2, "cluster 0: face count");
-    d.u16s(&[1 << 14, 1 << 14, 0], "cluster 0: sphere center (units of 2^5 steps)");
+    d.u16s(&[1 << 14, 1 << 14, 0], "cluster 0: sphere center (units of 2^4 steps)");
     d.u16(RADIUS, "cluster 0: sphere radius");
     d.end();
     d.end();
@@ -376,7 +380,7 @@ fn check_reads(bytes: &[u8]) {
     assert_eq!(h.max, Vec3::new(1.0, 1.0, 0.0));
     assert_eq!(rd.materials(), &[Material::default()]);
     let n = rd.nodes()[0];
-    assert_eq!((n.parent, n.faces, n.vertices, n.radius), (format::NO_PARENT, 2, 4, 786_944.0 / ONE as f32));
+    assert_eq!((n.parent, n.faces, n.vertices, n.radius), (format::NO_PARENT, 2, 4, 393_472.0 / ONE as f32));
     let g = rd.read_node(0).expect("node");
     assert_eq!(g.positions, quad().positions);
     assert_eq!(g.indices, vec![0, 1, 2, 0, 2, 3]);

@@ -216,8 +216,8 @@ impl NodeGeometry {
 
 /// Largest number of grid bits per axis: three coordinates pack into the low 63 bits of a u64.
 pub const MAX_GRID_BITS: u32 = 21;
-/// Grid bits the writer uses.
-pub const GRID_BITS: u32 = 21;
+/// Grid bits the writer uses: a millionth of the model's extent, and most nodes' offsets fit u16.
+pub const GRID_BITS: u32 = 20;
 
 /// The global position grid (spec §5.1): grid point `g` is at `origin + g·step` per axis,
 /// `0 ≤ g < 2^bits`, computed in f64 and rounded to f32 once, so that a grid point decodes to the

@@ -417,13 +417,14 @@ impl<R: Read + Seek> Reader<R> {
 
         // NBRS
         let nf = fields(nbrs);
-        if nbrs.frame.size % 4 != 0 {
-            return Err(nf.error(format!("size {} is not a multiple of 4", nbrs.frame.size)));
+        let width = nbrs.frame.flags as u64;
+        if width != 2 && width != 4 {
+            return Err(nf.error_at(nbrs.offset + 4, format!("entry width {width}; must be 2 or 4")));
         }
-        let neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(4).map(LE::read_u32).collect();
-        if let Some(k) = neighbors.iter().position(|&x| x >= h.nodes) {
-            return Err(nf.error_at(nbrs.payload_offset() + 4 * k as u64, format!("neighbour {} of {} nodes", neighbors[k], h.nodes)));
+        if nbrs.frame.size % width != 0 {
+            return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
         }
+        let mut neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
 
         // NODE
         let mut f = fields(node);
@@ -505,6 +506,17 @@ impl<R: Read + Seek> Reader<R> {
         }
         if neighbor_first != neighbors.len() as u64 {
             return Err(nf.error(format!("holds {} neighbours, the nodes use {neighbor_first}", neighbors.len())));
+        }
+        for (i, n) in nodes.iter().enumerate() {
+            let lev = &levels[n.level as usize];
+            for k in n.neighbor_first..n.neighbor_first + n.neighbor_count {
+                let x = &mut neighbors[k as usize];
+                if *x >= lev.nodes {
+                    let at = nbrs.payload_offset() + width * k as u64;
+                    return Err(nf.error_at(at, format!("node {i}: neighbour {} of the {} nodes of level {}", *x, lev.nodes, n.level)));
+                }
+                *x += lev.first_node;
+            }
         }
 
         // MATL
@@ -597,8 +609,8 @@ impl<R: Read + Seek> Reader<R> {
         let mut g = NodeGeometry::default();
         if let Some(s) = found[0] {
             let width = s.frame.flags as u64;
-            if width != 2 && width != 4 {
-                return Err(err(s.offset + 4, format!("position width {width}; must be 2 or 4")));
+            if width != 2 && width != 3 {
+                return Err(err(s.offset + 4, format!("position width {width}; must be 2 or 3")));
             }
             if s.frame.size != 12 + v * 3 * width {
                 return Err(err(s.offset + 8, format!("VPOS holds {} bytes; {v} vertices need {} for positions", s.frame.size, 12 + v * 3 * width)));
@@ -606,11 +618,7 @@ impl<R: Read + Seek> Reader<R> {
             let b = &payload[s.start..s.end];
             let base = [LE::read_u32(&b[0..4]), LE::read_u32(&b[4..8]), LE::read_u32(&b[8..12])];
             let grid = self.header.grid;
-            let offsets: Vec<u32> = if width == 2 {
-                b[12..].chunks_exact(2).map(|c| LE::read_u16(c) as u32).collect()
-            } else {
-                b[12..].chunks_exact(4).map(LE::read_u32).collect()
-            };
+            let offsets: Vec<u32> = b[12..].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
             g.positions.reserve(v as usize);
             for (k, q) in offsets.chunks_exact(3).enumerate() {
                 let p: [u64; 3] = std::array::from_fn(|a| base[a] as u64 + q[a] as u64);

@@ -602,16 +602,11 @@ fn encode_node(
 
     let base = points.iter().fold(if points.is_empty() { [0; 3] } else { [u32::MAX; 3] }, |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].min(p[2])]);
     let span = points.iter().flat_map(|p| (0..3).map(move |k| p[k] - base[k])).max().unwrap_or(0);
-    let width: u32 = if span <= u16::MAX as u32 { 2 } else { 4 };
+    let width: u32 = if span <= u16::MAX as u32 { 2 } else { 3 };
     let mut pos: Vec<u8> = base.iter().flat_map(|x| x.to_le_bytes()).collect();
     for p in &points {
         for k in 0..3 {
-            let d = p[k] - base[k];
-            if width == 2 {
-                pos.extend_from_slice(&(d as u16).to_le_bytes());
-            } else {
-                pos.extend_from_slice(&d.to_le_bytes());
-            }
+            pos.extend_from_slice(&(p[k] - base[k]).to_le_bytes()[..width as usize]);
         }
     }
 
@@ -753,8 +748,15 @@ fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], codes: &[Codes], n
     chunk::put(&mut payload, id::NODE, 0, &p);
 
     p.clear();
-    p.extend(neighbors.iter().flat_map(|x| x.to_le_bytes()));
-    chunk::put(&mut payload, id::NBRS, 0, &p);
+    let width = if levels.iter().all(|l| l.nodes <= 1 << 16) { 2 } else { 4 };
+    let mut next = neighbors.iter();
+    for r in records {
+        let first = levels[r.level as usize].first_node;
+        for &x in next.by_ref().take(r.neighbor_count as usize) {
+            p.extend_from_slice(&(x - first).to_le_bytes()[..width as usize]);
+        }
+    }
+    chunk::put(&mut payload, id::NBRS, width, &p);
 
     p.clear();
     for m in materials {
