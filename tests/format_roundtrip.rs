@@ -220,6 +220,8 @@ fn real_mesh_sizes() {
 fn large_mesh_sizes() {
     if let Some((summary, per_face, _)) = measure("large/cthead_skin_native.ply") {
         assert!(per_face <= 20.0, "level 0 takes {per_face} bytes per face");
-        assert!(summary.skeleton_bytes as f64 / summary.nodes as f64 <= 125.0, "skeleton bytes per node");
+        assert!(summary.skeleton_bytes as f64 / summary.nodes as f64 <= 70.0, "skeleton bytes per node");
+        assert!(summary.bytes_per_face() <= 32.0, "the file takes {} bytes per face", summary.bytes_per_face());
+        assert!(summary.skeleton_bytes as f64 <= 0.02 * summary.file_bytes as f64, "the skeleton is over 2% of the file");
     }
 }

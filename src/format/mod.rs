@@ -322,3 +322,43 @@ pub fn radius_code(steps: f64) -> u16 {
 pub fn radius_decode(k: u16) -> f64 {
     ((k & 0x7FF) as u64) as f64 * (1u64 << (k >> 11)) as f64
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_round_up_and_stay_close() {
+        for i in 0..=2000 {
+            let a = i as f64 * std::f64::consts::PI / 2000.0;
+            let k = angle_code(a);
+            assert!(angle_decode(k) as f64 >= a || k == u16::MAX, "angle {a} coded as {k}");
+            assert!((angle_decode(k) as f64) < a + 1e-4, "angle {a} widened to {}", angle_decode(k));
+        }
+        assert_eq!(angle_code(10.0), u16::MAX);
+        for steps in [0.0, 0.5, 1.0, 2047.0, 2047.5, 2048.0, 123_456.7, 3e6, 1e12] {
+            let r = radius_decode(radius_code(steps));
+            assert!(r >= steps && r <= steps * (1.0 + 1.0 / 1024.0) + 1.0, "{steps} steps coded as {r}");
+        }
+    }
+
+    #[test]
+    fn grid_points_pack_and_decode_within_half_a_step() {
+        let g = [(1 << 21) - 1, 12345, 0];
+        assert_eq!(unpack(pack(g)), Some(g));
+        assert_eq!(unpack(1 << 63), None);
+        let (min, max) = (Vec3::new(-3.0, 1000.0, 0.25), Vec3::new(5.0, 1001.0, 0.5));
+        let grid = Grid::fit(min, max, GRID_BITS);
+        assert!(8.0 / grid.step <= grid.last() as f64 && 8.0 / (grid.step / 2.0) > grid.last() as f64);
+        for k in 0..1000 {
+            let t = k as f32 / 999.0;
+            let p = min + (max - min) * Vec3::new(t, t * t, 1.0 - t);
+            let q = grid.decode(grid.encode(p));
+            for a in 0..3 {
+                let ulp = (p[a].abs().max(q[a].abs()) * f32::EPSILON) as f64;
+                assert!(((q[a] - p[a]) as f64).abs() <= grid.step / 2.0 + ulp / 2.0, "{p} → {q}");
+            }
+            assert!(grid.decode(grid.bound(p, false)).cmple(p).all() && p.cmple(grid.decode(grid.bound(p, true))).all());
+        }
+    }
+}
