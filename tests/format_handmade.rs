@@ -417,4 +417,6 @@ fn newer_major_is_refused_newer_minor_is_read() {
     assert!(msg.contains(&format!("version {}.0 is newer", MAJOR + 1)), "{msg}");
     assert_eq!(err.location(), Some(&strata::Location::Byte(8)));
     check_reads(&handmade(MAJOR, MINOR + 1, true).bytes);
+    let err = Reader::open(Cursor::new(handmade(MAJOR - 1, 0, false).bytes)).err().expect("a 1.0 file is refused");
+    assert!(err.to_string().contains(&format!("version {}.0 is not supported", MAJOR - 1)), "{err}");
 }
