@@ -465,6 +465,7 @@ fn inspect(a: InspectArgs) -> Result<()> {
     let units = if h.metres_per_unit > 0.0 { format!("{} m per unit", h.metres_per_unit) } else { "unknown units".into() };
     println!("input     {} vertices, {} faces, {units}", h.input_vertices, h.input_faces);
     println!("bounds    {:?} .. {:?}", h.min, h.max);
+    println!("grid      origin {:?}, step {}, {} bits", h.grid.origin, h.grid.step, h.grid.bits);
     println!("contents  {} levels, {} nodes, {} culling clusters, attributes {:?}", h.levels, h.nodes, h.clusters, h.attributes);
     println!("materials {}", h.materials.join(", "));
     println!("chunks");

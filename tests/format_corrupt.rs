@@ -134,6 +134,7 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
     let good = small_file();
     let at = offsets(&good);
     let (head, skel, node, nbrs) = (at("HEAD"), at("SKEL"), at("NODE"), at("NBRS"));
+    let max16 = u16::MAX.to_le_bytes();
     let max32 = u32::MAX.to_le_bytes();
     let max64 = u64::MAX.to_le_bytes();
     let hp = head + 16;
@@ -144,17 +145,18 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
         ("HEAD nodes", hp + 48, max32.to_vec(), vec![head], "nodes"),
         ("HEAD nodes - 1", hp + 48, (u32::MAX - 1).to_le_bytes().to_vec(), vec![head], "HEAD says"),
         ("HEAD materials", hp + 52, max32.to_vec(), vec![head], "MATL"),
-        ("HEAD tool length", hp + 120, max32.to_vec(), vec![head], "tool string"),
+        ("HEAD tool length", hp + 156, max32.to_vec(), vec![head], "tool string"),
+        ("HEAD grid bits", hp + 152, max32.to_vec(), vec![head], "grid"),
         ("HEAD size", head + 8, max64.to_vec(), vec![], "HEAD"),
         ("SKEL size", skel + 8, max64.to_vec(), vec![], "SKEL"),
         ("NODE size", node + 8, max64.to_vec(), vec![skel], "NODE"),
         ("NBRS size", nbrs + 8, (u32::MAX as u64).to_le_bytes().to_vec(), vec![skel], "NBRS"),
-        ("node 0 child count", node + 16 + 8, max32.to_vec(), vec![node, skel], "children"),
-        ("node 0 neighbour count", node + 16 + 12, max32.to_vec(), vec![node, skel], "neighbours"),
-        ("node 0 faces", node + 16 + 76, max32.to_vec(), vec![node, skel], "INDX"),
-        ("node 0 vertices", node + 16 + 80, max32.to_vec(), vec![node, skel], "vertices need"),
-        ("node 0 offset", node + 16 + 84, max64.to_vec(), vec![node, skel], "geometry"),
-        ("node 0 size", node + 16 + 92, max32.to_vec(), vec![node, skel], "geometry"),
+        ("node 0 child count", node + 16, max16.to_vec(), vec![node, skel], "children"),
+        ("node 0 neighbour count", node + 16 + 2, max16.to_vec(), vec![node, skel], "neighbours"),
+        ("node 0 box min", node + 16 + 12, max64.to_vec(), vec![node, skel], "grid"),
+        ("node 0 faces", node + 16 + 40, max32.to_vec(), vec![node, skel], "INDX"),
+        ("node 0 vertices", node + 16 + 44, max32.to_vec(), vec![node, skel], "vertices need"),
+        ("node 0 size", node + 16 + 48, max32.to_vec(), vec![node, skel], "geometry"),
     ];
     for (what, pos, value, seal, expect) in cases {
         let msg = damaged(&good, pos, &value, &seal);
@@ -170,6 +172,6 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
     reseal(&mut bytes, geom);
     let size = u64::from_le_bytes(bytes[geom + 8..geom + 16].try_into().expect("8 bytes")) as usize;
     let crc = bytes[geom + 16 + size..geom + 20 + size].to_vec();
-    let msg = damaged(&bytes, node + 16 + 96, &crc, &[node, skel]);
+    let msg = damaged(&bytes, node + 16 + 52, &crc, &[node, skel]);
     assert!(msg.contains("VPOS") && msg.contains("parent has"), "{msg}");
 }

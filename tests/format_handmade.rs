@@ -1,4 +1,4 @@
-//! A tiny file built byte by byte from the rules of format-spec/strata-v1.md (with byteorder, not
+//! A tiny file built byte by byte from the rules of format-spec/strata-v2.md (with byteorder, not
 //! through the writer): it must equal the spec's worked hex example and the writer's output for
 //! the same input, read back through the reader, and stay readable with unknown chunks inserted.
 //! Version rules: a newer major is refused, a newer minor is read.
@@ -15,7 +15,7 @@ use strata::hierarchy::{GroupInfo, Hierarchy, HierarchyParams, Level, Lists, NO_
 use strata::levels::{LevelMesh, LevelMeshes};
 use strata::mesh::{Material, Mesh};
 
-const SPEC: &str = include_str!("../format-spec/strata-v1.md");
+const SPEC: &str = include_str!("../format-spec/strata-v2.md");
 
 /// Bytes with a note per field, and the chunks opened so far.
 #[derive(Default)]
@@ -44,6 +44,20 @@ impl Doc {
     fn u32(&mut self, v: u32, label: &str) {
         let s = self.bytes.len();
         self.bytes.write_u32::<LE>(v).unwrap();
+        self.note(s, label);
+    }
+    fn u16s(&mut self, v: &[u16], label: &str) {
+        let s = self.bytes.len();
+        for &x in v {
+            self.bytes.write_u16::<LE>(x).unwrap();
+        }
+        self.note(s, label);
+    }
+    fn u32s(&mut self, v: &[u32], label: &str) {
+        let s = self.bytes.len();
+        for &x in v {
+            self.bytes.write_u32::<LE>(x).unwrap();
+        }
         self.note(s, label);
     }
     fn u64(&mut self, v: u64, label: &str) {
@@ -177,6 +191,15 @@ fn options() -> WriteOptions {
     WriteOptions { metres_per_unit: 1.0, params: example_params(), level_ratio: 0.5, tool: "strata test".into() }
 }
 
+/// The example's grid step: the smallest power of two with 1 / step ≤ 2^20 − 1.
+const STEP: f64 = 1.0 / (1u64 << 19) as f64;
+/// Grid coordinates of 1 and 0.5.
+const ONE: u64 = 1 << 19;
+const HALF: u64 = 1 << 18;
+/// Radius code of both spheres: the needed 0.75 (the hierarchy's radius) is 393,216 steps, times
+/// the writer's 1 + 10⁻⁶ margin, rounded up to 11 bits of mantissa: 1537 · 2^8 = 393,472 steps.
+const RADIUS: u16 = 1537 | 8 << 11;
+
 /// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
 fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     let mut d = Doc::default();
@@ -210,6 +233,11 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.f32s(&[p.kc, p.ks, p.kn], "params: kc, ks, kn");
     d.u32(p.top_groups as u32, "params: top_groups");
     d.f32s(&[0.5], "level ratio");
+    d.f64(0.0, "grid origin x");
+    d.f64(0.0, "grid origin y");
+    d.f64(0.0, "grid origin z");
+    d.f64(STEP, "grid step (2^-19)");
+    d.u32(20, "grid bits");
     d.u32(11, "tool length");
     d.raw(b"strata test", "tool");
     d.end();
@@ -232,23 +260,22 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
         d.chunk(b"xsub", b"unknown sub-chunk");
     }
     d.begin(b"NODE", 0);
-    d.u32(NO_PARENT, "node 0: parent (none)");
-    d.u32(0, "node 0: first child");
-    d.u32(0, "node 0: child count");
-    d.u32(0, "node 0: neighbour count");
-    d.f32s(&[0.0, 0.0, 1.0, 0.0], "node 0: cone axis, half-angle");
-    d.f32s(&[0.5, 0.5, 0.0, 0.75], "node 0: sphere center, radius");
-    d.f32s(&[0.0, 0.0, 0.0], "node 0: box min");
-    d.f32s(&[1.0, 1.0, 0.0], "node 0: box max");
-    d.f32s(&[0.0], "node 0: geometric error");
+    d.u16(0, "node 0: child count");
+    d.u16(0, "node 0: neighbour count");
+    d.u16s(&[0, 0], "node 0: cone axis (+z)");
+    d.u16(0, "node 0: cone half-angle (0)");
+    d.u16(RADIUS, "node 0: sphere radius (1537·2^8 steps)");
+    d.u64(0, "node 0: box min (0, 0, 0)");
+    d.u64(ONE | ONE << 21, "node 0: box max (2^19, 2^19, 0)");
+    d.u64(HALF | HALF << 21, "node 0: sphere center (2^18, 2^18, 0)");
+    d.f32s(&[(STEP * 3f64.sqrt() / 2.0) as f32], "node 0: geometric error (√3/2 step)");
     d.u32(2, "node 0: faces");
     d.u32(4, "node 0: vertices");
     let node_geom_at = d.bytes.len();
-    d.u64(0, "node 0: GEOM offset");
     d.u32(0, "node 0: GEOM bytes (ID to CRC)");
     d.u32(0, "node 0: GEOM CRC-32");
     d.end();
-    d.begin(b"NBRS", 0);
+    d.begin(b"NBRS", 2);
     d.end();
     d.begin(b"MATL", 0);
     d.u32(7, "material 0: name length");
@@ -258,19 +285,20 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.end();
     d.end();
 
-    if extra {
-        d.chunk(b"XTR2", b"");
-    }
-
     // GEOM of node 0.
     let geom = d.bytes.len();
     d.begin(b"GEOM", 0);
     if extra {
         d.chunk(b"VTAN", b"a future attribute");
     }
-    d.begin(b"VPOS", 0);
-    for (k, p) in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]].iter().enumerate() {
-        d.f32s(p, &format!("vertex {k}"));
+    d.begin(b"VPOS", 3);
+    d.u32s(&[0, 0, 0], "base");
+    for (k, p) in [[0, 0, 0], [ONE, 0, 0], [ONE, ONE, 0], [0, ONE, 0]].iter().enumerate() {
+        let s = d.bytes.len();
+        for x in p {
+            d.bytes.write_u24::<LE>(*x as u32).unwrap();
+        }
+        d.note(s, &format!("vertex {k} (u24 offsets)"));
     }
     d.end();
     d.begin(b"INDX", 2);
@@ -285,11 +313,12 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.u32(0, "range 0: first index");
     d.u32(6, "range 0: index count");
     d.end();
-    d.begin(b"CLUS", 0);
-    d.f32s(&[0.0, 0.0, 1.0, 0.0], "cluster 0: cone axis, half-angle");
-    d.f32s(&[0.5, 0.5, 0.0, 0.75], "cluster 0: sphere center, radius");
-    d.u32(0, "cluster 0: first face");
-    d.u32(2, "cluster 0: face count");
+    d.begin(b"CLUS", 4);
+    d.u16s(&[0, 0], "cluster 0: cone axis (+z)");
+    d.u16(0, "cluster 0: cone half-angle (0)");
+    d.u16(2, "cluster 0: face count");
+    d.u16s(&[1 << 14, 1 << 14, 0], "cluster 0: sphere center (units of 2^4 steps)");
+    d.u16(RADIUS, "cluster 0: sphere radius");
     d.end();
     d.end();
     let geom_span = 16 + u64::from_le_bytes(d.bytes[geom + 8..geom + 16].try_into().unwrap()) + 4;
@@ -302,12 +331,11 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     let len = d.bytes.len() as u64;
     d.patch(file_size_at, &len.to_le_bytes());
     d.patch(level_bytes_at, &(geom_end - geom as u64).to_le_bytes());
-    d.patch(node_geom_at, &(geom as u64).to_le_bytes());
-    d.patch(node_geom_at + 8, &(geom_span as u32).to_le_bytes());
+    d.patch(node_geom_at, &(geom_span as u32).to_le_bytes());
     d.seal();
     let payload_end = geom + geom_span as usize - 4;
     let geom_crc = crc32fast::hash(&d.bytes[geom + 16..payload_end]);
-    d.patch(node_geom_at + 12, &geom_crc.to_le_bytes());
+    d.patch(node_geom_at + 4, &geom_crc.to_le_bytes());
     d.seal();
     d
 }
@@ -352,7 +380,7 @@ fn check_reads(bytes: &[u8]) {
     assert_eq!(h.max, Vec3::new(1.0, 1.0, 0.0));
     assert_eq!(rd.materials(), &[Material::default()]);
     let n = rd.nodes()[0];
-    assert_eq!((n.parent, n.faces, n.vertices, n.radius), (format::NO_PARENT, 2, 4, 0.75));
+    assert_eq!((n.parent, n.faces, n.vertices, n.radius), (format::NO_PARENT, 2, 4, 393_472.0 / ONE as f32));
     let g = rd.read_node(0).expect("node");
     assert_eq!(g.positions, quad().positions);
     assert_eq!(g.indices, vec![0, 1, 2, 0, 2, 3]);
@@ -377,6 +405,9 @@ fn unknown_chunks_are_skipped() {
     let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     let ids: Vec<&str> = rd.skeleton_chunks().iter().map(|c| c.id.as_str()).collect();
     assert_eq!(ids, ["HEAD", "XTRA", "SKEL", "LEVL", "xsub", "NODE", "NBRS", "MATL"]);
+    let mut rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
+    let top: Vec<String> = rd.chunks().expect("chunks").iter().map(|c| c.id.clone()).collect();
+    assert_eq!(top, ["HEAD", "XTRA", "SKEL", "GEOM", "XEND"]);
 }
 
 #[test]
@@ -386,4 +417,6 @@ fn newer_major_is_refused_newer_minor_is_read() {
     assert!(msg.contains(&format!("version {}.0 is newer", MAJOR + 1)), "{msg}");
     assert_eq!(err.location(), Some(&strata::Location::Byte(8)));
     check_reads(&handmade(MAJOR, MINOR + 1, true).bytes);
+    let err = Reader::open(Cursor::new(handmade(MAJOR - 1, 0, false).bytes)).err().expect("a 1.0 file is refused");
+    assert!(err.to_string().contains(&format!("version {}.0 is not supported", MAJOR - 1)), "{err}");
 }

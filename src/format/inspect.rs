@@ -33,6 +33,8 @@ pub struct HeaderView {
     pub input_faces: u64,
     pub clusters: u32,
     pub params: crate::hierarchy::HierarchyParams,
+    /// The position grid: origin, step and bits per axis.
+    pub grid: super::Grid,
     pub level_ratio: f32,
     pub tool: String,
 }
@@ -102,6 +104,7 @@ pub fn inspect<R: Read + Seek>(rd: &mut Reader<R>, select: Selection) -> Result<
         input_faces: h.input_faces,
         clusters: h.clusters,
         params: h.params,
+        grid: h.grid,
         level_ratio: h.level_ratio,
         tool: h.tool.clone(),
     };

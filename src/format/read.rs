@@ -6,9 +6,9 @@
 
 use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
 use super::{
-    id, octa, Attributes, Cluster, Header, LevelRecord, MaterialRange, NodeGeometry, NodeRecord, CLUSTER_RECORD_BYTES,
-    HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAGIC, MAJOR, MAX_TOOL_BYTES, MINOR, NODE_RECORD_BYTES, NO_PARENT,
-    PROLOGUE_BYTES, RANGE_RECORD_BYTES, VERSION,
+    angle_decode, id, octa, radius_decode, unpack, Attributes, Cluster, Grid, Header, LevelRecord, MaterialRange, NodeGeometry,
+    NodeRecord, CLUSTER_RECORD_BYTES, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAGIC, MAJOR, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR,
+    NODE_RECORD_BYTES, NO_PARENT, PROLOGUE_BYTES, RANGE_RECORD_BYTES, VERSION,
 };
 use crate::cone::Cone;
 use crate::error::{Error, Result};
@@ -337,6 +337,17 @@ impl<R: Read + Seek> Reader<R> {
         };
         let level_ratio = f.f32()?;
         let at = f.offset();
+        let grid = Grid { origin: [f.f64()?, f.f64()?, f.f64()?], step: f.f64()?, bits: f.u32()? };
+        let sane = grid.origin.iter().all(|x| x.is_finite())
+            && grid.step.is_finite()
+            && grid.step > 0.0
+            && (1..=MAX_GRID_BITS).contains(&grid.bits)
+            && grid.decode([0; 3]).is_finite()
+            && grid.decode([grid.last(); 3]).is_finite();
+        if !sane {
+            return Err(f.error_at(at, format!("grid origin {:?}, step {}, {} bits", grid.origin, grid.step, grid.bits)));
+        }
+        let at = f.offset();
         let tool_len = f.u32()?;
         if tool_len as u64 > MAX_TOOL_BYTES {
             return Err(f.error_at(at, format!("tool string of {tool_len} bytes exceeds {MAX_TOOL_BYTES}")));
@@ -360,6 +371,7 @@ impl<R: Read + Seek> Reader<R> {
             input_faces,
             clusters,
             params,
+            grid,
             level_ratio,
             tool,
         })
@@ -405,13 +417,14 @@ impl<R: Read + Seek> Reader<R> {
 
         // NBRS
         let nf = fields(nbrs);
-        if nbrs.frame.size % 4 != 0 {
-            return Err(nf.error(format!("size {} is not a multiple of 4", nbrs.frame.size)));
+        let width = nbrs.frame.flags as u64;
+        if width != 2 && width != 4 {
+            return Err(nf.error_at(nbrs.offset + 4, format!("entry width {width}; must be 2 or 4")));
         }
-        let neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(4).map(LE::read_u32).collect();
-        if let Some(k) = neighbors.iter().position(|&x| x >= h.nodes) {
-            return Err(nf.error_at(nbrs.payload_offset() + 4 * k as u64, format!("neighbour {} of {} nodes", neighbors[k], h.nodes)));
+        if nbrs.frame.size % width != 0 {
+            return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
         }
+        let mut neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
 
         // NODE
         let mut f = fields(node);
@@ -419,45 +432,57 @@ impl<R: Read + Seek> Reader<R> {
         if node.frame.size != want {
             return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
         }
-        let mut nodes = Vec::with_capacity(h.nodes as usize);
+        let grid = h.grid;
+        let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
         let mut neighbor_first = 0u64;
+        let mut offset = self.skeleton_end;
+        // Children of the levels above are consecutive: node i's are those after its predecessors'.
+        let mut next_child = 0u64;
         for (l, lev) in levels.iter().enumerate().rev() {
+            let end = lev.first_node as u64 + lev.nodes as u64;
+            if l + 1 < levels.len() && next_child != end {
+                return Err(f.error(format!("the children of level {} cover nodes up to {next_child}, level {l} ends at {end}", l + 1)));
+            }
+            next_child = end;
             for i in lev.first_node..lev.first_node + lev.nodes {
                 let at = f.offset();
-                let (parent, first_child, child_count, neighbor_count) = (f.u32()?, f.u32()?, f.u32()?, f.u32()?);
-                let cone = Cone { axis: f.vec3()?, half_angle: f.f32()? };
-                let (center, radius) = (f.vec3()?, f.f32()?);
-                let (min, max, error) = (f.vec3()?, f.vec3()?, f.f32()?);
-                let (faces, vertices, offset, size, crc) = (f.u32()?, f.u32()?, f.u64()?, f.u32()?, f.u32()?);
+                let (child_count, neighbor_count) = (f.u16()? as u32, f.u16()? as u32);
+                let axis = octa::decode([f.u16()? as i16, f.u16()? as i16]);
+                let (half, radius_code) = (f.u16()?, f.u16()?);
+                let (lo, hi, center) = (unpack(f.u64()?), unpack(f.u64()?), unpack(f.u64()?));
+                let (error, faces, vertices, size, crc) = (f.f32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?);
                 let bad = |msg: String| f.error_at(at, format!("node {i}: {msg}"));
-                if parent != NO_PARENT && parent >= h.nodes {
-                    return Err(bad(format!("parent {parent} of {} nodes", h.nodes)));
+                let first_child = if child_count > 0 { next_child as u32 } else { 0 };
+                if l == 0 && child_count > 0 {
+                    return Err(bad(format!("a level-0 node with {child_count} children")));
                 }
-                if first_child as u64 + child_count as u64 > h.nodes as u64 {
-                    return Err(bad(format!("children {first_child}..+{child_count} of {} nodes", h.nodes)));
+                next_child += child_count as u64;
+                if l > 0 && next_child > (lev.first_node + lev.nodes) as u64 + levels[l - 1].nodes as u64 {
+                    return Err(bad(format!("children {first_child}..+{child_count} run past level {}", l - 1)));
                 }
                 if neighbor_first + neighbor_count as u64 > neighbors.len() as u64 {
                     return Err(bad(format!("neighbours run past the {} of NBRS", neighbors.len())));
                 }
-                let in_file = offset % chunk::ALIGN == 0
-                    && offset >= self.skeleton_end
-                    && size as u64 >= HEADER_BYTES + TRAILER_BYTES
-                    && offset.checked_add(size as u64).is_some_and(|e| e <= self.len);
+                let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
+                let (Some(lo), Some(hi), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
+                    return Err(bad(format!("box or sphere center off the {}-bit grid", grid.bits)));
+                };
+                let in_file = size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= self.len);
                 if !in_file {
-                    return Err(bad(format!("geometry {size} bytes at offset {offset} is not an aligned span after the skeleton within the {}-byte file", self.len)));
+                    return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", self.len)));
                 }
                 nodes.push(NodeRecord {
                     level: l as u32,
-                    parent,
+                    parent: NO_PARENT,
                     first_child,
                     child_count,
                     neighbor_first: neighbor_first as u32,
                     neighbor_count,
-                    cone,
-                    center,
-                    radius,
-                    min,
-                    max,
+                    cone: Cone { axis, half_angle: angle_decode(half) },
+                    center: grid.decode(center),
+                    radius: grid.length(radius_decode(radius_code)),
+                    min: grid.decode(lo),
+                    max: grid.decode(hi),
                     error,
                     faces,
                     vertices,
@@ -466,10 +491,32 @@ impl<R: Read + Seek> Reader<R> {
                     crc,
                 });
                 neighbor_first += neighbor_count as u64;
+                let end = offset + size as u64;
+                offset = end + chunk::padding(end);
             }
+        }
+        for i in 0..nodes.len() {
+            let n = nodes[i];
+            for c in n.first_child..n.first_child + n.child_count {
+                nodes[c as usize].parent = i as u32;
+            }
+        }
+        if offset > self.len {
+            return Err(fields(node).error(format!("geometry chunks end at {offset}, past the end of the {}-byte file", self.len)));
         }
         if neighbor_first != neighbors.len() as u64 {
             return Err(nf.error(format!("holds {} neighbours, the nodes use {neighbor_first}", neighbors.len())));
+        }
+        for (i, n) in nodes.iter().enumerate() {
+            let lev = &levels[n.level as usize];
+            for k in n.neighbor_first..n.neighbor_first + n.neighbor_count {
+                let x = &mut neighbors[k as usize];
+                if *x >= lev.nodes {
+                    let at = nbrs.payload_offset() + width * k as u64;
+                    return Err(nf.error_at(at, format!("node {i}: neighbour {} of the {} nodes of level {}", *x, lev.nodes, n.level)));
+                }
+                *x += lev.first_node;
+            }
         }
 
         // MATL
@@ -561,12 +608,24 @@ impl<R: Read + Seek> Reader<R> {
         };
         let mut g = NodeGeometry::default();
         if let Some(s) = found[0] {
-            g.positions = data(s, 12, "positions")?
-                .chunks_exact(12)
-                .map(|c| Vec3::new(LE::read_f32(&c[0..4]), LE::read_f32(&c[4..8]), LE::read_f32(&c[8..12])))
-                .collect();
-            if let Some(k) = g.positions.iter().position(|p| !p.is_finite()) {
-                return Err(err(s.payload_offset() + 12 * k as u64, format!("vertex {k} is not finite")));
+            let width = s.frame.flags as u64;
+            if width != 2 && width != 3 {
+                return Err(err(s.offset + 4, format!("position width {width}; must be 2 or 3")));
+            }
+            if s.frame.size != 12 + v * 3 * width {
+                return Err(err(s.offset + 8, format!("VPOS holds {} bytes; {v} vertices need {} for positions", s.frame.size, 12 + v * 3 * width)));
+            }
+            let b = &payload[s.start..s.end];
+            let base = [LE::read_u32(&b[0..4]), LE::read_u32(&b[4..8]), LE::read_u32(&b[8..12])];
+            let grid = self.header.grid;
+            let offsets: Vec<u32> = b[12..].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
+            g.positions.reserve(v as usize);
+            for (k, q) in offsets.chunks_exact(3).enumerate() {
+                let p: [u64; 3] = std::array::from_fn(|a| base[a] as u64 + q[a] as u64);
+                if p.iter().any(|&x| x > grid.last() as u64) {
+                    return Err(err(s.payload_offset() + 12 + 3 * width * k as u64, format!("vertex {k} lies off the {}-bit grid", grid.bits)));
+                }
+                g.positions.push(grid.decode(p.map(|x| x as u32)));
             }
         }
         if let Some(s) = found[1] {
@@ -621,24 +680,35 @@ impl<R: Read + Seek> Reader<R> {
             if s.frame.size % CLUSTER_RECORD_BYTES != 0 {
                 return Err(err(s.offset + 8, format!("CLUS size {} is not a multiple of {CLUSTER_RECORD_BYTES}", s.frame.size)));
             }
+            let grid = self.header.grid;
+            let shift = s.frame.flags;
+            if shift > grid.bits {
+                return Err(err(s.offset + 4, format!("CLUS shift {shift} exceeds the {} grid bits", grid.bits)));
+            }
+            let base = found[0].map_or([0; 3], |p| {
+                let b = &payload[p.start..p.end];
+                [LE::read_u32(&b[0..4]), LE::read_u32(&b[4..8]), LE::read_u32(&b[8..12])]
+            });
             let mut next = 0u64;
-            for (k, c) in payload[s.start..s.end].chunks_exact(40).enumerate() {
-                let fl = |o: usize| LE::read_f32(&c[o..o + 4]);
-                let cl = Cluster {
-                    cone: Cone { axis: Vec3::new(fl(0), fl(4), fl(8)), half_angle: fl(12) },
-                    center: Vec3::new(fl(16), fl(20), fl(24)),
-                    radius: fl(28),
-                    first_face: LE::read_u32(&c[32..36]),
-                    face_count: LE::read_u32(&c[36..40]),
-                };
-                if cl.first_face as u64 != next || cl.face_count == 0 {
-                    return Err(err(
-                        s.payload_offset() + 40 * k as u64,
-                        format!("cluster {k} (faces {}..+{}) does not continue at face {next}", cl.first_face, cl.face_count),
-                    ));
+            for (k, c) in payload[s.start..s.end].chunks_exact(16).enumerate() {
+                let u = |o: usize| LE::read_u16(&c[o..o + 2]);
+                let face_count = u(6) as u32;
+                let center: [u64; 3] = std::array::from_fn(|a| base[a] as u64 + ((u(8 + 2 * a) as u64) << shift));
+                let rec_at = s.payload_offset() + 16 * k as u64;
+                if face_count == 0 {
+                    return Err(err(rec_at, format!("cluster {k} has no faces")));
                 }
-                next += cl.face_count as u64;
-                g.clusters.push(cl);
+                if center.iter().any(|&x| x > grid.last() as u64) {
+                    return Err(err(rec_at, format!("cluster {k}'s center lies off the {}-bit grid", grid.bits)));
+                }
+                g.clusters.push(Cluster {
+                    cone: Cone { axis: octa::decode([u(0) as i16, u(2) as i16]), half_angle: angle_decode(u(4)) },
+                    center: grid.decode(center.map(|x| x as u32)),
+                    radius: grid.length(radius_decode(u(14))),
+                    first_face: next as u32,
+                    face_count,
+                });
+                next += face_count as u64;
             }
             if next != rec.faces as u64 {
                 return Err(err(s.offset, format!("clusters cover {next} of {} faces", rec.faces)));
@@ -664,6 +734,7 @@ fn empty_header() -> Header {
         input_faces: 0,
         clusters: 0,
         params: HierarchyParams::default(),
+        grid: Grid { origin: [0.0; 3], step: 1.0, bits: 1 },
         level_ratio: 0.0,
         tool: String::new(),
     }

@@ -1,12 +1,17 @@
-//! Write a group hierarchy and its level meshes as a strata file (format-spec/strata-v1.md).
+//! Write a group hierarchy and its level meshes as a strata file (format-spec/strata-v2.md).
 //!
 //! Nodes are numbered breadth-first from the top level, children of a node consecutive, and their
 //! geometry chunks follow the skeleton in that order, so a prefix of the file is a coarse model.
 //! Bounds and cones are the hierarchy's, widened to cover each node's own (simplified) geometry and
-//! its descendants, so that culling a node by them is safe for everything below it.
+//! its descendants, so that culling a node by them is safe for everything below it. Positions are
+//! stored on one global grid; bounds, cones and errors are computed on the quantized positions and
+//! rounded outward when stored.
 
 use super::chunk;
-use super::{id, octa, Attributes, Header, LevelRecord, NodeRecord, MAGIC, MAJOR, MAX_TOOL_BYTES, MINOR, NO_PARENT};
+use super::{
+    angle_code, angle_decode, id, octa, pack, radius_code, radius_decode, Attributes, Grid, Header, LevelRecord, NodeRecord, GRID_BITS, MAGIC,
+    MAJOR, MAX_TOOL_BYTES, MINOR, NO_PARENT,
+};
 use crate::atomic::AtomicFile;
 use crate::cone::Cone;
 use crate::error::{Error, Result};
@@ -99,10 +104,16 @@ fn write_named<W: Write + Seek>(
     let attributes = check_inputs(h, lv, opts).map_err(bad)?;
     let materials = material_table(&lv.levels[0].mesh);
     let plan = plan(h, lv);
-    let mut records = bounds(h, lv, &plan).map_err(bad)?;
+    let grid = model_grid(lv);
+    let quant: Vec<Quantized> = lv.levels.iter().map(|l| Quantized::new(&grid, &l.mesh)).collect();
+    let (mut records, codes) = bounds(h, lv, &plan, &grid, &quant).map_err(bad)?;
     let (neighbor_counts, neighbors) = neighbor_lists(h, &plan);
-    for (r, &c) in records.iter_mut().zip(&neighbor_counts) {
+    for (n, (r, &c)) in records.iter_mut().zip(&neighbor_counts).enumerate() {
         r.neighbor_count = c;
+        if c > u16::MAX as u32 || r.child_count > u16::MAX as u32 {
+            let (l, g) = plan.nodes[n];
+            return Err(bad(format!("level {l} group {g}: {c} neighbours and {} children; at most {} each", r.child_count, u16::MAX)));
+        }
     }
 
     let nl = plan.level_first.len();
@@ -121,6 +132,7 @@ fn write_named<W: Write + Seek>(
         input_faces: lv.levels[0].mesh.face_count() as u64,
         clusters: 0,
         params: opts.params,
+        grid,
         level_ratio: opts.level_ratio,
         tool: opts.tool.clone(),
     };
@@ -138,7 +150,7 @@ fn write_named<W: Write + Seek>(
     let crc = chunk::crc32(&prologue);
     prologue.extend_from_slice(&crc.to_le_bytes());
     w.write_all(&prologue).map_err(io)?;
-    let reserved = head_chunk(&header).len() + skel_chunk(&levels, &records, &neighbors, &materials).len();
+    let reserved = head_chunk(&header).len() + skel_chunk(&levels, &records, &codes, &neighbors, &materials).len();
     w.write_all(&vec![0u8; reserved]).map_err(io)?;
 
     let mut pos = prologue.len() as u64 + reserved as u64;
@@ -151,7 +163,7 @@ fn write_named<W: Write + Seek>(
         }
         let clusters = (l == 0).then_some(&h.clusters);
         buf.clear();
-        let enc = encode_node(mesh, faces, clusters, attributes, &mut buf);
+        let enc = encode_node(mesh, &quant[l as usize], &grid, faces, clusters, attributes, &mut buf).map_err(bad)?;
         let span = enc.span;
         let rec = &mut records[n];
         rec.offset = pos;
@@ -173,7 +185,7 @@ fn write_named<W: Write + Seek>(
     header.min = top.iter().fold(Vec3::splat(f32::MAX), |m, r| m.min(r.min));
     header.max = top.iter().fold(Vec3::splat(f32::MIN), |m, r| m.max(r.max));
     let mut skeleton = head_chunk(&header);
-    skeleton.extend(skel_chunk(&levels, &records, &neighbors, &materials));
+    skeleton.extend(skel_chunk(&levels, &records, &codes, &neighbors, &materials));
     if skeleton.len() != reserved {
         return Err(bad(format!("internal error: skeleton of {} bytes in {reserved} reserved", skeleton.len())));
     }
@@ -357,18 +369,65 @@ fn angle(a: Vec3, b: Vec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b))
 }
 
-/// A half-angle that covers `needed` radians despite rounding to f32.
-fn cover(current: f32, needed: f64) -> f32 {
-    if needed <= current as f64 {
-        current
-    } else {
-        ((needed + 1e-6) as f32).min(std::f32::consts::PI)
+/// The grid of the file: the bounds of every level's positions, [`GRID_BITS`] bits.
+fn model_grid(lv: &LevelMeshes) -> Grid {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for l in &lv.levels {
+        for p in &l.mesh.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+    }
+    if lo.cmpgt(hi).any() {
+        (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
+    }
+    Grid::fit(lo, hi, GRID_BITS)
+}
+
+/// A level mesh's positions on the grid: grid points and the positions they decode to.
+struct Quantized {
+    points: Vec<[u32; 3]>,
+    positions: Vec<Vec3>,
+}
+
+impl Quantized {
+    fn new(grid: &Grid, mesh: &Mesh) -> Quantized {
+        let points: Vec<[u32; 3]> = mesh.positions.iter().map(|&p| grid.encode(p)).collect();
+        let positions = points.iter().map(|&g| grid.decode(g)).collect();
+        Quantized { points, positions }
     }
 }
 
-/// Node records with structure, bounds, cones and errors; geometry fields are filled while writing.
-/// Bottom-up, so each node's cone and bounds cover its descendants'.
-fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan) -> std::result::Result<Vec<NodeRecord>, String> {
+/// A node's stored codes: box corners and sphere center on the grid, cone and radius codes.
+#[derive(Clone, Copy, Default)]
+struct Codes {
+    min: [u32; 3],
+    max: [u32; 3],
+    center: [u32; 3],
+    axis: [i16; 2],
+    half_angle: u16,
+    radius: u16,
+}
+
+/// The cone stored for a cone around `axis` that must reach `need(decoded axis)` radians: the axis
+/// quantized, the angle rounded up.
+fn store_cone(axis: Vec3, need: impl Fn(Vec3) -> f64) -> ([i16; 2], u16, Cone) {
+    let code = octa::encode(axis);
+    let decoded = octa::decode(code);
+    let k = angle_code(need(decoded));
+    (code, k, Cone { axis: decoded, half_angle: angle_decode(k) })
+}
+
+/// The radius code covering `needed` model units, and its decoded radius.
+fn store_radius(grid: &Grid, needed: f64) -> (u16, f32) {
+    let k = radius_code(needed / grid.step * (1.0 + 1e-6));
+    (k, grid.length(radius_decode(k)))
+}
+
+/// Node records with structure, bounds, cones and errors, and their stored codes; geometry fields
+/// are filled while writing. Bottom-up, so each node's cone and bounds cover its descendants', all
+/// computed on the quantized positions and rounded outward.
+fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan, grid: &Grid, quant: &[Quantized]) -> std::result::Result<(Vec<NodeRecord>, Vec<Codes>), String> {
     let mut records: Vec<NodeRecord> = Vec::with_capacity(plan.nodes.len());
     for (n, &(l, _)) in plan.nodes.iter().enumerate() {
         let (first_child, child_count) = plan.children[n];
@@ -392,51 +451,81 @@ fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan) -> std::result::Result<V
             crc: 0,
         });
     }
+    let mut codes = vec![Codes::default(); plan.nodes.len()];
     for l in 0..h.levels.len() {
         let hl = &h.levels[l];
         let mesh = &lv.levels[l].mesh;
+        let q = &quant[l];
         for (g, info) in hl.groups.iter().enumerate() {
             let n = plan.node_of[l][g] as usize;
-            let mut cone = info.cone;
-            cone.axis = cone.axis.normalize_or(Vec3::Z);
-            let (mut lo, mut hi, mut radius) = (info.min, info.max, info.radius);
-            let mut error = lv.levels[l].group_error[g];
-            for &f in plan.faces[l].get(g) {
-                let t = &mesh.triangles[f as usize];
-                for &v in t {
-                    let p = mesh.positions[v as usize];
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                    radius = radius.max(info.center.distance(p) * (1.0 + 1e-6));
-                }
-                let c = triangle_cross(&mesh.positions, t);
-                if c.length_squared() > 0.0 {
-                    cone.half_angle = cover(cone.half_angle, angle(cone.axis, c.normalize().as_vec3()));
-                }
+            if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
+                return Err(format!("level {l} group {g}: bounds are not finite"));
             }
             let (first, count) = plan.children[n];
+            let faces = plan.faces[l].get(g);
+            let (mut lo, mut hi) = (grid.bound(info.min, false), grid.bound(info.max, true));
+            let mut grow = |p: [u32; 3]| {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            };
+            for &f in faces {
+                for &v in &mesh.triangles[f as usize] {
+                    grow(q.points[v as usize]);
+                }
+            }
+            for c in first..first + count {
+                grow(codes[c as usize].min);
+                grow(codes[c as usize].max);
+            }
+
+            let center = grid.encode(info.center);
+            let dc = grid.decode(center).as_dvec3();
+            let mut needed = info.radius as f64 + dc.distance(info.center.as_dvec3());
+            for &f in faces {
+                for &v in &mesh.triangles[f as usize] {
+                    needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
+                }
+            }
+            let mut error = lv.levels[l].group_error[g] + grid.error();
             for c in first..first + count {
                 let child = records[c as usize];
-                cone.half_angle = cover(cone.half_angle, angle(cone.axis, child.cone.axis) + child.cone.half_angle as f64);
-                lo = lo.min(child.min);
-                hi = hi.max(child.max);
-                radius = radius.max((info.center.distance(child.center) + child.radius) * (1.0 + 1e-6));
+                needed = needed.max(dc.distance(child.center.as_dvec3()) + child.radius as f64);
                 error = error.max(child.error);
                 records[c as usize].parent = n as u32;
             }
-            if !(lo.is_finite() && hi.is_finite() && radius.is_finite()) {
-                return Err(format!("level {l} group {g}: bounds are not finite"));
-            }
+            let (radius_code, radius) = store_radius(grid, needed);
+
+            let normals: Vec<Vec3> = faces
+                .iter()
+                .map(|&f| triangle_cross(&q.positions, &mesh.triangles[f as usize]))
+                .filter(|c| c.length_squared() > 0.0)
+                .map(|c| c.normalize().as_vec3())
+                .collect();
+            let axis = info.cone.axis.normalize_or(Vec3::Z);
+            let (axis_code, angle, cone) = store_cone(axis, |d| {
+                let mut need = info.cone.half_angle as f64 + angle(axis, d);
+                for &nrm in &normals {
+                    need = need.max(angle(d, nrm));
+                }
+                for c in first..first + count {
+                    let ch = records[c as usize].cone;
+                    need = need.max(angle(d, ch.axis) + ch.half_angle as f64);
+                }
+                need
+            });
+            codes[n] = Codes { min: lo, max: hi, center, axis: axis_code, half_angle: angle, radius: radius_code };
             let r = &mut records[n];
             r.cone = cone;
-            r.center = info.center;
+            r.center = grid.decode(center);
             r.radius = radius;
-            r.min = lo;
-            r.max = hi;
+            r.min = grid.decode(lo);
+            r.max = grid.decode(hi);
             r.error = error;
         }
     }
-    Ok(records)
+    Ok((records, codes))
 }
 
 /// Per node, its same-level neighbours as node numbers, ascending; and all lists end to end.
@@ -471,29 +560,36 @@ struct Encoded {
 }
 
 /// Append the `GEOM` chunk of `faces` of `mesh` to `out` (at an aligned position). Faces are
-/// ordered by culling cluster (level 0), then material; vertices are deduplicated corners in order
-/// of first use. Cluster cones and spheres are the hierarchy's, widened where rounding left a face
-/// outside.
-fn encode_node(mesh: &Mesh, faces: &[u32], clusters: Option<&hierarchy::Level>, attrs: Attributes, out: &mut Vec<u8>) -> Encoded {
+/// ordered by culling cluster (level 0), then material; vertices are deduplicated corners (grid
+/// point and attributes) in order of first use. Cluster cones and spheres are the hierarchy's,
+/// widened to cover the quantized faces and rounded outward.
+fn encode_node(
+    mesh: &Mesh,
+    q: &Quantized,
+    grid: &Grid,
+    faces: &[u32],
+    clusters: Option<&hierarchy::Level>,
+    attrs: Attributes,
+    out: &mut Vec<u8>,
+) -> std::result::Result<Encoded, String> {
     let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
     let mut order: Vec<u32> = faces.to_vec();
     order.sort_by_key(|&f| (cluster_of(f), material_of(mesh, f as usize), f));
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
     let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());
-    let (mut pos, mut nrm, mut tex, mut col) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut points, mut nrm, mut tex, mut col) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut indices: Vec<u32> = Vec::with_capacity(order.len() * 3);
     for &f in &order {
         for k in 0..3 {
             let corner = 3 * f as usize + k;
-            let p = mesh.positions[mesh.triangles[f as usize][k] as usize];
+            let g = q.points[mesh.triangles[f as usize][k] as usize];
             let n = if attrs.normals { octa::encode(mesh.normals[corner]) } else { [0; 2] };
             let uv = if attrs.uvs { mesh.uvs[corner].to_array().map(f32::to_bits) } else { [0; 2] };
             let c = if attrs.colors { mesh.colors[corner] } else { [0; 4] };
-            let key = (p.to_array().map(f32::to_bits), n, uv, c);
             let next = index_of.len() as u32;
-            let i = *index_of.entry(key).or_insert_with(|| {
-                pos.extend(p.to_array().iter().flat_map(|x| x.to_le_bytes()));
+            let i = *index_of.entry((g, n, uv, c)).or_insert_with(|| {
+                points.push(g);
                 nrm.extend(n.iter().flat_map(|x| x.to_le_bytes()));
                 tex.extend(uv.iter().flat_map(|x| x.to_le_bytes()));
                 col.extend_from_slice(&c);
@@ -504,8 +600,18 @@ fn encode_node(mesh: &Mesh, faces: &[u32], clusters: Option<&hierarchy::Level>, 
     }
     let vertices = index_of.len() as u32;
 
+    let base = points.iter().fold(if points.is_empty() { [0; 3] } else { [u32::MAX; 3] }, |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].min(p[2])]);
+    let span = points.iter().flat_map(|p| (0..3).map(move |k| p[k] - base[k])).max().unwrap_or(0);
+    let width: u32 = if span <= u16::MAX as u32 { 2 } else { 3 };
+    let mut pos: Vec<u8> = base.iter().flat_map(|x| x.to_le_bytes()).collect();
+    for p in &points {
+        for k in 0..3 {
+            pos.extend_from_slice(&(p[k] - base[k]).to_le_bytes()[..width as usize]);
+        }
+    }
+
     let mut payload = Vec::new();
-    chunk::put(&mut payload, id::VPOS, 0, &pos);
+    chunk::put(&mut payload, id::VPOS, width, &pos);
     if attrs.normals {
         chunk::put(&mut payload, id::VNRM, 0, &nrm);
     }
@@ -534,36 +640,44 @@ fn encode_node(mesh: &Mesh, faces: &[u32], clusters: Option<&hierarchy::Level>, 
 
     let mut cluster_count = 0;
     if let Some(cl) = clusters {
+        let shift = (0..=grid.bits).find(|&s| span >> s <= u16::MAX as u32).unwrap_or(grid.bits);
         let mut table = Vec::new();
-        let mut first = 0u32;
         for run in order.chunk_by(|&a, &b| cluster_of(a) == cluster_of(b)) {
             let g = &cl.groups[cluster_of(run[0]) as usize];
-            let axis = g.cone.axis.normalize_or(Vec3::Z);
-            let (mut half, mut radius) = (g.cone.half_angle, g.radius);
+            if !(g.center.is_finite() && g.radius.is_finite()) {
+                return Err(format!("cluster {}: bounds are not finite", cluster_of(run[0])));
+            }
+            let target = grid.encode(g.center);
+            let c: [u32; 3] = std::array::from_fn(|k| (target[k].saturating_sub(base[k]).min(span) >> shift).min(u16::MAX as u32));
+            let dc = grid.decode(std::array::from_fn(|k| base[k] + (c[k] << shift))).as_dvec3();
+            let mut needed = g.radius as f64 + dc.distance(g.center.as_dvec3());
+            let mut normals = Vec::new();
             for &f in run {
                 let t = &mesh.triangles[f as usize];
-                let c = triangle_cross(&mesh.positions, t);
-                if c.length_squared() > 0.0 {
-                    half = cover(half, angle(axis, c.normalize().as_vec3()));
-                }
                 for &v in t {
-                    radius = radius.max(g.center.distance(mesh.positions[v as usize]) * (1.0 + 1e-6));
+                    needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
+                }
+                let n = triangle_cross(&q.positions, t);
+                if n.length_squared() > 0.0 {
+                    normals.push(n.normalize().as_vec3());
                 }
             }
-            let mut fields = axis.to_array().to_vec();
-            fields.push(half);
-            fields.extend(g.center.to_array());
-            fields.push(radius);
-            table.extend(fields.iter().flat_map(|x| x.to_le_bytes()));
-            table.extend_from_slice(&first.to_le_bytes());
-            table.extend_from_slice(&(run.len() as u32).to_le_bytes());
-            first += run.len() as u32;
-            cluster_count += 1;
+            let (radius, _) = store_radius(grid, needed);
+            let axis = g.cone.axis.normalize_or(Vec3::Z);
+            let (axis_code, half, _) = store_cone(axis, |d| normals.iter().fold(g.cone.half_angle as f64 + angle(axis, d), |m, &n| m.max(angle(d, n))));
+            for piece in run.chunks(u16::MAX as usize) {
+                table.extend(axis_code.iter().flat_map(|x| x.to_le_bytes()));
+                table.extend_from_slice(&half.to_le_bytes());
+                table.extend_from_slice(&(piece.len() as u16).to_le_bytes());
+                table.extend(c.iter().flat_map(|&x| (x as u16).to_le_bytes()));
+                table.extend_from_slice(&radius.to_le_bytes());
+                cluster_count += 1;
+            }
         }
-        chunk::put(&mut payload, id::CLUS, 0, &table);
+        chunk::put(&mut payload, id::CLUS, shift, &table);
     }
     chunk::put(out, id::GEOM, 0, &payload);
-    Encoded { span: payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, vertices, clusters: cluster_count }
+    Ok(Encoded { span: payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, vertices, clusters: cluster_count })
 }
 
 /// The `HEAD` chunk.
@@ -592,6 +706,10 @@ fn head_chunk(h: &Header) -> Vec<u8> {
     }
     p.extend_from_slice(&(q.top_groups.min(u32::MAX as usize) as u32).to_le_bytes());
     p.extend_from_slice(&h.level_ratio.to_le_bytes());
+    for x in h.grid.origin.into_iter().chain([h.grid.step]) {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&h.grid.bits.to_le_bytes());
     p.extend_from_slice(&(h.tool.len() as u32).to_le_bytes());
     p.extend_from_slice(h.tool.as_bytes());
     let mut out = Vec::with_capacity(p.len() + 32);
@@ -600,7 +718,7 @@ fn head_chunk(h: &Header) -> Vec<u8> {
 }
 
 /// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`.
-fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], neighbors: &[u32], materials: &[Material]) -> Vec<u8> {
+fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], codes: &[Codes], neighbors: &[u32], materials: &[Material]) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
     for l in levels {
@@ -613,29 +731,32 @@ fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], neighbors: &[u32],
     chunk::put(&mut payload, id::LEVL, 0, &p);
 
     p.clear();
-    for r in records {
-        for x in [r.parent, r.first_child, r.child_count, r.neighbor_count] {
+    for (r, c) in records.iter().zip(codes) {
+        p.extend_from_slice(&(r.child_count as u16).to_le_bytes());
+        p.extend_from_slice(&(r.neighbor_count as u16).to_le_bytes());
+        p.extend(c.axis.iter().flat_map(|x| x.to_le_bytes()));
+        p.extend_from_slice(&c.half_angle.to_le_bytes());
+        p.extend_from_slice(&c.radius.to_le_bytes());
+        for g in [c.min, c.max, c.center] {
+            p.extend_from_slice(&pack(g).to_le_bytes());
+        }
+        p.extend_from_slice(&r.error.to_le_bytes());
+        for x in [r.faces, r.vertices, r.size, r.crc] {
             p.extend_from_slice(&x.to_le_bytes());
         }
-        let floats = [
-            r.cone.axis.x, r.cone.axis.y, r.cone.axis.z, r.cone.half_angle,
-            r.center.x, r.center.y, r.center.z, r.radius,
-            r.min.x, r.min.y, r.min.z, r.max.x, r.max.y, r.max.z, r.error,
-        ];
-        for x in floats {
-            p.extend_from_slice(&x.to_le_bytes());
-        }
-        p.extend_from_slice(&r.faces.to_le_bytes());
-        p.extend_from_slice(&r.vertices.to_le_bytes());
-        p.extend_from_slice(&r.offset.to_le_bytes());
-        p.extend_from_slice(&r.size.to_le_bytes());
-        p.extend_from_slice(&r.crc.to_le_bytes());
     }
     chunk::put(&mut payload, id::NODE, 0, &p);
 
     p.clear();
-    p.extend(neighbors.iter().flat_map(|x| x.to_le_bytes()));
-    chunk::put(&mut payload, id::NBRS, 0, &p);
+    let width = if levels.iter().all(|l| l.nodes <= 1 << 16) { 2 } else { 4 };
+    let mut next = neighbors.iter();
+    for r in records {
+        let first = levels[r.level as usize].first_node;
+        for &x in next.by_ref().take(r.neighbor_count as usize) {
+            p.extend_from_slice(&(x - first).to_le_bytes()[..width as usize]);
+        }
+    }
+    chunk::put(&mut payload, id::NBRS, width, &p);
 
     p.clear();
     for m in materials {
