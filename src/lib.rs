@@ -21,6 +21,7 @@ pub mod levels;
 pub mod mesh;
 pub mod pipeline;
 pub mod simplify;
+pub mod stream;
 
 pub use error::{Error, Location, Result};
 pub use import::{import, Format, Imported};
