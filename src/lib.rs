@@ -20,6 +20,7 @@ pub mod import;
 pub mod levels;
 pub mod mesh;
 pub mod pipeline;
+pub mod render;
 pub mod simplify;
 pub mod stream;
 

@@ -1,0 +1,581 @@
+//! A software rasterizer for looking at meshes and measuring what streaming changes on screen:
+//! triangles seen by a [`Camera`] are drawn with a headlight into an RGBA8 image with a depth buffer.
+//!
+//! Faces are transformed to clip space and clipped (near and far planes, and a guard band around
+//! the sides so screen coordinates stay small), then snapped to a fixed-point sub-pixel grid and
+//! filled with exact integer edge functions under the top-left rule: faces sharing an edge neither
+//! overlap nor leave cracks. Depth is z/w, interpolated linearly in screen space. Faces are set up
+//! in parallel, then filled in parallel by horizontal bands, each band drawing its faces in input
+//! order, so the image does not depend on the thread count.
+
+use crate::atomic::AtomicFile;
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use glam::{Vec3, Vec4};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::Path;
+
+/// Color of pixels no face covers.
+pub const BACKGROUND: [u8; 4] = [28, 30, 36, 255];
+/// Share of the color lit regardless of the light direction.
+const AMBIENT: f32 = 0.18;
+/// Sub-pixel bits of the fixed-point vertex grid.
+const SUBPIXEL_BITS: u32 = 8;
+const SUBPIXEL: f32 = (1 << SUBPIXEL_BITS) as f32;
+/// Faces are clipped to |x|, |y| ≤ GUARD · w, so screen coordinates stay within a few viewports.
+const GUARD: f32 = 2.0;
+/// Rows per band of the parallel fill.
+const BAND_ROWS: u32 = 32;
+/// Faces per parallel setup task.
+const SETUP_CHUNK: usize = 4096;
+
+/// An RGBA8 color buffer with a depth buffer.
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, top row first, 4 bytes per pixel.
+    pub rgba: Vec<u8>,
+    /// Normalized device depth (z/w, -1 near to 1 far) per pixel; +inf where nothing was drawn.
+    pub depth: Vec<f32>,
+}
+
+/// A face ready to fill: fixed-point screen vertices with positive area, and linear depth and
+/// shade over the screen.
+struct Setup {
+    x: [i64; 3],
+    y: [i64; 3],
+    /// Pixel bounds, inclusive.
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+    /// `value(px, py) = v + dx·(px − ox) + dy·(py − oy)` in pixels, for depth and shade, with the
+    /// origin at vertex 0.
+    origin: [f32; 2],
+    z: [f32; 3],
+    shade: [f32; 3],
+    color: [u8; 4],
+}
+
+/// A clip-space vertex with its shade.
+#[derive(Clone, Copy)]
+struct ClipVertex {
+    p: Vec4,
+    shade: f32,
+}
+
+impl Image {
+    /// An image cleared to [`BACKGROUND`] with depth +inf; at least 1 × 1.
+    pub fn new(width: u32, height: u32) -> Image {
+        let (width, height) = (width.max(1), height.max(1));
+        let n = width as usize * height as usize;
+        let mut image = Image { width, height, rgba: vec![0; 4 * n], depth: vec![f32::INFINITY; n] };
+        image.clear();
+        image
+    }
+
+    /// Back to [`BACKGROUND`] and depth +inf.
+    pub fn clear(&mut self) {
+        for px in self.rgba.chunks_exact_mut(4) {
+            px.copy_from_slice(&BACKGROUND);
+        }
+        self.depth.fill(f32::INFINITY);
+    }
+
+    /// Rasterize triangles (indices into positions, 3 per face) seen by `camera`, with simple
+    /// shading (Lambert from a headlight along the view direction + ambient) of `color`. Per-vertex
+    /// `normals` (same length as positions) give smooth shading; empty (or any other length) →
+    /// flat face normals. Back faces are culled (counter-clockwise front faces). Faces with an
+    /// index out of range or a non-finite position are skipped. The viewport is this image; the
+    /// camera's own size only sets its aspect ratio. Returns the number of faces drawn (not
+    /// culled/clipped away).
+    pub fn draw(&mut self, camera: &Camera, positions: &[Vec3], normals: &[Vec3], indices: &[u32], color: [u8; 4]) -> usize {
+        if self.rgba.len() != 4 * self.depth.len() || self.depth.len() != self.width as usize * self.height as usize {
+            return 0;
+        }
+        let view_projection = camera.view_projection();
+        let light = -camera.forward();
+        let lit = |n: Vec3| AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(light).max(0.0);
+        let vertex_shade: Vec<f32> =
+            if normals.len() == positions.len() { normals.par_iter().map(|&n| lit(n)).collect() } else { Vec::new() };
+        let (width, height) = (self.width, self.height);
+        let face_count = indices.len() / 3;
+        let chunks: Vec<(Vec<Setup>, usize)> = (0..face_count.div_ceil(SETUP_CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut out = Vec::new();
+                let mut drawn = 0;
+                for f in c * SETUP_CHUNK..((c + 1) * SETUP_CHUNK).min(face_count) {
+                    let tri = [indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]];
+                    if tri.iter().any(|&i| i as usize >= positions.len()) {
+                        continue;
+                    }
+                    let p = tri.map(|i| positions[i as usize]);
+                    if !p.iter().all(|v| v.is_finite()) {
+                        continue;
+                    }
+                    let shade = if vertex_shade.is_empty() {
+                        [lit((p[1] - p[0]).cross(p[2] - p[0])); 3]
+                    } else {
+                        tri.map(|i| vertex_shade[i as usize])
+                    };
+                    let corners: [ClipVertex; 3] =
+                        std::array::from_fn(|k| ClipVertex { p: view_projection * p[k].extend(1.0), shade: shade[k] });
+                    let before = out.len();
+                    setup_face(corners, width, height, color, &mut out);
+                    drawn += (out.len() > before) as usize;
+                }
+                (out, drawn)
+            })
+            .collect();
+        let drawn = chunks.iter().map(|c| c.1).sum();
+        let faces: Vec<Setup> = chunks.into_iter().flat_map(|c| c.0).collect();
+
+        let bands = height.div_ceil(BAND_ROWS) as usize;
+        let mut binned: Vec<Vec<u32>> = vec![Vec::new(); bands];
+        for (i, s) in faces.iter().enumerate() {
+            for band in &mut binned[(s.y0 / BAND_ROWS) as usize..=(s.y1 / BAND_ROWS) as usize] {
+                band.push(i as u32);
+            }
+        }
+        let row_pixels = width as usize * BAND_ROWS as usize;
+        self.rgba
+            .par_chunks_mut(4 * row_pixels)
+            .zip(self.depth.par_chunks_mut(row_pixels))
+            .zip(binned.par_iter())
+            .enumerate()
+            .for_each(|(band, ((rgba, depth), list))| {
+                let first_row = band as u32 * BAND_ROWS;
+                let last_row = (first_row + BAND_ROWS).min(height) - 1;
+                for &i in list {
+                    fill(&faces[i as usize], width, first_row, last_row, rgba, depth);
+                }
+            });
+        drawn
+    }
+
+    /// Pixels covered by the model (depth written), for comparisons.
+    pub fn coverage(&self) -> Vec<bool> {
+        self.depth.iter().map(|d| d.is_finite()).collect()
+    }
+
+    /// Write the image as an RGBA PNG, all or nothing.
+    pub fn write_png(&self, path: &Path) -> Result<()> {
+        let bytes = self.encode().map_err(|e| Error::invalid(path, None, format!("cannot encode PNG: {e}")))?;
+        let mut file = AtomicFile::create(path)?;
+        file.write_all(&bytes).map_err(|e| Error::io(path, e))?;
+        file.commit()
+    }
+
+    /// The image as an RGBA PNG file's bytes; empty if the fields disagree on the size.
+    pub fn encode_png(&self) -> Vec<u8> {
+        self.encode().unwrap_or_default()
+    }
+
+    fn encode(&self) -> std::result::Result<Vec<u8>, png::EncodingError> {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header()?;
+        writer.write_image_data(&self.rgba)?;
+        writer.finish()?;
+        Ok(bytes)
+    }
+}
+
+/// Clip a face, cull it if it faces away, and append its fill setups (none, or one per triangle of
+/// the clipped polygon).
+fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4], out: &mut Vec<Setup>) {
+    if !corners.iter().all(|c| c.p.is_finite()) {
+        return;
+    }
+    // Inside each plane where plane · p ≥ 0: near, far, left, right, bottom, top.
+    const PLANES: [Vec4; 6] = [
+        Vec4::new(0.0, 0.0, 1.0, 1.0),
+        Vec4::new(0.0, 0.0, -1.0, 1.0),
+        Vec4::new(1.0, 0.0, 0.0, GUARD),
+        Vec4::new(-1.0, 0.0, 0.0, GUARD),
+        Vec4::new(0.0, 1.0, 0.0, GUARD),
+        Vec4::new(0.0, -1.0, 0.0, GUARD),
+    ];
+    let (w, h) = (width as f32, height as f32);
+    // Screen space: x right, y down, pixel (i, j) covers [i, i+1) × [j, j+1); z is depth.
+    let to_screen = |v: &ClipVertex| {
+        let n = v.p.truncate() / v.p.w;
+        ((n.x + 1.0) * 0.5 * w, (1.0 - n.y) * 0.5 * h, n.z, v.shade)
+    };
+    let finite = |s: &(f32, f32, f32, f32)| s.0.is_finite() && s.1.is_finite() && s.2.is_finite();
+    if PLANES.iter().all(|plane| corners.iter().all(|c| plane.dot(c.p) >= 0.0)) {
+        let screen = corners.map(|c| to_screen(&c));
+        if screen.iter().all(finite) {
+            out.extend(setup_triangle(screen, width, height, color));
+        }
+        return;
+    }
+    let mut polygon: Vec<ClipVertex> = corners.to_vec();
+    for plane in PLANES {
+        let d: Vec<f32> = polygon.iter().map(|v| plane.dot(v.p)).collect();
+        if d.iter().all(|&d| d >= 0.0) {
+            continue;
+        }
+        if d.iter().all(|&d| d < 0.0) {
+            return;
+        }
+        let mut clipped = Vec::with_capacity(polygon.len() + 1);
+        for i in 0..polygon.len() {
+            let j = (i + 1) % polygon.len();
+            if d[i] >= 0.0 {
+                clipped.push(polygon[i]);
+            }
+            if (d[i] >= 0.0) != (d[j] >= 0.0) {
+                let t = d[i] / (d[i] - d[j]);
+                clipped.push(ClipVertex {
+                    p: polygon[i].p.lerp(polygon[j].p, t),
+                    shade: polygon[i].shade + (polygon[j].shade - polygon[i].shade) * t,
+                });
+            }
+        }
+        polygon = clipped;
+    }
+    let screen: Vec<(f32, f32, f32, f32)> = polygon.iter().map(to_screen).collect();
+    if !screen.iter().all(finite) {
+        return;
+    }
+    for k in 1..screen.len().saturating_sub(1) {
+        out.extend(setup_triangle([screen[0], screen[k], screen[k + 1]], width, height, color));
+    }
+}
+
+/// Snap a screen triangle to the fixed-point grid; `None` if it faces away, has no area, or lies
+/// outside the image.
+fn setup_triangle(v: [(f32, f32, f32, f32); 3], width: u32, height: u32, color: [u8; 4]) -> Option<Setup> {
+    let mut x = v.map(|s| (s.0 * SUBPIXEL).round() as i64);
+    let mut y = v.map(|s| (s.1 * SUBPIXEL).round() as i64);
+    let mut z = v.map(|s| s.2);
+    let mut shade = v.map(|s| s.3);
+    let area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
+    // Counter-clockwise with y up is negative area with y down; reorder it to positive.
+    if area >= 0 {
+        return None;
+    }
+    x.swap(1, 2);
+    y.swap(1, 2);
+    z.swap(1, 2);
+    shade.swap(1, 2);
+    // Pixels whose centers (i + ½) lie within the vertices' bounds.
+    let half = 1i64 << (SUBPIXEL_BITS - 1);
+    let first = |lo: i64| (lo - half + (1 << SUBPIXEL_BITS) - 1).div_euclid(1 << SUBPIXEL_BITS).max(0);
+    let last = |hi: i64, n: u32| (hi - half).div_euclid(1 << SUBPIXEL_BITS).min(n as i64 - 1);
+    let (x0, x1) = (first(*x.iter().min()?), last(*x.iter().max()?, width));
+    let (y0, y1) = (first(*y.iter().min()?), last(*y.iter().max()?, height));
+    if x0 > x1 || y0 > y1 {
+        return None;
+    }
+    // Depth and shade as `[value at vertex 0, d/dx, d/dy]` per pixel.
+    let fx = x.map(|v| v as f32 / SUBPIXEL);
+    let fy = y.map(|v| v as f32 / SUBPIXEL);
+    let (ax, ay, bx, by) = (fx[1] - fx[0], fy[1] - fy[0], fx[2] - fx[0], fy[2] - fy[0]);
+    let area = ax * by - ay * bx;
+    let plane = |v: [f32; 3]| {
+        let (d1, d2) = (v[1] - v[0], v[2] - v[0]);
+        [v[0], (d1 * by - d2 * ay) / area, (d2 * ax - d1 * bx) / area]
+    };
+    let (x0, x1, y0, y1) = (x0 as u32, x1 as u32, y0 as u32, y1 as u32);
+    Some(Setup { x, y, x0, x1, y0, y1, origin: [fx[0], fy[0]], z: plane(z), shade: plane(shade), color })
+}
+
+/// Fill the rows `first_row ..= last_row` of a face into a band of the image.
+fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32]) {
+    let (y0, y1) = (s.y0.max(first_row), s.y1.min(last_row));
+    let step = 1i64 << SUBPIXEL_BITS;
+    // Edge k runs from vertex k to k + 1; on a top edge (horizontal, going right) or a left edge
+    // (going up), centers exactly on the edge are inside, elsewhere they are not.
+    let mut edges = [(0i64, 0i64, 0i64); 3];
+    for (k, e) in edges.iter_mut().enumerate() {
+        let j = (k + 1) % 3;
+        let (dx, dy) = (s.x[j] - s.x[k], s.y[j] - s.y[k]);
+        let top_left = dy < 0 || (dy == 0 && dx > 0);
+        // E(p) = dx·(py − yk) − dy·(px − xk), minus one where the edge itself is outside.
+        let px = s.x0 as i64 * step + step / 2;
+        let e0 = dx * (y0 as i64 * step + step / 2 - s.y[k]) - dy * (px - s.x[k]) - (!top_left) as i64;
+        *e = (e0, -dy * step, dx * step);
+    }
+    let [r, g, b, a] = s.color.map(|c| c as f32);
+    for (row, py) in (y0..=y1).enumerate() {
+        let mut e = edges.map(|(e0, _, per_row)| e0 + per_row * row as i64);
+        let cy = py as f32 + 0.5 - s.origin[1];
+        let line = (py - first_row) as usize * width as usize;
+        for px in s.x0..=s.x1 {
+            if (e[0] | e[1] | e[2]) >= 0 {
+                let cx = px as f32 + 0.5 - s.origin[0];
+                let z = s.z[0] + s.z[1] * cx + s.z[2] * cy;
+                let i = line + px as usize;
+                if z < depth[i] {
+                    depth[i] = z;
+                    let l = (s.shade[0] + s.shade[1] * cx + s.shade[2] * cy).clamp(0.0, 1.0);
+                    rgba[4 * i..4 * i + 4].copy_from_slice(&[(r * l) as u8, (g * l) as u8, (b * l) as u8, a as u8]);
+                }
+            }
+            for (k, ek) in e.iter_mut().enumerate() {
+                *ek += edges[k].1;
+            }
+        }
+    }
+}
+
+/// A stable, distinct color per id (for group and level colors): hues a golden angle apart, with
+/// saturation and brightness varied so that ids a full turn apart still differ.
+pub fn palette(id: u32) -> [u8; 4] {
+    let hue = (id as f64 * 0.618_033_988_749_895).fract() * 6.0;
+    let saturation = [0.65, 0.45, 0.8][(id / 7 % 3) as usize];
+    let value = [0.95, 0.8][(id / 3 % 2) as usize];
+    let c = value * saturation;
+    let x = c * (1.0 - (hue % 2.0 - 1.0).abs());
+    let (r, g, b) = match hue as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let byte = |v: f64| ((v + value - c) * 255.0).round() as u8;
+    [byte(r), byte(g), byte(b), 255]
+}
+
+/// Share of covered pixels whose color differs by more than `tolerance` (max channel) between two
+/// images of the same size, over pixels covered in either: the "shape retention" measure. Images
+/// of different sizes differ entirely (1); two empty images not at all (0).
+pub fn changed_share(a: &Image, b: &Image, tolerance: u8) -> f64 {
+    if a.width != b.width || a.height != b.height || a.rgba.len() != b.rgba.len() || a.depth.len() != b.depth.len() {
+        return 1.0;
+    }
+    let (mut covered, mut changed) = (0usize, 0usize);
+    for (i, (da, db)) in a.depth.iter().zip(&b.depth).enumerate() {
+        if !da.is_finite() && !db.is_finite() {
+            continue;
+        }
+        covered += 1;
+        let (pa, pb) = (&a.rgba[4 * i..4 * i + 4], &b.rgba[4 * i..4 * i + 4]);
+        changed += pa.iter().zip(pb).any(|(x, y)| x.abs_diff(*y) > tolerance) as usize;
+    }
+    if covered == 0 {
+        0.0
+    } else {
+        changed as f64 / covered as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Projection;
+
+    /// Looking down −Z at the origin, 50 pixels per unit over a 100 × 100 image.
+    fn ortho() -> Camera {
+        Camera {
+            eye: Vec3::new(0.0, 0.0, 5.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            projection: Projection::Orthographic { height: 2.0 },
+            width: 100,
+            height: 100,
+            near: 1.0,
+            far: 10.0,
+        }
+    }
+
+    fn covered(image: &Image) -> usize {
+        image.coverage().iter().filter(|&&c| c).count()
+    }
+
+    fn pixel(image: &Image, x: u32, y: u32) -> [u8; 4] {
+        let i = 4 * (y * image.width + x) as usize;
+        [image.rgba[i], image.rgba[i + 1], image.rgba[i + 2], image.rgba[i + 3]]
+    }
+
+    /// A sphere of `radius` made of flat triangles, counter-clockwise seen from outside.
+    fn sphere(radius: f32) -> (Vec<Vec3>, Vec<u32>) {
+        let m = crate::fixtures::icosphere(3);
+        (m.positions.iter().map(|p| *p * radius).collect(), m.triangles.iter().flatten().copied().collect())
+    }
+
+    #[test]
+    fn triangle_covers_its_area_and_winding_decides_culling() {
+        let tri = [Vec3::new(-0.5, -0.5, 0.0), Vec3::new(0.5, -0.5, 0.0), Vec3::new(0.0, 0.5, 0.0)];
+        let mut image = Image::new(100, 100);
+        assert_eq!(image.draw(&ortho(), &tri, &[], &[0, 1, 2], [255, 0, 0, 255]), 1);
+        let expected = 0.5 * 50.0 * 50.0;
+        let got = covered(&image) as f32;
+        assert!((got - expected).abs() < 0.03 * expected, "{got} pixels, expected about {expected}");
+        // Lit head-on: the full color.
+        assert_eq!(pixel(&image, 50, 60), [255, 0, 0, 255]);
+        let mut back = Image::new(100, 100);
+        assert_eq!(back.draw(&ortho(), &tri, &[], &[0, 2, 1], [255, 0, 0, 255]), 0);
+        assert_eq!(covered(&back), 0);
+    }
+
+    #[test]
+    fn faces_sharing_an_edge_cover_each_pixel_once() {
+        // A 50 × 50 pixel square split along a diagonal through pixel centers.
+        let square = [Vec3::new(-0.5, -0.5, 0.0), Vec3::new(0.5, -0.5, 0.0), Vec3::new(0.5, 0.5, 0.0), Vec3::new(-0.5, 0.5, 0.0)];
+        let (mut a, mut b) = (Image::new(100, 100), Image::new(100, 100));
+        a.draw(&ortho(), &square, &[], &[0, 1, 2], [255; 4]);
+        b.draw(&ortho(), &square, &[], &[0, 2, 3], [255; 4]);
+        let both = a.coverage().iter().zip(b.coverage()).filter(|(x, y)| **x && *y).count();
+        assert_eq!(both, 0);
+        assert_eq!(covered(&a) + covered(&b), 2500);
+    }
+
+    #[test]
+    fn nearer_face_wins_in_either_order() {
+        let quad = |z: f32| [Vec3::new(-0.5, -0.5, z), Vec3::new(0.5, -0.5, z), Vec3::new(0.5, 0.5, z), Vec3::new(-0.5, 0.5, z)];
+        let indices = [0, 1, 2, 0, 2, 3];
+        let (near, far) = (quad(1.0), quad(0.0));
+        for near_first in [true, false] {
+            let mut image = Image::new(100, 100);
+            for draw_near in [near_first, !near_first] {
+                let (p, c) = if draw_near { (&near, [0, 255, 0, 255]) } else { (&far, [255, 0, 0, 255]) };
+                assert_eq!(image.draw(&ortho(), p, &[], &indices, c), 2);
+            }
+            assert_eq!(pixel(&image, 50, 50), [0, 255, 0, 255], "near drawn first: {near_first}");
+            assert_eq!(pixel(&image, 30, 70), [0, 255, 0, 255]);
+        }
+    }
+
+    #[test]
+    fn faces_crossing_the_near_plane_are_clipped_not_dropped() {
+        let camera = Camera {
+            eye: Vec3::ZERO,
+            target: Vec3::NEG_Z,
+            up: Vec3::Y,
+            projection: Projection::Perspective { fov_y: 90f32.to_radians() },
+            width: 64,
+            height: 64,
+            near: 0.1,
+            far: 100.0,
+        };
+        // A floor below the eye, reaching behind it.
+        let floor = [Vec3::new(-1.0, -1.0, -5.0), Vec3::new(0.0, -1.0, 1.0), Vec3::new(1.0, -1.0, -5.0)];
+        let mut image = Image::new(64, 64);
+        assert_eq!(image.draw(&camera, &floor, &[], &[0, 1, 2], [200; 4]), 1);
+        let c = image.coverage();
+        let bottom = c[32 * 64..].iter().filter(|&&c| c).count();
+        assert!(bottom > 200, "{bottom} pixels below the horizon");
+        assert!(c[..31 * 64].iter().all(|&c| !c), "nothing above the horizon");
+        // Nearest rows are covered at the bottom center: the clipped part reaches the near plane.
+        assert!(c[63 * 64 + 32]);
+        let behind = floor.map(|p| Vec3::new(p.x, p.y, 10.0 + p.z.abs()));
+        assert_eq!(Image::new(64, 64).draw(&camera, &behind, &[], &[0, 1, 2], [200; 4]), 0);
+    }
+
+    #[test]
+    fn sphere_covers_its_disk_from_every_direction() {
+        let (positions, indices) = sphere(1.0);
+        let fov = 45f32.to_radians();
+        for dir in [Vec3::Z, Vec3::Y, Vec3::NEG_X, Vec3::new(0.3, 0.4, 1.0), Vec3::new(-1.0, -2.0, 0.5)] {
+            // Frame a larger sphere so the unit sphere has a margin.
+            let camera = Camera::framing(Vec3::ZERO, 1.25, dir, fov, 256, 256);
+            let mut image = Image::new(256, 256);
+            let drawn = image.draw(&camera, &positions, &[], &indices, [200; 4]);
+            assert!(drawn > indices.len() / 3 / 3 && drawn < indices.len() / 3 * 2 / 3, "{drawn} faces drawn");
+            let half_angle = (1.0 / camera.eye.length()).asin();
+            let radius = 128.0 * half_angle.tan() / (0.5 * fov).tan();
+            let expected = std::f32::consts::PI * radius * radius;
+            let got = covered(&image) as f32;
+            assert!((got / expected - 0.985).abs() < 0.02, "from {dir}: {got} pixels, expected about {expected}");
+            // Lit from the eye: brightest at the center, darker toward the rim.
+            let center = pixel(&image, 128, 128)[0];
+            let rim = pixel(&image, 128, 128 + radius as u32 - 3)[0];
+            assert!(center > 190 && rim < center, "center {center}, rim {rim}");
+        }
+    }
+
+    #[test]
+    fn smooth_normals_shade_without_facets() {
+        let (positions, indices) = sphere(1.0);
+        let camera = Camera::framing(Vec3::ZERO, 1.25, Vec3::Z, 45f32.to_radians(), 128, 128);
+        let mut flat = Image::new(128, 128);
+        let mut smooth = Image::new(128, 128);
+        flat.draw(&camera, &positions, &[], &indices, [200; 4]);
+        smooth.draw(&camera, &positions, &positions, &indices, [200; 4]);
+        assert_eq!(flat.coverage(), smooth.coverage());
+        // Along a row, smooth shading changes by small steps only.
+        let row: Vec<i32> = (40..88).map(|x| pixel(&smooth, x, 64)[0] as i32).collect();
+        assert!(row.windows(2).all(|w| (w[0] - w[1]).abs() <= 4), "{row:?}");
+        assert!(changed_share(&flat, &smooth, 2) > 0.1);
+    }
+
+    #[test]
+    fn bad_input_draws_nothing() {
+        let mut image = Image::new(100, 100);
+        let nan = [Vec3::new(f32::NAN, 0.0, 0.0), Vec3::new(0.5, -0.5, 0.0), Vec3::new(0.0, 0.5, 0.0)];
+        assert_eq!(image.draw(&ortho(), &nan, &[], &[0, 1, 2], [255; 4]), 0);
+        let inf = [Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::new(0.5, -0.5, 0.0), Vec3::new(0.0, 0.5, 0.0)];
+        assert_eq!(image.draw(&ortho(), &inf, &[], &[0, 1, 2], [255; 4]), 0);
+        let ok = [Vec3::new(-0.5, -0.5, 0.0), Vec3::new(0.5, -0.5, 0.0), Vec3::new(0.0, 0.5, 0.0)];
+        assert_eq!(image.draw(&ortho(), &ok, &[], &[0, 1, 3, 7, u32::MAX, 0], [255; 4]), 0);
+        assert_eq!(image.draw(&ortho(), &ok, &[], &[0, 1, 1, 2, 2, 2], [255; 4]), 0);
+        assert_eq!(image.draw(&ortho(), &[Vec3::splat(1e30); 3], &[], &[0, 1, 2], [255; 4]), 0);
+        assert_eq!(image.draw(&ortho(), &[], &[], &[0, 1], [255; 4]), 0);
+        let nan_normals = [Vec3::NAN; 3];
+        assert_eq!(image.draw(&ortho(), &ok, &nan_normals, &[0, 1, 2, 0], [255; 4]), 1);
+        assert!(covered(&image) > 1000);
+        let mut degenerate_camera = ortho();
+        degenerate_camera.target = degenerate_camera.eye;
+        degenerate_camera.near = 0.0;
+        degenerate_camera.projection = Projection::Perspective { fov_y: 0.0 };
+        let mut other = Image::new(0, 0);
+        other.draw(&degenerate_camera, &ok, &[], &[0, 1, 2], [255; 4]);
+    }
+
+    #[test]
+    fn changed_share_is_zero_for_itself_and_positive_for_a_shift() {
+        let (positions, indices) = sphere(1.0);
+        let camera = Camera::framing(Vec3::ZERO, 1.25, Vec3::new(0.3, 0.4, 1.0), 45f32.to_radians(), 128, 128);
+        let mut a = Image::new(128, 128);
+        a.draw(&camera, &positions, &[], &indices, palette(3));
+        assert_eq!(changed_share(&a, &a, 0), 0.0);
+        let shift = Vec3::new(0.05, 0.0, 0.0);
+        let moved = Camera { eye: camera.eye + shift, target: camera.target + shift, ..camera };
+        let mut b = Image::new(128, 128);
+        b.draw(&moved, &positions, &[], &indices, palette(3));
+        let share = changed_share(&a, &b, 8);
+        assert!(share > 0.01 && share < 1.0, "{share}");
+        assert_eq!(changed_share(&Image::new(10, 10), &Image::new(10, 10), 0), 0.0);
+        assert_eq!(changed_share(&a, &Image::new(10, 10), 0), 1.0);
+    }
+
+    #[test]
+    fn palette_colors_are_distinct_and_stable() {
+        let colors: Vec<[u8; 4]> = (0..64).map(palette).collect();
+        assert_eq!(colors, (0..64).map(palette).collect::<Vec<_>>());
+        for i in 0..colors.len() {
+            for j in 0..i {
+                let d = (0..3).map(|k| colors[i][k].abs_diff(colors[j][k])).max().unwrap_or(0);
+                assert!(d >= 8, "palette({i}) = {:?} and palette({j}) = {:?}", colors[i], colors[j]);
+            }
+        }
+    }
+
+    #[test]
+    fn png_round_trips() {
+        let (positions, indices) = sphere(1.0);
+        let camera = Camera::framing(Vec3::ZERO, 1.25, Vec3::Z, 45f32.to_radians(), 96, 64);
+        let mut image = Image::new(96, 64);
+        image.draw(&camera, &positions, &positions, &indices, palette(1));
+        let bytes = image.encode_png();
+        let decoder = png::Decoder::new(std::io::Cursor::new(&bytes));
+        let mut reader = decoder.read_info().expect("decodes");
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        let info = reader.next_frame(&mut buf).expect("frame");
+        assert_eq!((info.width, info.height, info.color_type), (96, 64, png::ColorType::Rgba));
+        assert_eq!(&buf[..info.buffer_size()], &image.rgba[..]);
+        let path = std::env::temp_dir().join(format!("strata-render-test-{}.png", std::process::id()));
+        image.write_png(&path).expect("writes");
+        assert_eq!(std::fs::read(&path).expect("reads"), bytes);
+        let _ = std::fs::remove_file(&path);
+    }
+}
