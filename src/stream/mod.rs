@@ -15,6 +15,7 @@ mod tests;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh};
 use crate::format::{NodeGeometry, NodeRecord, Reader, NO_PARENT};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
@@ -177,6 +178,27 @@ impl<R: Read + Seek> Streamer<R> {
         let report = FrameReport { frame: self.frame, front: cut.shown, added, removed, culled: cut.culled, stats };
         self.frame += 1;
         Ok(report)
+    }
+
+    /// The displayed front as one mesh, each node's vertices kept apart, material 0 throughout.
+    pub fn front_mesh(&self) -> Mesh {
+        let mut m = Mesh::default();
+        let geometries: Vec<&NodeGeometry> = self.front.iter().filter_map(|&i| self.geometry(i)).collect();
+        let normals = geometries.iter().all(|g| !g.normals.is_empty());
+        for g in geometries {
+            let base = m.positions.len() as u32;
+            m.positions.extend(&g.positions);
+            for t in g.indices.chunks_exact(3) {
+                m.triangles.push([base + t[0], base + t[1], base + t[2]]);
+                if normals {
+                    m.normals.extend(t.iter().map(|&k| g.normals[k as usize]));
+                }
+            }
+        }
+        m.face_materials = vec![0; m.triangles.len()];
+        m.materials = vec![Material::default()];
+        m.compute_face_geometry();
+        m
     }
 
     /// The mark node `i` got in the last frame.

@@ -76,6 +76,7 @@ fn check(s: &Streamer<File>, rep: &FrameReport, camera: &Camera, budgets: &Budge
     }
     let faces: u64 = rep.front.iter().map(|&i| nodes[i as usize].faces as u64).sum();
     assert_eq!(faces, rep.stats.faces);
+    assert_eq!(s.front_mesh().face_count() as u64, faces);
     assert!(budgets.faces.is_none_or(|b| faces <= b), "frame {}: {faces} faces", rep.frame);
     assert!(budgets.bytes.is_none_or(|b| rep.stats.resident_bytes <= b), "frame {}", rep.frame);
 }
