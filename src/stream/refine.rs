@@ -187,3 +187,43 @@ pub fn priority(n: &NodeRecord, camera: &Camera) -> f32 {
         _ => 1.0,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cone::Cone;
+    use glam::Vec3;
+
+    fn node(axis: Vec3, half_angle: f32) -> NodeRecord {
+        NodeRecord {
+            level: 1,
+            parent: NO_PARENT,
+            first_child: 0,
+            child_count: 0,
+            neighbor_first: 0,
+            neighbor_count: 0,
+            cone: Cone { axis, half_angle },
+            center: Vec3::ZERO,
+            radius: 0.1,
+            min: Vec3::splat(-0.1),
+            max: Vec3::splat(0.1),
+            error: 0.01,
+            faces: 1,
+            vertices: 3,
+            offset: 0,
+            size: 0,
+            crc: 0,
+        }
+    }
+
+    #[test]
+    fn silhouette_and_wide_cones_come_first() {
+        let cam = Camera::framing(Vec3::ZERO, 1.0, Vec3::Z, 1.0, 64, 64);
+        let facing = priority(&node(Vec3::Z, 0.1), &cam);
+        let silhouette = priority(&node(Vec3::X, 0.1), &cam);
+        let wide = priority(&node(Vec3::Z, 1.2), &cam);
+        assert!(silhouette > facing && wide > facing);
+        assert!((facing - (1.0 - 0.1f32.cos()) / 2.0).abs() < 1e-4);
+        assert_eq!(priority(&node(-Vec3::Z, 0.5), &cam), 1.0);
+    }
+}
