@@ -32,7 +32,7 @@ impl FrameTime {
     /// Feedback: the last frame took `ms` with `faces` displayed. Coarser by one step when it was
     /// slower than the band, finer when faster.
     pub fn measured(&mut self, ms: f32, faces: u64) {
-        if !(ms.is_finite() && ms >= 0.0) {
+        if !ms.is_finite() || ms < 0.0 {
             return;
         }
         if faces > 0 && ms > 0.0 {

@@ -104,7 +104,7 @@ impl<R: Read + Seek> Streamer<R> {
         if budgets.bytes.is_some_and(|b| b < bytes) {
             return Err(Error::invalid(reader.path(), None, format!("the memory budget is below the top level's {bytes} bytes")));
         }
-        if !(budgets.pixel_error >= 0.0) {
+        if budgets.pixel_error.is_nan() || budgets.pixel_error < 0.0 {
             return Err(Error::invalid(reader.path(), None, "the pixel-error threshold must be zero or more"));
         }
         Ok(Streamer {
