@@ -48,7 +48,7 @@ impl Default for HierarchyParams {
     fn default() -> Self {
         HierarchyParams {
             cluster_faces: 32,
-            cluster_angle: 25f32.to_radians(),
+            cluster_angle: 35f32.to_radians(),
             leaf_faces: 512,
             leaf_angle: 120f32.to_radians(),
             angle_step: 30f32.to_radians(),

@@ -89,7 +89,7 @@ impl Image {
     /// flat face normals. Back faces are culled (counter-clockwise front faces). Faces with an
     /// index out of range or a non-finite position are skipped. The viewport is this image; the
     /// camera's own size only sets its aspect ratio. Returns the number of faces drawn (not
-    /// culled/clipped away).
+    /// culled/clipped away, and reaching at least one pixel center within their bounds).
     pub fn draw(&mut self, camera: &Camera, positions: &[Vec3], normals: &[Vec3], indices: &[u32], color: [u8; 4]) -> usize {
         if self.rgba.len() != 4 * self.depth.len() || self.depth.len() != self.width as usize * self.height as usize {
             return 0;

@@ -1,0 +1,94 @@
+//! The main job through the CLI: convert a shipped fixture, verify it, extract its full-detail
+//! level and compare it with the input; a failing conversion leaves nothing behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn strata(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_strata")).args(args).output().expect("run strata")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("strata-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn fixture(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name).display().to_string()
+}
+
+#[test]
+fn convert_verify_extract_round_trip() {
+    let dir = temp_dir("roundtrip");
+    let out = dir.join("cad.strata");
+    let extracted = dir.join("level0.ply");
+    let input = fixture("cad_part.obj");
+    let o = strata(&["convert", &input, out.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "convert failed: {}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert!(summary["summary"]["levels"].as_array().is_some_and(|l| !l.is_empty()));
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "only the output file is left");
+
+    let o = strata(&["verify", out.to_str().unwrap()]);
+    assert!(o.status.success(), "verify failed: {}", String::from_utf8_lossy(&o.stderr));
+
+    let o = strata(&["extract", out.to_str().unwrap(), "--level", "0", "-o", extracted.to_str().unwrap()]);
+    assert!(o.status.success(), "extract failed: {}", String::from_utf8_lossy(&o.stderr));
+    let original = strata::import(Path::new(&input), None).unwrap().mesh;
+    let back = strata::import(&extracted, None).unwrap().mesh;
+    assert_eq!(back.face_count(), original.face_count());
+    let key = |m: &strata::Mesh| {
+        let mut faces: Vec<[[u32; 3]; 3]> = m
+            .triangles
+            .iter()
+            .map(|t| {
+                let mut f = t.map(|v| m.positions[v as usize].to_array().map(f32::to_bits));
+                let first = (0..3).min_by_key(|&k| f[k]).unwrap();
+                f.rotate_left(first);
+                f
+            })
+            .collect();
+        faces.sort_unstable();
+        faces
+    };
+    let (a, b) = (key(&original), key(&back));
+    let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    let positions_exact = differing == 0;
+    if !positions_exact {
+        // A format that quantizes positions states its bound; the faces must still match within it.
+        let diag = original.diagonal();
+        let mut pa: Vec<[f32; 3]> = original.positions.iter().map(|p| p.to_array()).collect();
+        let mut pb: Vec<[f32; 3]> = back.positions.iter().map(|p| p.to_array()).collect();
+        pa.sort_by(|x, y| x.partial_cmp(y).unwrap());
+        pb.sort_by(|x, y| x.partial_cmp(y).unwrap());
+        assert_eq!(pa.len(), pb.len());
+        let worst = pa.iter().zip(&pb).map(|(x, y)| (0..3).map(|k| (x[k] - y[k]).abs()).fold(0.0, f32::max)).fold(0.0, f32::max);
+        assert!(worst <= 1e-5 * diag, "positions moved by {worst} on a diagonal of {diag}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn failed_convert_leaves_nothing() {
+    let dir = temp_dir("fail");
+    let bad = dir.join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 3\n").unwrap();
+    let out = dir.join("out.strata");
+    let o = strata(&["convert", bad.to_str().unwrap(), out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("bad.obj") && stderr.contains("line 3"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 1, "only the input remains: {left:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn convert_to_an_unwritable_place_fails_cleanly() {
+    let o = strata(&["convert", &fixture("cube.obj"), "/nonexistent/dir/out.strata"]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("/nonexistent/dir/out.strata"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
