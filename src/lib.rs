@@ -22,6 +22,7 @@ pub mod mesh;
 pub mod pipeline;
 pub mod render;
 pub mod simplify;
+pub mod stream;
 
 pub use error::{Error, Location, Result};
 pub use import::{import, Format, Imported};

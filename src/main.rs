@@ -31,8 +31,50 @@ enum Command {
     Verify(VerifyArgs),
     /// Write one level of a strata file as a mesh (.obj, .ply or .glb).
     Extract(ExtractArgs),
+    /// Play a viewing session over a strata file: per frame, the streamed front, its delta and costs.
+    Stream(StreamArgs),
     /// Draw a mesh, or one level of a strata file, to a PNG with the software rasterizer.
     Render(RenderArgs),
+}
+
+#[derive(Args)]
+#[command(group(clap::ArgGroup::new("session").args(["orbit", "path"])))]
+struct StreamArgs {
+    /// A .strata file.
+    file: PathBuf,
+    /// N frames around the model, moving in from far (model ~5% of the view) to a close-up over the
+    /// first half. The default session (64 frames).
+    #[arg(long, value_name = "N")]
+    orbit: Option<usize>,
+    /// Camera path: one camera per line, "ex ey ez tx ty tz" (eye, then target, model units);
+    /// blank lines and lines starting with # are skipped.
+    #[arg(long, value_name = "FILE")]
+    path: Option<PathBuf>,
+    /// Most faces displayed at once.
+    #[arg(long, value_name = "N")]
+    budget_faces: Option<u64>,
+    /// Most bytes of resident geometry.
+    #[arg(long, value_name = "B")]
+    budget_bytes: Option<u64>,
+    /// Refine until the projected geometric error is under this many pixels.
+    #[arg(long, value_name = "E", default_value_t = 1.0)]
+    pixel_error: f32,
+    /// Frame time to keep, in ms, by steering the pixel threshold (refine + draw of the last frame).
+    #[arg(long, value_name = "T")]
+    target_ms: Option<f32>,
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+    /// One JSON object per frame (JSON lines).
+    #[arg(long)]
+    json: bool,
+    /// Write each frame as a PNG into this directory (nodes colored by id).
+    #[arg(long, value_name = "DIR")]
+    frames_dir: Option<PathBuf>,
+    /// Write the last front as a mesh (.obj, .ply or .glb).
+    #[arg(long, value_name = "OUT")]
+    export_cut: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -275,6 +317,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Inspect(a) => inspect(a),
         Command::Verify(a) => verify(a),
         Command::Extract(a) => extract(a),
+        Command::Stream(a) => stream(a),
         Command::Render(a) => render(a),
     }
 }
@@ -520,6 +563,71 @@ fn extract(a: ExtractArgs) -> Result<()> {
     let mesh = format::to_mesh(&mut rd, a.level)?;
     strata::export::write(&a.output, &mesh)?;
     println!("wrote level {} ({} faces, {} vertices) to {}", a.level, mesh.face_count(), mesh.vertex_count(), a.output.display());
+    Ok(())
+}
+
+fn stream(a: StreamArgs) -> Result<()> {
+    use strata::stream::{session, Budgets, Streamer};
+    let reader = format::Reader::open_path(&a.file)?;
+    let h = reader.header();
+    let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
+    let (width, height) = (a.width.max(1), a.height.max(1));
+    let cameras = match &a.path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            session::parse_path(&text, p, center, radius, width, height)?
+        }
+        None => {
+            let n = a.orbit.unwrap_or(64).max(1);
+            (0..n).map(|i| session::orbit(center, radius, i, n, width, height)).collect()
+        }
+    };
+    if let Some(d) = &a.frames_dir {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    let budgets = Budgets { faces: a.budget_faces, bytes: a.budget_bytes, pixel_error: a.pixel_error, target_ms: a.target_ms };
+    let mut streamer = Streamer::new(reader, budgets)?;
+    let mut image = strata::render::Image::new(width, height);
+    let mut last_ms = None;
+    for (k, camera) in cameras.iter().enumerate() {
+        let rep = streamer.update(camera, last_ms)?;
+        let start = Instant::now();
+        image.clear();
+        for &i in &rep.front {
+            if let Some(g) = streamer.geometry(i) {
+                image.draw(camera, &g.positions, &g.normals, &g.indices, strata::render::palette(i));
+            }
+        }
+        let draw_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Some(d) = &a.frames_dir {
+            image.write_png(&d.join(format!("frame{k:05}.png")))?;
+        }
+        last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
+        let s = &rep.stats;
+        if a.json {
+            let v = serde_json::json!({
+                "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
+                "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
+                "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
+                "refine_ms": s.refine_ms, "draw_ms": draw_ms,
+            });
+            println!("{v}");
+        } else {
+            let levels: Vec<String> = s.levels.iter().map(|c| c.to_string()).collect();
+            println!(
+                "frame {:>4}  nodes {:>5}  faces {:>8}  levels [{}]  +{} -{}  read {} B  resident {} B  px {:.2}  refine {:.2} ms  draw {:.2} ms",
+                rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
+                s.resident_bytes, s.pixel_error, s.refine_ms, draw_ms
+            );
+        }
+    }
+    if let Some(out) = &a.export_cut {
+        let mesh = streamer.front_mesh();
+        strata::export::write(out, &mesh)?;
+        if !a.json {
+            println!("wrote the last front ({} faces) to {}", mesh.face_count(), out.display());
+        }
+    }
     Ok(())
 }
 

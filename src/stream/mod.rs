@@ -1,0 +1,249 @@
+//! Streaming for display (METHOD.md §6): per frame, the front of the hierarchy a camera needs, its
+//! delta from the last frame, and the geometry of its nodes, read lazily from a chunk file.
+//!
+//! - [`refine`]: front selection, breadth-first with the neighbour rule and the paper's priority;
+//! - [`cache`]: resident geometry under a memory budget, LRU;
+//! - [`budget`]: the frame-time controller on the pixel-error threshold;
+//! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines.
+
+pub mod budget;
+pub mod cache;
+pub mod refine;
+pub mod session;
+#[cfg(test)]
+mod tests;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh};
+use crate::format::{NodeGeometry, NodeRecord, Reader, NO_PARENT};
+use budget::FrameTime;
+use cache::{record_bytes, Cache};
+use refine::{Limits, Mark, Refiner};
+use serde::Serialize;
+use std::io::{Read, Seek};
+use std::time::Instant;
+
+/// What bounds the front; each budget is optional and they combine.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Budgets {
+    /// Most faces displayed at once (the paper's N_T = R / v).
+    pub faces: Option<u64>,
+    /// Most bytes of resident geometry (see [`cache::geometry_bytes`]).
+    pub bytes: Option<u64>,
+    /// Refinement stops where a node's projected geometric error is under this many pixels.
+    pub pixel_error: f32,
+    /// Frame time to keep, in milliseconds, by steering the pixel threshold from `pixel_error` on.
+    pub target_ms: Option<f32>,
+}
+
+impl Default for Budgets {
+    fn default() -> Self {
+        Budgets { faces: None, bytes: None, pixel_error: 1.0, target_ms: None }
+    }
+}
+
+/// Figures of one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Stats {
+    pub faces: u64,
+    pub nodes: usize,
+    /// Roots of culled subtrees (back-facing or outside the frustum).
+    pub culled: usize,
+    /// Displayed nodes per level, finest first.
+    pub levels: Vec<u32>,
+    /// Bytes read from the file so far, skeleton included.
+    pub bytes_read: u64,
+    pub resident_bytes: u64,
+    /// The pixel-error threshold this frame was refined with.
+    pub pixel_error: f32,
+    /// Time to select the front and load its geometry.
+    pub refine_ms: f64,
+}
+
+/// One frame's front and what changed since the previous frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FrameReport {
+    /// Counts from 0.
+    pub frame: u64,
+    /// Displayed nodes, ascending.
+    pub front: Vec<u32>,
+    /// Nodes displayed now and not in the previous frame, ascending.
+    pub added: Vec<u32>,
+    /// Nodes displayed in the previous frame and not now, ascending.
+    pub removed: Vec<u32>,
+    /// Roots of culled subtrees, ascending.
+    pub culled: Vec<u32>,
+    pub stats: Stats,
+}
+
+/// A viewing session over one chunk file.
+pub struct Streamer<R> {
+    reader: Reader<R>,
+    budgets: Budgets,
+    refiner: Refiner,
+    cache: Cache,
+    controller: Option<FrameTime>,
+    front: Vec<u32>,
+    culled: Vec<u32>,
+    faces: u64,
+    frame: u64,
+}
+
+impl<R: Read + Seek> Streamer<R> {
+    /// Start a session. Budgets must admit the whole top level, which the first frame shows.
+    pub fn new(reader: Reader<R>, budgets: Budgets) -> Result<Streamer<R>> {
+        let attrs = reader.header().attributes;
+        let top = reader.levels().len().saturating_sub(1) as u32;
+        let top_nodes = &reader.nodes()[reader.level_nodes(top).start as usize..reader.level_nodes(top).end as usize];
+        let faces: u64 = top_nodes.iter().map(|n| n.faces as u64).sum();
+        let bytes: u64 = top_nodes.iter().map(|n| record_bytes(n, attrs)).sum();
+        if budgets.faces.is_some_and(|b| b < faces) {
+            return Err(Error::invalid(reader.path(), None, format!("the face budget is below the top level's {faces} faces")));
+        }
+        if budgets.bytes.is_some_and(|b| b < bytes) {
+            return Err(Error::invalid(reader.path(), None, format!("the memory budget is below the top level's {bytes} bytes")));
+        }
+        if budgets.pixel_error.is_nan() || budgets.pixel_error < 0.0 {
+            return Err(Error::invalid(reader.path(), None, "the pixel-error threshold must be zero or more"));
+        }
+        Ok(Streamer {
+            cache: Cache::new(budgets.bytes),
+            controller: budgets.target_ms.map(|t| FrameTime::new(t, budgets.pixel_error)),
+            reader,
+            budgets,
+            refiner: Refiner::default(),
+            front: Vec::new(),
+            culled: Vec::new(),
+            faces: 0,
+            frame: 0,
+        })
+    }
+
+    pub fn reader(&self) -> &Reader<R> {
+        &self.reader
+    }
+
+    /// The displayed nodes, ascending.
+    pub fn front(&self) -> &[u32] {
+        &self.front
+    }
+
+    /// Geometry of a displayed node.
+    pub fn geometry(&self, node: u32) -> Option<&NodeGeometry> {
+        self.cache.get(node)
+    }
+
+    /// Compute the front for `camera`, load what it adds and report it. `frame_ms` is the time
+    /// the previous frame took, fed to the frame-time controller when there is one.
+    pub fn update(&mut self, camera: &Camera, frame_ms: Option<f32>) -> Result<FrameReport> {
+        let start = Instant::now();
+        if let (Some(c), Some(ms)) = (self.controller.as_mut(), frame_ms) {
+            c.measured(ms, self.faces);
+        }
+        let threshold = self.controller.map_or(self.budgets.pixel_error, |c| c.threshold());
+        let limits = Limits { pixel_error: threshold, max_faces: self.budgets.faces, max_bytes: self.budgets.bytes };
+        let attrs = self.reader.header().attributes;
+        let cut = self.refiner.select(&self.reader, camera, &limits, &|n| record_bytes(n, attrs));
+        let (added, removed) = diff(&self.front, &cut.shown);
+        self.cache.update(&added, &removed, &mut self.reader)?;
+
+        if let Some(c) = self.controller.as_mut() {
+            let nodes = self.reader.nodes();
+            let new_faces = added
+                .iter()
+                .filter(|&&a| was_culled(&self.culled, nodes, a))
+                .map(|&a| nodes[a as usize].faces as u64)
+                .sum();
+            c.predict(cut.faces, new_faces);
+        }
+
+        let mut levels = vec![0u32; self.reader.levels().len()];
+        for &i in &cut.shown {
+            levels[self.reader.nodes()[i as usize].level as usize] += 1;
+        }
+        let stats = Stats {
+            faces: cut.faces,
+            nodes: cut.shown.len(),
+            culled: cut.culled.len(),
+            levels,
+            bytes_read: self.reader.bytes_read(),
+            resident_bytes: self.cache.resident_bytes(),
+            pixel_error: threshold,
+            refine_ms: start.elapsed().as_secs_f64() * 1e3,
+        };
+        self.front.clone_from(&cut.shown);
+        self.culled.clone_from(&cut.culled);
+        self.faces = cut.faces;
+        let report = FrameReport { frame: self.frame, front: cut.shown, added, removed, culled: cut.culled, stats };
+        self.frame += 1;
+        Ok(report)
+    }
+
+    /// The displayed front as one mesh, each node's vertices kept apart, material 0 throughout.
+    pub fn front_mesh(&self) -> Mesh {
+        let mut m = Mesh::default();
+        let geometries: Vec<&NodeGeometry> = self.front.iter().filter_map(|&i| self.geometry(i)).collect();
+        let normals = geometries.iter().all(|g| !g.normals.is_empty());
+        for g in geometries {
+            let base = m.positions.len() as u32;
+            m.positions.extend(&g.positions);
+            for t in g.indices.chunks_exact(3) {
+                m.triangles.push([base + t[0], base + t[1], base + t[2]]);
+                if normals {
+                    m.normals.extend(t.iter().map(|&k| g.normals[k as usize]));
+                }
+            }
+        }
+        m.face_materials = vec![0; m.triangles.len()];
+        m.materials = vec![Material::default()];
+        m.compute_face_geometry();
+        m
+    }
+
+    /// The mark node `i` got in the last frame.
+    pub fn mark(&self, i: u32) -> Mark {
+        self.refiner.mark(i)
+    }
+}
+
+/// Elements only in `new` and only in `old`, both ascending.
+fn diff(old: &[u32], new: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let (mut added, mut removed) = (Vec::new(), Vec::new());
+    let (mut i, mut j) = (0, 0);
+    loop {
+        match (old.get(i), new.get(j)) {
+            (Some(a), Some(b)) if a == b => {
+                i += 1;
+                j += 1;
+            }
+            (Some(a), Some(b)) if a > b => {
+                added.push(*b);
+                j += 1;
+            }
+            (Some(a), _) => {
+                removed.push(*a);
+                i += 1;
+            }
+            (None, Some(b)) => {
+                added.push(*b);
+                j += 1;
+            }
+            (None, None) => return (added, removed),
+        }
+    }
+}
+
+/// Whether node `a` or one of its ancestors was a culled root last frame: `a` came into view.
+fn was_culled(culled: &[u32], nodes: &[NodeRecord], a: u32) -> bool {
+    let mut j = a;
+    loop {
+        if culled.binary_search(&j).is_ok() {
+            return true;
+        }
+        match nodes[j as usize].parent {
+            NO_PARENT => return false,
+            p => j = p,
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! Invariants of streamed fronts on a converted fixture.
+
+use super::refine::sees;
+use super::session::orbit;
+use super::*;
+use crate::camera::Projection;
+use crate::cone::{facing_perspective, Facing};
+use crate::hierarchy::HierarchyParams;
+use crate::pipeline::{convert, ConvertOptions, Silent};
+use glam::Vec3;
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// The icosphere converted with small groups, so that it has several levels; built once.
+fn fixture() -> &'static PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("strata-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("icosphere.strata");
+        let input = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/icosphere.obj"));
+        let hierarchy = HierarchyParams { cluster_faces: 4, leaf_faces: 16, top_groups: 2, ..HierarchyParams::default() };
+        convert(&input, None, &out, &ConvertOptions { hierarchy, ..ConvertOptions::default() }, &mut Silent).unwrap();
+        out
+    })
+}
+
+fn open() -> Reader<File> {
+    Reader::open_path(fixture()).unwrap()
+}
+
+fn sphere(r: &Reader<File>) -> (Vec3, f32) {
+    let h = r.header();
+    (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length())
+}
+
+/// Ancestors of `i`, itself first.
+fn lineage(nodes: &[NodeRecord], i: u32) -> Vec<u32> {
+    let mut out = vec![i];
+    while nodes[*out.last().unwrap() as usize].parent != NO_PARENT {
+        out.push(nodes[*out.last().unwrap() as usize].parent);
+    }
+    out
+}
+
+/// The invariants every frame must keep.
+fn check(s: &Streamer<File>, rep: &FrameReport, camera: &Camera, budgets: &Budgets) {
+    let r = s.reader();
+    let nodes = r.nodes();
+    let shown: BTreeSet<u32> = rep.front.iter().copied().collect();
+    let culled: BTreeSet<u32> = rep.culled.iter().copied().collect();
+    assert!(shown.is_disjoint(&culled));
+    // A valid cut: every level-0 node (hence every face) lies under exactly one shown or culled node.
+    for leaf in r.level_nodes(0) {
+        let hits = lineage(nodes, leaf).iter().filter(|a| shown.contains(a) || culled.contains(a)).count();
+        assert_eq!(hits, 1, "frame {} leaf {leaf}", rep.frame);
+    }
+    for &i in &rep.front {
+        let n = &nodes[i as usize];
+        assert!(sees(n, camera), "frame {}: node {i} is culled but shown", rep.frame);
+        let g = s.geometry(i).expect("displayed geometry is resident");
+        assert_eq!(g.face_count() as u32, n.faces);
+        // Displayed neighbours differ by at most one level.
+        for &m in r.neighbors(i) {
+            for a in lineage(nodes, m).into_iter().skip(1) {
+                if shown.contains(&a) {
+                    assert!(nodes[a as usize].level <= n.level + 1, "frame {}: {i} next to {a}", rep.frame);
+                }
+            }
+        }
+    }
+    for &c in &rep.culled {
+        assert!(!sees(&nodes[c as usize], camera));
+    }
+    let faces: u64 = rep.front.iter().map(|&i| nodes[i as usize].faces as u64).sum();
+    assert_eq!(faces, rep.stats.faces);
+    assert_eq!(s.front_mesh().face_count() as u64, faces);
+    assert!(budgets.faces.is_none_or(|b| faces <= b), "frame {}: {faces} faces", rep.frame);
+    assert!(budgets.bytes.is_none_or(|b| rep.stats.resident_bytes <= b), "frame {}", rep.frame);
+}
+
+/// Play an orbit, checking every frame and replaying the deltas; returns the reports.
+fn play(budgets: Budgets, frames: usize) -> Vec<FrameReport> {
+    let r = open();
+    let (c, rad) = sphere(&r);
+    let mut s = Streamer::new(r, budgets).unwrap();
+    let mut replay = BTreeSet::new();
+    let mut reports = Vec::new();
+    for i in 0..frames {
+        let cam = orbit(c, rad, i, frames, 256, 256);
+        let rep = s.update(&cam, Some(5.0)).unwrap();
+        check(&s, &rep, &cam, &budgets);
+        for a in &rep.added {
+            assert!(replay.insert(*a));
+        }
+        for x in &rep.removed {
+            assert!(replay.remove(x));
+        }
+        assert_eq!(replay.iter().copied().collect::<Vec<_>>(), rep.front);
+        reports.push(rep);
+    }
+    reports
+}
+
+#[test]
+fn fixture_has_several_levels() {
+    let r = open();
+    assert!(r.levels().len() >= 3, "{} levels", r.levels().len());
+}
+
+#[test]
+fn first_frame_shows_the_top_level() {
+    let r = open();
+    let top = r.levels().len() as u32 - 1;
+    let (c, rad) = sphere(&r);
+    let expected: Vec<u32> = r.level_nodes(top).collect();
+    let mut s = Streamer::new(r, Budgets { pixel_error: f32::INFINITY, ..Budgets::default() }).unwrap();
+    let cam = Camera::framing(c, rad, Vec3::Z, 1.0, 64, 64);
+    let rep = s.update(&cam, None).unwrap();
+    let mut all = rep.front.clone();
+    all.extend(&rep.culled);
+    all.sort_unstable();
+    assert_eq!(all, expected);
+    assert_eq!(rep.added, rep.front);
+    assert!(rep.stats.bytes_read < s.reader().file_size());
+}
+
+#[test]
+fn orbit_without_budgets_keeps_the_invariants() {
+    let reps = play(Budgets::default(), 24);
+    let finest = |rep: &FrameReport| rep.stats.levels.iter().position(|&c| c > 0).unwrap();
+    assert!(finest(reps.last().unwrap()) < finest(&reps[0]), "the approach refines");
+}
+
+#[test]
+fn face_budget_is_never_exceeded() {
+    let top_faces: u64 = {
+        let r = open();
+        let top = r.levels().len() as u32 - 1;
+        r.level_nodes(top).map(|i| r.nodes()[i as usize].faces as u64).sum()
+    };
+    let budget = top_faces * 3;
+    let reps = play(Budgets { faces: Some(budget), pixel_error: 0.0, ..Budgets::default() }, 16);
+    assert!(reps.iter().any(|r| r.stats.faces > top_faces), "the budget leaves room to refine");
+}
+
+#[test]
+fn memory_budget_is_never_exceeded() {
+    let r = open();
+    let attrs = r.header().attributes;
+    let top = r.levels().len() as u32 - 1;
+    let top_bytes: u64 = r.level_nodes(top).map(|i| cache::record_bytes(&r.nodes()[i as usize], attrs)).sum();
+    let budget = top_bytes * 2 + top_bytes / 2;
+    let reps = play(Budgets { bytes: Some(budget), pixel_error: 0.0, ..Budgets::default() }, 16);
+    assert!(reps.iter().any(|r| r.stats.nodes > r.stats.levels[top as usize] as usize));
+}
+
+#[test]
+fn budgets_below_the_top_level_are_refused() {
+    assert!(Streamer::new(open(), Budgets { faces: Some(1), ..Budgets::default() }).is_err());
+    assert!(Streamer::new(open(), Budgets { bytes: Some(1), ..Budgets::default() }).is_err());
+}
+
+#[test]
+fn zero_threshold_and_a_wide_far_view_reach_every_front_facing_leaf() {
+    let r = open();
+    let (c, rad) = sphere(&r);
+    let mut cam = Camera::framing(c, rad, Vec3::new(0.3, 0.5, 1.0), 2.0, 128, 128);
+    cam.eye = c + (cam.eye - c) * 10.0;
+    cam.far *= 20.0;
+    assert!(matches!(cam.projection, Projection::Perspective { .. }));
+    let nodes = r.nodes().to_vec();
+    let expected: Vec<u32> = r
+        .level_nodes(0)
+        .filter(|&i| {
+            lineage(&nodes, i).iter().all(|&a| {
+                let n = &nodes[a as usize];
+                facing_perspective(&n.cone, n.center, n.radius, cam.eye) != Facing::Back
+            })
+        })
+        .collect();
+    assert!(!expected.is_empty() && expected.len() < r.level_nodes(0).len());
+    let budgets = Budgets { pixel_error: 0.0, ..Budgets::default() };
+    let mut s = Streamer::new(r, budgets).unwrap();
+    let rep = s.update(&cam, None).unwrap();
+    check(&s, &rep, &cam, &budgets);
+    assert_eq!(rep.front, expected);
+}
+
+#[test]
+fn moving_away_coarsens() {
+    let r = open();
+    let (c, rad) = sphere(&r);
+    let budgets = Budgets::default();
+    let mut s = Streamer::new(r, budgets).unwrap();
+    let near = orbit(c, rad, 10, 20, 256, 256);
+    let mut far = near;
+    far.eye = c + (near.eye - c) * 8.0;
+    far.far = far.eye.distance(c) + rad;
+    let a = s.update(&near, None).unwrap();
+    let b = s.update(&far, None).unwrap();
+    check(&s, &b, &far, &budgets);
+    assert!(b.stats.faces < a.stats.faces);
+    assert!(!b.removed.is_empty());
+    // Every node that appears is an ancestor of a removed one: children collapsed into parents.
+    let nodes = s.reader().nodes();
+    let removed_lineages: BTreeSet<u32> = b.removed.iter().flat_map(|&x| lineage(nodes, x)).collect();
+    let uncovered = b.added.iter().filter(|a| !removed_lineages.contains(a)).count();
+    assert!(uncovered < b.added.len(), "some added nodes are parents of removed ones");
+}
+
+#[test]
+fn frame_time_target_steers_the_threshold() {
+    let r = open();
+    let (c, rad) = sphere(&r);
+    let mut s = Streamer::new(r, Budgets { target_ms: Some(1.0), ..Budgets::default() }).unwrap();
+    let cam = orbit(c, rad, 15, 20, 256, 256);
+    let first = s.update(&cam, None).unwrap();
+    let mut last = first.clone();
+    for _ in 0..5 {
+        last = s.update(&cam, Some(100.0)).unwrap();
+    }
+    assert!(last.stats.pixel_error > first.stats.pixel_error);
+    assert!(last.stats.faces <= first.stats.faces);
+}
