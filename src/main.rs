@@ -62,6 +62,12 @@ struct StreamArgs {
     /// Frame time to keep, in ms, by steering the pixel threshold (refine + draw of the last frame).
     #[arg(long, value_name = "T")]
     target_ms: Option<f32>,
+    /// Refinement order under the budgets: silhouette (the paper's f(g)) or plain breadth-first.
+    #[arg(long, value_enum, default_value_t = StreamPriority::Silhouette)]
+    priority: StreamPriority,
+    /// With --target-ms, only react to measured frame times: no predictive step for newly visible nodes.
+    #[arg(long)]
+    no_predict: bool,
     #[arg(long, default_value_t = 640)]
     width: u32,
     #[arg(long, default_value_t = 480)]
@@ -75,6 +81,12 @@ struct StreamArgs {
     /// Write the last front as a mesh (.obj, .ply or .glb).
     #[arg(long, value_name = "OUT")]
     export_cut: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum StreamPriority {
+    Silhouette,
+    Breadth,
 }
 
 #[derive(Args)]
@@ -567,7 +579,7 @@ fn extract(a: ExtractArgs) -> Result<()> {
 }
 
 fn stream(a: StreamArgs) -> Result<()> {
-    use strata::stream::{session, Budgets, Streamer};
+    use strata::stream::{session, Budgets, Priority, Streamer};
     let reader = format::Reader::open_path(&a.file)?;
     let h = reader.header();
     let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
@@ -585,7 +597,18 @@ fn stream(a: StreamArgs) -> Result<()> {
     if let Some(d) = &a.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
-    let budgets = Budgets { faces: a.budget_faces, bytes: a.budget_bytes, pixel_error: a.pixel_error, target_ms: a.target_ms };
+    let priority = match a.priority {
+        StreamPriority::Silhouette => Priority::Silhouette,
+        StreamPriority::Breadth => Priority::Breadth,
+    };
+    let budgets = Budgets {
+        faces: a.budget_faces,
+        bytes: a.budget_bytes,
+        pixel_error: a.pixel_error,
+        target_ms: a.target_ms,
+        priority,
+        predict: !a.no_predict,
+    };
     let mut streamer = Streamer::new(reader, budgets)?;
     let mut image = strata::render::Image::new(width, height);
     let mut last_ms = None;
