@@ -81,6 +81,10 @@ struct StreamArgs {
     /// Write the last front as a mesh (.obj, .ply or .glb).
     #[arg(long, value_name = "OUT")]
     export_cut: Option<PathBuf>,
+    /// Per frame, also draw the front and the full-detail model (level 0, read once, kept apart
+    /// from the session's reader and budgets) in one plain color and report the shape retention.
+    #[arg(long)]
+    compare_full: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -609,8 +613,15 @@ fn stream(a: StreamArgs) -> Result<()> {
         priority,
         predict: !a.no_predict,
     };
+    let full: Vec<format::NodeGeometry> = if a.compare_full {
+        let mut rd = format::Reader::open_path(&a.file)?;
+        rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?
+    } else {
+        Vec::new()
+    };
     let mut streamer = Streamer::new(reader, budgets)?;
     let mut image = strata::render::Image::new(width, height);
+    let (mut plain_front, mut plain_full) = (image_if(a.compare_full, width, height), image_if(a.compare_full, width, height));
     let mut last_ms = None;
     for (k, camera) in cameras.iter().enumerate() {
         let rep = streamer.update(camera, last_ms)?;
@@ -626,14 +637,35 @@ fn stream(a: StreamArgs) -> Result<()> {
             image.write_png(&d.join(format!("frame{k:05}.png")))?;
         }
         last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
+        let retained = match (&mut plain_front, &mut plain_full) {
+            (Some(front), Some(whole)) => {
+                const PLAIN: [u8; 4] = [200, 200, 200, 255];
+                front.clear();
+                whole.clear();
+                for &i in &rep.front {
+                    if let Some(g) = streamer.geometry(i) {
+                        front.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
+                    }
+                }
+                for g in &full {
+                    whole.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
+                }
+                Some(strata::stream::retention::retention(front, whole))
+            }
+            _ => None,
+        };
         let s = &rep.stats;
         if a.json {
-            let v = serde_json::json!({
+            let mut v = serde_json::json!({
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
                 "refine_ms": s.refine_ms, "draw_ms": draw_ms,
             });
+            if let Some(r) = retained {
+                v["retained"] = serde_json::json!(r.shaded);
+                v["coverage_retained"] = serde_json::json!(r.coverage);
+            }
             println!("{v}");
         } else {
             let levels: Vec<String> = s.levels.iter().map(|c| c.to_string()).collect();
@@ -642,6 +674,9 @@ fn stream(a: StreamArgs) -> Result<()> {
                 rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
                 s.resident_bytes, s.pixel_error, s.refine_ms, draw_ms
             );
+            if let Some(r) = retained {
+                println!("           retained {:.4} (coverage {:.4})", r.shaded, r.coverage);
+            }
         }
     }
     if let Some(out) = &a.export_cut {
@@ -652,6 +687,11 @@ fn stream(a: StreamArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A cleared image when `wanted`.
+fn image_if(wanted: bool, width: u32, height: u32) -> Option<strata::render::Image> {
+    wanted.then(|| strata::render::Image::new(width, height))
 }
 
 /// Three comma-separated numbers.

@@ -4,11 +4,13 @@
 //! - [`refine`]: front selection, breadth-first with the neighbour rule and the paper's priority;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
+//! - [`retention`]: shape retention of a front's image against the full-detail one;
 //! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines.
 
 pub mod budget;
 pub mod cache;
 pub mod refine;
+pub mod retention;
 pub mod session;
 #[cfg(test)]
 mod tests;
