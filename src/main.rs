@@ -584,6 +584,7 @@ fn extract(a: ExtractArgs) -> Result<()> {
 
 fn stream(a: StreamArgs) -> Result<()> {
     use strata::stream::{session, Budgets, Priority, Streamer};
+    let opened = Instant::now();
     let reader = format::Reader::open_path(&a.file)?;
     let h = reader.header();
     let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
@@ -637,6 +638,7 @@ fn stream(a: StreamArgs) -> Result<()> {
             image.write_png(&d.join(format!("frame{k:05}.png")))?;
         }
         last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
+        let since_open_ms = opened.elapsed().as_secs_f64() * 1e3;
         let retained = match (&mut plain_front, &mut plain_full) {
             (Some(front), Some(whole)) => {
                 const PLAIN: [u8; 4] = [200, 200, 200, 255];
@@ -660,7 +662,7 @@ fn stream(a: StreamArgs) -> Result<()> {
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
-                "refine_ms": s.refine_ms, "draw_ms": draw_ms,
+                "refine_ms": s.refine_ms, "draw_ms": draw_ms, "since_open_ms": since_open_ms,
             });
             if let Some(r) = retained {
                 v["retained"] = serde_json::json!(r.shaded);
@@ -674,6 +676,9 @@ fn stream(a: StreamArgs) -> Result<()> {
                 rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
                 s.resident_bytes, s.pixel_error, s.refine_ms, draw_ms
             );
+            if k == 0 {
+                println!("           first frame ready {since_open_ms:.1} ms after opening the file");
+            }
             if let Some(r) = retained {
                 println!("           retained {:.4} (coverage {:.4})", r.shaded, r.coverage);
             }
