@@ -62,6 +62,12 @@ struct StreamArgs {
     /// Frame time to keep, in ms, by steering the pixel threshold (refine + draw of the last frame).
     #[arg(long, value_name = "T")]
     target_ms: Option<f32>,
+    /// Refinement order under the budgets: silhouette (the paper's f(g)) or plain breadth-first.
+    #[arg(long, value_enum, default_value_t = StreamPriority::Silhouette)]
+    priority: StreamPriority,
+    /// With --target-ms, only react to measured frame times: no predictive step for newly visible nodes.
+    #[arg(long)]
+    no_predict: bool,
     #[arg(long, default_value_t = 640)]
     width: u32,
     #[arg(long, default_value_t = 480)]
@@ -75,6 +81,16 @@ struct StreamArgs {
     /// Write the last front as a mesh (.obj, .ply or .glb).
     #[arg(long, value_name = "OUT")]
     export_cut: Option<PathBuf>,
+    /// Per frame, also draw the front and the full-detail model (level 0, read once, kept apart
+    /// from the session's reader and budgets) in one plain color and report the shape retention.
+    #[arg(long)]
+    compare_full: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum StreamPriority {
+    Silhouette,
+    Breadth,
 }
 
 #[derive(Args)]
@@ -567,7 +583,8 @@ fn extract(a: ExtractArgs) -> Result<()> {
 }
 
 fn stream(a: StreamArgs) -> Result<()> {
-    use strata::stream::{session, Budgets, Streamer};
+    use strata::stream::{session, Budgets, Priority, Streamer};
+    let opened = Instant::now();
     let reader = format::Reader::open_path(&a.file)?;
     let h = reader.header();
     let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
@@ -585,9 +602,27 @@ fn stream(a: StreamArgs) -> Result<()> {
     if let Some(d) = &a.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
-    let budgets = Budgets { faces: a.budget_faces, bytes: a.budget_bytes, pixel_error: a.pixel_error, target_ms: a.target_ms };
+    let priority = match a.priority {
+        StreamPriority::Silhouette => Priority::Silhouette,
+        StreamPriority::Breadth => Priority::Breadth,
+    };
+    let budgets = Budgets {
+        faces: a.budget_faces,
+        bytes: a.budget_bytes,
+        pixel_error: a.pixel_error,
+        target_ms: a.target_ms,
+        priority,
+        predict: !a.no_predict,
+    };
+    let full: Vec<format::NodeGeometry> = if a.compare_full {
+        let mut rd = format::Reader::open_path(&a.file)?;
+        rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?
+    } else {
+        Vec::new()
+    };
     let mut streamer = Streamer::new(reader, budgets)?;
     let mut image = strata::render::Image::new(width, height);
+    let (mut plain_front, mut plain_full) = (image_if(a.compare_full, width, height), image_if(a.compare_full, width, height));
     let mut last_ms = None;
     for (k, camera) in cameras.iter().enumerate() {
         let rep = streamer.update(camera, last_ms)?;
@@ -603,14 +638,36 @@ fn stream(a: StreamArgs) -> Result<()> {
             image.write_png(&d.join(format!("frame{k:05}.png")))?;
         }
         last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
+        let since_open_ms = opened.elapsed().as_secs_f64() * 1e3;
+        let retained = match (&mut plain_front, &mut plain_full) {
+            (Some(front), Some(whole)) => {
+                const PLAIN: [u8; 4] = [200, 200, 200, 255];
+                front.clear();
+                whole.clear();
+                for &i in &rep.front {
+                    if let Some(g) = streamer.geometry(i) {
+                        front.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
+                    }
+                }
+                for g in &full {
+                    whole.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
+                }
+                Some(strata::stream::retention::retention(front, whole))
+            }
+            _ => None,
+        };
         let s = &rep.stats;
         if a.json {
-            let v = serde_json::json!({
+            let mut v = serde_json::json!({
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
-                "refine_ms": s.refine_ms, "draw_ms": draw_ms,
+                "refine_ms": s.refine_ms, "draw_ms": draw_ms, "since_open_ms": since_open_ms,
             });
+            if let Some(r) = retained {
+                v["retained"] = serde_json::json!(r.shaded);
+                v["coverage_retained"] = serde_json::json!(r.coverage);
+            }
             println!("{v}");
         } else {
             let levels: Vec<String> = s.levels.iter().map(|c| c.to_string()).collect();
@@ -619,6 +676,12 @@ fn stream(a: StreamArgs) -> Result<()> {
                 rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
                 s.resident_bytes, s.pixel_error, s.refine_ms, draw_ms
             );
+            if k == 0 {
+                println!("           first frame ready {since_open_ms:.1} ms after opening the file");
+            }
+            if let Some(r) = retained {
+                println!("           retained {:.4} (coverage {:.4})", r.shaded, r.coverage);
+            }
         }
     }
     if let Some(out) = &a.export_cut {
@@ -629,6 +692,11 @@ fn stream(a: StreamArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A cleared image when `wanted`.
+fn image_if(wanted: bool, width: u32, height: u32) -> Option<strata::render::Image> {
+    wanted.then(|| strata::render::Image::new(width, height))
 }
 
 /// Three comma-separated numbers.

@@ -30,12 +30,14 @@ impl FrameTime {
     }
 
     /// Feedback: the last frame took `ms` with `faces` displayed. Coarser by one step when it was
-    /// slower than the band, finer when faster.
+    /// slower than the band, finer when faster. A frame that displayed nothing says nothing about
+    /// what geometry costs, so it leaves the threshold alone (else looking away from the model
+    /// would drift it to the finest, and the model would come back into view far over the target).
     pub fn measured(&mut self, ms: f32, faces: u64) {
-        if !ms.is_finite() || ms < 0.0 {
+        if !ms.is_finite() || ms < 0.0 || faces == 0 {
             return;
         }
-        if faces > 0 && ms > 0.0 {
+        if ms > 0.0 {
             self.ms_per_face = Some(ms / faces as f32);
         }
         if ms > self.target_ms * (1.0 + DEAD_BAND) {
@@ -79,6 +81,8 @@ mod tests {
             f.measured(1000.0, 1000);
         }
         assert_eq!(f.threshold(), MAX_PIXELS);
+        f.measured(1.0, 0);
+        assert_eq!(f.threshold(), MAX_PIXELS, "an empty frame is no evidence");
     }
 
     #[test]

@@ -4,11 +4,13 @@
 //! - [`refine`]: front selection, breadth-first with the neighbour rule and the paper's priority;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
+//! - [`retention`]: shape retention of a front's image against the full-detail one;
 //! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines.
 
 pub mod budget;
 pub mod cache;
 pub mod refine;
+pub mod retention;
 pub mod session;
 #[cfg(test)]
 mod tests;
@@ -20,6 +22,7 @@ use crate::format::{NodeGeometry, NodeRecord, Reader, NO_PARENT};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
 use refine::{Limits, Mark, Refiner};
+pub use refine::Priority;
 use serde::Serialize;
 use std::io::{Read, Seek};
 use std::time::Instant;
@@ -35,11 +38,16 @@ pub struct Budgets {
     pub pixel_error: f32,
     /// Frame time to keep, in milliseconds, by steering the pixel threshold from `pixel_error` on.
     pub target_ms: Option<f32>,
+    /// Refinement order under the face and memory budgets.
+    pub priority: Priority,
+    /// Whether the frame-time controller also coarsens ahead when nodes come into view (else it
+    /// only reacts to measured times), for comparison.
+    pub predict: bool,
 }
 
 impl Default for Budgets {
     fn default() -> Self {
-        Budgets { faces: None, bytes: None, pixel_error: 1.0, target_ms: None }
+        Budgets { faces: None, bytes: None, pixel_error: 1.0, target_ms: None, priority: Priority::Silhouette, predict: true }
     }
 }
 
@@ -142,13 +150,18 @@ impl<R: Read + Seek> Streamer<R> {
             c.measured(ms, self.faces);
         }
         let threshold = self.controller.map_or(self.budgets.pixel_error, |c| c.threshold());
-        let limits = Limits { pixel_error: threshold, max_faces: self.budgets.faces, max_bytes: self.budgets.bytes };
+        let limits = Limits {
+            pixel_error: threshold,
+            max_faces: self.budgets.faces,
+            max_bytes: self.budgets.bytes,
+            priority: self.budgets.priority,
+        };
         let attrs = self.reader.header().attributes;
         let cut = self.refiner.select(&self.reader, camera, &limits, &|n| record_bytes(n, attrs));
         let (added, removed) = diff(&self.front, &cut.shown);
         self.cache.update(&added, &removed, &mut self.reader)?;
 
-        if let Some(c) = self.controller.as_mut() {
+        if let Some(c) = self.controller.as_mut().filter(|_| self.budgets.predict) {
             let nodes = self.reader.nodes();
             let new_faces = added
                 .iter()

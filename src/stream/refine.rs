@@ -15,6 +15,17 @@ pub struct Limits {
     pub pixel_error: f32,
     pub max_faces: Option<u64>,
     pub max_bytes: Option<u64>,
+    pub priority: Priority,
+}
+
+/// The order in which a level's refinable nodes claim the budget.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Priority {
+    /// The paper's f(g), highest first: silhouette and wide-cone groups first.
+    #[default]
+    Silhouette,
+    /// Plain breadth-first order (node id within the level), for comparison.
+    Breadth,
 }
 
 /// A node's part in the current cut.
@@ -55,7 +66,7 @@ impl Refiner {
     }
 
     /// Select the cut for `camera`: start from the top level; level by level, refine shown nodes
-    /// whose projected error is not under the threshold, highest priority first, when no
+    /// whose projected error is not under the threshold, in `limits.priority` order, when no
     /// same-level neighbour is displayed coarser and the budgets allow all the visible children.
     /// `bytes(i)` is the resident size of node `i`'s geometry.
     pub fn select<R: Read + Seek>(
@@ -92,7 +103,10 @@ impl Refiner {
                     let n = &nodes[i as usize];
                     n.child_count > 0 && camera.projected_error(n.error, n.center, n.radius) >= limits.pixel_error
                 })
-                .map(|&i| (priority(&nodes[i as usize], camera), i))
+                .map(|&i| match limits.priority {
+                    Priority::Silhouette => (priority(&nodes[i as usize], camera), i),
+                    Priority::Breadth => (0.0, i),
+                })
                 .collect();
             candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             let mut next = Vec::new();

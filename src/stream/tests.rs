@@ -225,3 +225,57 @@ fn frame_time_target_steers_the_threshold() {
     assert!(last.stats.pixel_error > first.stats.pixel_error);
     assert!(last.stats.faces <= first.stats.faces);
 }
+
+#[test]
+fn breadth_first_order_changes_fronts_under_a_face_budget_only() {
+    let frames = 16;
+    let fronts = |budgets: Budgets| -> Vec<Vec<u32>> {
+        let r = open();
+        let (c, rad) = sphere(&r);
+        let mut s = Streamer::new(r, budgets).unwrap();
+        (0..frames)
+            .map(|i| {
+                let cam = orbit(c, rad, i, frames, 256, 256);
+                let rep = s.update(&cam, None).unwrap();
+                check(&s, &rep, &cam, &budgets);
+                rep.front
+            })
+            .collect()
+    };
+    let free = Budgets { pixel_error: 0.5, ..Budgets::default() };
+    assert_eq!(fronts(free), fronts(Budgets { priority: Priority::Breadth, ..free }));
+    let top_faces: u64 = {
+        let r = open();
+        let top = r.levels().len() as u32 - 1;
+        r.level_nodes(top).map(|i| r.nodes()[i as usize].faces as u64).sum()
+    };
+    let differ = (2..8).any(|k| {
+        let tight = Budgets { faces: Some(top_faces * k / 2), pixel_error: 0.0, ..Budgets::default() };
+        fronts(tight) != fronts(Budgets { priority: Priority::Breadth, ..tight })
+    });
+    assert!(differ, "some face budget makes the two orders choose different fronts");
+}
+
+#[test]
+fn without_prediction_a_model_coming_into_view_takes_no_large_step() {
+    let run = |predict: bool| -> f32 {
+        let r = open();
+        let (c, rad) = sphere(&r);
+        let budgets = Budgets { target_ms: Some(10.0), predict, ..Budgets::default() };
+        let mut s = Streamer::new(r, budgets).unwrap();
+        let far = orbit(c, rad, 0, 20, 256, 256);
+        let near = orbit(c, rad, 15, 20, 256, 256);
+        let mut away = near;
+        away.target = 2.0 * near.eye - c;
+        let a = s.update(&far, None).unwrap();
+        let b = s.update(&away, Some(10.0)).unwrap();
+        assert_eq!(b.stats.faces, 0, "looking away shows nothing");
+        let n = s.update(&near, Some(10.0)).unwrap();
+        assert!(n.stats.faces as f32 > 1.5 * a.stats.faces as f32, "{} vs {}", n.stats.faces, a.stats.faces);
+        assert_eq!(n.stats.pixel_error, a.stats.pixel_error);
+        s.update(&near, Some(10.0)).unwrap().stats.pixel_error
+    };
+    let (with, without) = (run(true), run(false));
+    assert_eq!(without, 1.0, "in the dead band the reactive controller keeps the threshold");
+    assert!(with >= 1.0 * budget::STEP, "the predictive step coarsens at once: {with}");
+}
