@@ -628,11 +628,15 @@ fn stream(a: StreamArgs) -> Result<()> {
         let rep = streamer.update(camera, last_ms)?;
         let start = Instant::now();
         image.clear();
-        for &i in &rep.front {
-            if let Some(g) = streamer.geometry(i) {
-                image.draw(camera, &g.positions, &g.normals, &g.indices, strata::render::palette(i));
-            }
-        }
+        let parts: Vec<strata::render::Part> = rep
+            .front
+            .iter()
+            .filter_map(|&i| {
+                let g = streamer.geometry(i)?;
+                Some(strata::render::Part { positions: &g.positions, normals: &g.normals, indices: &g.indices, color: strata::render::palette(i) })
+            })
+            .collect();
+        image.draw_parts(camera, &parts);
         let draw_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(d) = &a.frames_dir {
             image.write_png(&d.join(format!("frame{k:05}.png")))?;

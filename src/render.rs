@@ -40,6 +40,20 @@ pub struct Image {
     pub depth: Vec<f32>,
 }
 
+/// Faces per batch of [`Image::draw_parts`]: large enough to amortize the parallel passes, small
+/// enough that the per-face setup records stay around a megabyte.
+pub const BATCH_FACES: usize = 8192;
+
+/// One mesh to draw: triangles (3 indices per face) over positions, optional per-vertex normals,
+/// one color.
+#[derive(Clone, Copy, Debug)]
+pub struct Part<'a> {
+    pub positions: &'a [Vec3],
+    pub normals: &'a [Vec3],
+    pub indices: &'a [u32],
+    pub color: [u8; 4],
+}
+
 /// A face ready to fill: fixed-point screen vertices with positive area, and linear depth and
 /// shade over the screen.
 struct Setup {
@@ -91,19 +105,51 @@ impl Image {
     /// camera's own size only sets its aspect ratio. Returns the number of faces drawn (not
     /// culled/clipped away, and reaching at least one pixel center within their bounds).
     pub fn draw(&mut self, camera: &Camera, positions: &[Vec3], normals: &[Vec3], indices: &[u32], color: [u8; 4]) -> usize {
+        self.draw_parts(camera, &[Part { positions, normals, indices, color }])
+    }
+
+    /// [`Image::draw`] for many meshes at once (a streamed front's nodes): parts are gathered into
+    /// batches of about [`BATCH_FACES`] faces, each set up and filled in one pass, so that many
+    /// small parts cost little more than one large one while temporary memory stays bounded.
+    /// Parts are drawn in order; returns the faces drawn over all parts.
+    pub fn draw_parts(&mut self, camera: &Camera, parts: &[Part<'_>]) -> usize {
+        let mut drawn = 0;
+        let mut start = 0;
+        while start < parts.len() {
+            let (mut end, mut faces) = (start + 1, parts[start].indices.len() / 3);
+            while end < parts.len() && faces + parts[end].indices.len() / 3 <= BATCH_FACES {
+                faces += parts[end].indices.len() / 3;
+                end += 1;
+            }
+            drawn += self.draw_batch(camera, &parts[start..end]);
+            start = end;
+        }
+        drawn
+    }
+
+    fn draw_batch(&mut self, camera: &Camera, parts: &[Part<'_>]) -> usize {
         if self.rgba.len() != 4 * self.depth.len() || self.depth.len() != self.width as usize * self.height as usize {
             return 0;
         }
         let view_projection = camera.view_projection();
         let light = -camera.forward();
         let lit = |n: Vec3| AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(light).max(0.0);
-        let vertex_shade: Vec<f32> =
-            if normals.len() == positions.len() { normals.par_iter().map(|&n| lit(n)).collect() } else { Vec::new() };
+        let vertex_shades: Vec<Vec<f32>> = parts
+            .par_iter()
+            .map(|p| if p.normals.len() == p.positions.len() { p.normals.iter().map(|&n| lit(n)).collect() } else { Vec::new() })
+            .collect();
         let (width, height) = (self.width, self.height);
-        let face_count = indices.len() / 3;
-        let chunks: Vec<(Vec<Setup>, usize)> = (0..face_count.div_ceil(SETUP_CHUNK))
-            .into_par_iter()
-            .map(|c| {
+        let work: Vec<(usize, usize)> = parts
+            .iter()
+            .enumerate()
+            .flat_map(|(k, p)| (0..(p.indices.len() / 3).div_ceil(SETUP_CHUNK)).map(move |c| (k, c)))
+            .collect();
+        let chunks: Vec<(Vec<Setup>, usize)> = work
+            .par_iter()
+            .map(|&(k, c)| {
+                let Part { positions, indices, color, .. } = parts[k];
+                let vertex_shade = &vertex_shades[k];
+                let face_count = indices.len() / 3;
                 let mut out = Vec::new();
                 let mut drawn = 0;
                 for f in c * SETUP_CHUNK..((c + 1) * SETUP_CHUNK).min(face_count) {
@@ -443,6 +489,25 @@ mod tests {
             assert_eq!(pixel(&image, 50, 50), [0, 255, 0, 255], "near drawn first: {near_first}");
             assert_eq!(pixel(&image, 30, 70), [0, 255, 0, 255]);
         }
+    }
+
+    #[test]
+    fn parts_draw_as_their_draws_in_sequence() {
+        let (positions, indices) = sphere(0.6);
+        let (left, right): (Vec<Vec3>, Vec<Vec3>) =
+            (positions.iter().map(|p| *p - Vec3::X * 0.3).collect(), positions.iter().map(|p| *p + Vec3::X * 0.3).collect());
+        let mut one_by_one = Image::new(100, 100);
+        let drawn = one_by_one.draw(&ortho(), &left, &[], &indices, [255, 0, 0, 255])
+            + one_by_one.draw(&ortho(), &right, &[], &indices, [0, 0, 255, 255]);
+        let mut batched = Image::new(100, 100);
+        let parts = [
+            Part { positions: &left, normals: &[], indices: &indices, color: [255, 0, 0, 255] },
+            Part { positions: &right, normals: &[], indices: &indices, color: [0, 0, 255, 255] },
+        ];
+        assert_eq!(batched.draw_parts(&ortho(), &parts), drawn);
+        assert_eq!(batched.rgba, one_by_one.rgba);
+        assert_eq!(batched.depth, one_by_one.depth);
+        assert!(drawn > 0);
     }
 
     #[test]
