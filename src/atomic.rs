@@ -20,6 +20,13 @@ pub fn remove_pending() {
     }
 }
 
+/// Write `dest` all or nothing with `write`, whose I/O errors are reported against `dest`.
+pub fn write_file(dest: &Path, write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
+    let mut file = AtomicFile::create(dest)?;
+    write(file.writer()).map_err(|e| Error::io(dest, e))?;
+    file.commit()
+}
+
 /// A file being written under a temporary name.
 pub struct AtomicFile {
     dest: PathBuf,

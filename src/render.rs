@@ -8,7 +8,7 @@
 //! in parallel, then filled in parallel by horizontal bands, each band drawing its faces in input
 //! order, so the image does not depend on the thread count.
 
-use crate::atomic::AtomicFile;
+use crate::atomic::write_file;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use glam::{Vec3, Vec4};
@@ -209,9 +209,7 @@ impl Image {
     /// Write the image as an RGBA PNG, all or nothing.
     pub fn write_png(&self, path: &Path) -> Result<()> {
         let bytes = self.encode().map_err(|e| Error::invalid(path, None, format!("cannot encode PNG: {e}")))?;
-        let mut file = AtomicFile::create(path)?;
-        file.write_all(&bytes).map_err(|e| Error::io(path, e))?;
-        file.commit()
+        write_file(path, |w| w.write_all(&bytes))
     }
 
     /// The image as an RGBA PNG file's bytes; empty if the fields disagree on the size.

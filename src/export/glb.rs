@@ -7,8 +7,8 @@
 //! made a valid URI reference), written only when the mesh has UVs to map it.
 
 use super::{check, invalid_mesh, split_vertices, Split};
-use crate::atomic::AtomicFile;
-use crate::error::{Error, Result};
+use crate::atomic::write_file;
+use crate::error::Result;
 use crate::mesh::Mesh;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -17,9 +17,7 @@ use std::path::Path;
 
 /// Write `mesh` to `path` as GLB.
 pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
-    let mut file = AtomicFile::create(path)?;
-    write_glb(file.writer(), mesh).map_err(|e| Error::io(path, e))?;
-    file.commit()
+    write_file(path, |w| write_glb(w, mesh))
 }
 
 /// Write the GLB bytes of `mesh`. A mesh without faces is refused: glTF has no empty primitive.

@@ -6,7 +6,7 @@
 //! one `v` line per color. Face order is kept, with a `usemtl` at the start of every material run.
 
 use super::check;
-use crate::atomic::AtomicFile;
+use crate::atomic::{write_file, AtomicFile};
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh};
 use std::collections::{HashMap, HashSet};
@@ -22,9 +22,7 @@ pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     let mut file = AtomicFile::create(path)?;
     write_obj(file.writer(), mesh, mtllib.as_deref()).map_err(|e| Error::io(path, e))?;
     if let Some(mtl_path) = &mtl_path {
-        let mut mtl = AtomicFile::create(mtl_path)?;
-        write_mtl(mtl.writer(), mesh).map_err(|e| Error::io(mtl_path, e))?;
-        mtl.commit()?;
+        write_file(mtl_path, |w| write_mtl(w, mesh))?;
     }
     file.commit()
 }

@@ -6,17 +6,15 @@
 //! `list uchar int vertex_indices`. Materials are not stored: PLY has no standard way to.
 
 use super::{check, invalid_mesh, split_vertices};
-use crate::atomic::AtomicFile;
-use crate::error::{Error, Result};
+use crate::atomic::write_file;
+use crate::error::Result;
 use crate::mesh::Mesh;
 use std::io::{self, Write};
 use std::path::Path;
 
 /// Write `mesh` to `path` as binary PLY.
 pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
-    let mut file = AtomicFile::create(path)?;
-    write_ply(file.writer(), mesh).map_err(|e| Error::io(path, e))?;
-    file.commit()
+    write_file(path, |w| write_ply(w, mesh))
 }
 
 /// Write the PLY bytes of `mesh`.
