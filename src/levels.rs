@@ -28,10 +28,11 @@ pub struct LevelMeshes {
 }
 
 /// Build every level mesh of `h` from `mesh`, each aiming at `ratio` of the faces of the level
-/// below. `on_level` is called after each level with its index, for progress reports.
-pub fn build(mesh: &Mesh, h: &Hierarchy, ratio: f32, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
+/// below. `mesh` becomes level 0 (taken, not copied: it is the largest of them). `on_level` is
+/// called after each level with its index, for progress reports.
+pub fn build(mesh: Mesh, h: &Hierarchy, ratio: f32, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
     let first = LevelMesh {
-        mesh: mesh.clone(),
+        mesh,
         face_group: h.levels[0].face_group.clone(),
         group_error: vec![0.0; h.levels[0].groups.len()],
     };

@@ -439,7 +439,7 @@ fn groups(a: GroupsArgs) -> Result<()> {
     rows.extend(h.levels.iter().enumerate().map(|(i, l)| level_summary(&i.to_string(), l)));
     let level_meshes = a.levels.then(|| {
         let start = Instant::now();
-        let lv = strata::levels::build(m, &h, a.level_ratio, &mut |_| {});
+        let lv = strata::levels::build(m.clone(), &h, a.level_ratio, &mut |_| {});
         (lv, start.elapsed().as_secs_f64() * 1e3)
     });
     if let Some((lv, _)) = &level_meshes {

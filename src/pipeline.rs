@@ -79,10 +79,11 @@ pub fn convert(
     progress.stage("group", 0);
     let adjacency = Adjacency::build(mesh);
     let h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
+    drop(adjacency);
     lap(&mut times.group_ms);
 
     progress.stage("simplify", h.levels.len() as u64);
-    let lv = levels::build(mesh, &h, opts.level_ratio, &mut |_| progress.step());
+    let lv = levels::build(imported.mesh, &h, opts.level_ratio, &mut |_| progress.step());
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);

@@ -10,7 +10,7 @@ fn check(name: &str, mesh: &Mesh) {
     let adj = Adjacency::build(mesh);
     let params = HierarchyParams { cluster_faces: 16, leaf_faces: 96, growth: 3, top_groups: 2, ..HierarchyParams::default() };
     let h = build(mesh, &adj, &params);
-    let lv = levels::build(mesh, &h, 0.5, &mut |_| {});
+    let lv = levels::build(mesh.clone(), &h, 0.5, &mut |_| {});
     assert_eq!(lv.levels.len(), h.levels.len(), "{name}: one mesh per level");
     let input_nonmanifold = adj.nonmanifold_edges.len();
     for (l, level) in lv.levels.iter().enumerate() {
