@@ -177,6 +177,29 @@ impl Hierarchy {
             &self.levels[l - 1]
         }
     }
+
+    /// Add a level above the top with the top's partition again, each top group the one child of
+    /// its copy: level meshes can then coarsen further than the grouping alone allows, so the level
+    /// a viewer shows first stays small.
+    pub fn repeat_top(&mut self) {
+        let Some(top) = self.levels.last_mut() else { return };
+        let n = top.groups.len() as u32;
+        top.parent = (0..n).collect();
+        let mut level = top.clone();
+        level.children = Lists { offsets: (0..=n).collect(), items: (0..n).collect() };
+        level.parent = vec![NO_PARENT; n as usize];
+        self.levels.push(level);
+    }
+
+    /// Remove the top level (never the last one); its children become the top.
+    pub fn pop_top(&mut self) {
+        if self.levels.len() > 1 {
+            self.levels.pop();
+            if let Some(top) = self.levels.last_mut() {
+                top.parent = vec![NO_PARENT; top.groups.len()];
+            }
+        }
+    }
 }
 
 /// Build the hierarchy of `mesh` (whose edge adjacency is `adj`).

@@ -27,10 +27,32 @@ pub struct LevelMeshes {
     pub levels: Vec<LevelMesh>,
 }
 
-/// Build every level mesh of `h` from `mesh`, each aiming at `ratio` of the faces of the level
-/// below. `mesh` becomes level 0 (taken, not copied: it is the largest of them). `on_level` is
-/// called after each level with its index, for progress reports.
-pub fn build(mesh: Mesh, h: &Hierarchy, ratio: f32, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
+/// How the level meshes are made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelParams {
+    /// Target ratio of faces between a level mesh and the one below.
+    pub ratio: f32,
+    /// The top level mesh should have at most this many faces: a viewer shows it at once. While it
+    /// has more, levels with the top's partition again are added (see [`Hierarchy::repeat_top`]),
+    /// as long as each gets most of the way to its ratio.
+    pub top_faces: usize,
+}
+
+impl Default for LevelParams {
+    fn default() -> Self {
+        LevelParams { ratio: 0.5, top_faces: 2048 }
+    }
+}
+
+/// At most this many levels are added above the grouping's top.
+const MAX_ADDED: usize = 32;
+
+/// Build every level mesh of `h` from `mesh`, each aiming at `p.ratio` of the faces of the level
+/// below, and add levels on top of `h` while the top mesh has more than `p.top_faces` faces.
+/// `mesh` becomes level 0 (taken, not copied: it is the largest of them). `on_level` is called
+/// after each level with its index, for progress reports.
+pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
+    let ratio = p.ratio.clamp(0.0, 1.0);
     let first = LevelMesh {
         mesh,
         face_group: h.levels[0].face_group.clone(),
@@ -39,21 +61,55 @@ pub fn build(mesh: Mesh, h: &Hierarchy, ratio: f32, on_level: &mut dyn FnMut(usi
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {
-        let below = &levels[l - 1];
-        let parent = &h.levels[l - 1].parent;
-        let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
-        let target = ((below.mesh.face_count() as f64) * ratio.clamp(0.0, 1.0) as f64).round() as usize;
-        let opts = SimplifyOptions { target_faces: target, ..SimplifyOptions::default() };
-        let s = simplify(&below.mesh, Some(&labels), &opts);
-        let groups = &h.levels[l];
-        let group_error = (0..groups.groups.len())
-            .map(|g| {
-                let children = groups.children.get(g).iter().map(|&c| below.group_error[c as usize]).fold(0.0, f32::max);
-                children + s.group_error.get(g).copied().unwrap_or(0.0)
-            })
-            .collect();
-        levels.push(LevelMesh { mesh: s.mesh, face_group: s.face_groups, group_error });
+        levels.push(coarsen(&levels[l - 1], h, l, ratio));
         on_level(l);
     }
+    // An added level must get most of the way to its target, or it costs more (a node per top
+    // group, in the skeleton every reader loads) than it saves.
+    let worthwhile = ratio as f64 + (1.0 - ratio as f64) / 4.0;
+    for _ in 0..MAX_ADDED {
+        let below = levels.last().map_or(0, |t| t.mesh.face_count());
+        if below <= p.top_faces {
+            break;
+        }
+        h.repeat_top();
+        let next = coarsen(&levels[levels.len() - 1], h, levels.len(), ratio);
+        if next.mesh.face_count() as f64 > below as f64 * worthwhile {
+            h.pop_top();
+            break;
+        }
+        levels.push(next);
+        on_level(levels.len() - 1);
+    }
     LevelMeshes { levels }
+}
+
+/// How many levels [`build`] is expected to make for `faces` input faces and a grouping of
+/// `grouped` levels (exact unless the simplifier stops short of its targets).
+pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
+    let ratio = p.ratio.clamp(0.0, 1.0) as f64;
+    let mut top = faces as f64 * ratio.powi(grouped.saturating_sub(1) as i32);
+    let mut n = grouped;
+    while top > p.top_faces as f64 && n < grouped + MAX_ADDED && ratio < 1.0 {
+        top *= ratio;
+        n += 1;
+    }
+    n
+}
+
+/// Level `l` made from the level mesh `below` of level `l − 1`.
+fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32) -> LevelMesh {
+    let parent = &h.levels[l - 1].parent;
+    let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
+    let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
+    let opts = SimplifyOptions { target_faces: target, ..SimplifyOptions::default() };
+    let s = simplify(&below.mesh, Some(&labels), &opts);
+    let groups = &h.levels[l];
+    let group_error = (0..groups.groups.len())
+        .map(|g| {
+            let children = groups.children.get(g).iter().map(|&c| below.group_error[c as usize]).fold(0.0, f32::max);
+            children + s.group_error.get(g).copied().unwrap_or(0.0)
+        })
+        .collect();
+    LevelMesh { mesh: s.mesh, face_group: s.face_groups, group_error }
 }

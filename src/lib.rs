@@ -19,6 +19,7 @@ pub mod hierarchy;
 pub mod import;
 pub mod levels;
 pub mod mesh;
+pub mod normals;
 pub mod pipeline;
 pub mod render;
 pub mod simplify;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::hierarchy::{self, HierarchyParams, Level};
 use strata::{culling, format, import, mesh, Format};
+use strata::pipeline::Normals;
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -93,6 +94,31 @@ enum StreamPriority {
     Breadth,
 }
 
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+enum NormalsArg {
+    Auto,
+    Input,
+    None,
+}
+
+/// How level meshes are made.
+#[derive(Args)]
+struct LevelArgs {
+    /// Target ratio of faces between a level mesh and the one below.
+    #[arg(long, default_value_t = 0.5)]
+    level_ratio: f32,
+    /// Faces the top level (shown first) should not exceed: levels with the top's groups are added
+    /// above the grouping while each still coarsens.
+    #[arg(long, default_value_t = 2048)]
+    top_faces: usize,
+}
+
+impl LevelArgs {
+    fn params(&self) -> strata::levels::LevelParams {
+        strata::levels::LevelParams { ratio: self.level_ratio, top_faces: self.top_faces }
+    }
+}
+
 #[derive(Args)]
 struct ConvertArgs {
     #[command(flatten)]
@@ -101,9 +127,15 @@ struct ConvertArgs {
     output: PathBuf,
     #[command(flatten)]
     grouping: GroupingArgs,
-    /// Target ratio of faces between a level mesh and the one below.
-    #[arg(long, default_value_t = 0.5)]
-    level_ratio: f32,
+    #[command(flatten)]
+    levels: LevelArgs,
+    /// Normals to store: the input's, else smooth ones computed with --crease-angle (auto); only
+    /// the input's (input); none, for the smallest file drawn flat-shaded (none).
+    #[arg(long, value_enum, default_value_t = NormalsArg::Auto)]
+    normals: NormalsArg,
+    /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
+    #[arg(long, default_value_t = 60.0)]
+    crease_angle: f32,
     /// No progress bars.
     #[arg(long, short)]
     quiet: bool,
@@ -291,9 +323,8 @@ struct GroupsArgs {
     /// Also build the level meshes and report each one's faces, error and sampled distance to the input.
     #[arg(long)]
     levels: bool,
-    /// Target ratio of faces between a level mesh and the one below (with --levels).
-    #[arg(long, default_value_t = 0.5)]
-    level_ratio: f32,
+    #[command(flatten)]
+    level_params: LevelArgs,
     /// Write the mesh colored by its groups of level L (-1 for the culling clusters) to a PLY.
     #[arg(long, num_args = 2, value_names = ["L", "OUT"], allow_hyphen_values = true)]
     write_groups: Option<Vec<String>>,
@@ -421,9 +452,14 @@ fn groups(a: GroupsArgs) -> Result<()> {
     let m = &imp.mesh;
     let start = Instant::now();
     let adj = mesh::Adjacency::build(m);
-    let h = hierarchy::build(m, &adj, &a.grouping.params());
+    let mut h = hierarchy::build(m, &adj, &a.grouping.params());
     let hierarchy_ms = start.elapsed().as_secs_f64() * 1e3;
     let stats = culling::measure(&h, m, a.views.max(1));
+    let level_meshes = a.levels.then(|| {
+        let start = Instant::now();
+        let lv = strata::levels::build(m.clone(), &mut h, &a.level_params.params(), &mut |_| {});
+        (lv, start.elapsed().as_secs_f64() * 1e3)
+    });
     if let Some(w) = &a.write_groups {
         let level: i64 = w[0].parse().with_context(|| format!("--write-groups: level {:?} is not a number", w[0]))?;
         let partition = match level {
@@ -437,11 +473,6 @@ fn groups(a: GroupsArgs) -> Result<()> {
     }
     let mut rows = vec![level_summary("clusters", &h.clusters)];
     rows.extend(h.levels.iter().enumerate().map(|(i, l)| level_summary(&i.to_string(), l)));
-    let level_meshes = a.levels.then(|| {
-        let start = Instant::now();
-        let lv = strata::levels::build(m.clone(), &h, a.level_ratio, &mut |_| {});
-        (lv, start.elapsed().as_secs_f64() * 1e3)
-    });
     if let Some((lv, _)) = &level_meshes {
         for (row, level) in rows.iter_mut().skip(1).zip(&lv.levels) {
             let d = strata::distance::surface_distance(m, &level.mesh, 100_000, 1);
@@ -828,7 +859,14 @@ impl Drop for Bars {
 }
 
 fn convert(a: ConvertArgs) -> Result<()> {
-    let opts = strata::pipeline::ConvertOptions { hierarchy: a.grouping.params(), level_ratio: a.level_ratio };
+    let opts = strata::pipeline::ConvertOptions { hierarchy: a.grouping.params(),
+        levels: a.levels.params(),
+        normals: match a.normals {
+            NormalsArg::Auto => Normals::Auto { crease_angle: a.crease_angle.to_radians() },
+            NormalsArg::Input => Normals::Input,
+            NormalsArg::None => Normals::None,
+        },
+    };
     let mut bars = Bars::new(a.quiet || a.json);
     let c = strata::pipeline::convert(&a.input.mesh, a.input.format, &a.output, &opts, &mut bars)?;
     drop(bars);

@@ -1,11 +1,13 @@
-//! The conversion, top-down in one place: import → group → simplify per level → write.
+//! The conversion, top-down in one place: import → normals (if missing) → group → simplify per
+//! level → write.
 
 use crate::error::Result;
 use crate::format::{self, WriteOptions, WriteSummary};
 use crate::hierarchy::{self, HierarchyParams};
 use crate::import::{import, Format};
-use crate::levels;
+use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
+use crate::normals::smooth_normals;
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -14,14 +16,30 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConvertOptions {
     pub hierarchy: HierarchyParams,
-    /// Target ratio of faces between a level mesh and the one below.
-    pub level_ratio: f32,
+    pub levels: LevelParams,
+    pub normals: Normals,
 }
 
 impl Default for ConvertOptions {
     fn default() -> Self {
-        ConvertOptions { hierarchy: HierarchyParams::default(), level_ratio: 0.5 }
+        ConvertOptions {
+            hierarchy: HierarchyParams::default(),
+            levels: LevelParams::default(),
+            normals: Normals::Auto { crease_angle: 60f32.to_radians() },
+        }
     }
+}
+
+/// Which normals the chunk file stores.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Normals {
+    /// The input's normals; when it has none, smooth normals split at edges sharper than
+    /// `crease_angle` radians ([`crate::normals::smooth_normals`]).
+    Auto { crease_angle: f32 },
+    /// The input's normals, if any.
+    Input,
+    /// None: the smallest file, drawn flat-shaded.
+    None,
 }
 
 /// Progress of a long conversion, reported stage by stage.
@@ -72,18 +90,25 @@ pub fn convert(
     };
 
     progress.stage("import", 0);
-    let imported = import(input, format)?;
+    let mut imported = import(input, format)?;
+    match opts.normals {
+        Normals::Auto { crease_angle } if imported.mesh.normals.is_empty() => {
+            imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
+        }
+        Normals::None => imported.mesh.normals.clear(),
+        _ => {}
+    }
     let mesh = &imported.mesh;
     lap(&mut times.import_ms);
 
     progress.stage("group", 0);
     let adjacency = Adjacency::build(mesh);
-    let h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
+    let mut h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
     drop(adjacency);
     lap(&mut times.group_ms);
 
-    progress.stage("simplify", h.levels.len() as u64);
-    let lv = levels::build(imported.mesh, &h, opts.level_ratio, &mut |_| progress.step());
+    progress.stage("simplify", levels::expected_levels(mesh.face_count(), h.levels.len(), &opts.levels) as u64);
+    let lv = levels::build(imported.mesh, &mut h, &opts.levels, &mut |_| progress.step());
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);
@@ -91,7 +116,7 @@ pub fn convert(
     let write_opts = WriteOptions {
         metres_per_unit: if is_gltf { 1.0 } else { 0.0 },
         params: opts.hierarchy,
-        level_ratio: opts.level_ratio,
+        level_ratio: opts.levels.ratio,
         ..WriteOptions::default()
     };
     let summary = format::write(output, &h, &lv, &write_opts)?;

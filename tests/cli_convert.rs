@@ -92,3 +92,43 @@ fn convert_to_an_unwritable_place_fails_cleanly() {
     assert!(stderr.contains("/nonexistent/dir/out.strata"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+#[test]
+fn a_mesh_without_normals_gets_smooth_ones_with_sharp_creases_unless_told_otherwise() {
+    let dir = temp_dir("normals");
+    let mut part = strata::fixtures::cad_part();
+    part.normals.clear();
+    let input = dir.join("part.ply").display().to_string();
+    strata::export::write(Path::new(&input), &part).unwrap();
+    let (auto, none) = (dir.join("auto.strata"), dir.join("none.strata"));
+    for (out, extra) in [(&auto, None), (&none, Some("none"))] {
+        let mut args = vec!["convert", &input, out.to_str().unwrap(), "--quiet"];
+        if let Some(mode) = extra {
+            args.extend(["--normals", mode]);
+        }
+        let o = strata(&args);
+        assert!(o.status.success(), "convert failed: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let mut rd = strata::format::Reader::open_path(&auto).unwrap();
+    assert!(rd.header().attributes.normals);
+    let (mut smooth, mut sharp) = (0, 0);
+    for i in rd.level_nodes(0) {
+        let g = rd.read_node(i).unwrap();
+        for t in g.indices.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|v| g.positions[v as usize]);
+            let face = (b - a).cross(c - a).normalize();
+            for &v in t {
+                let n = g.normals[v as usize];
+                assert!(n.dot(face) > 0.0, "a computed normal points away from its face");
+                if n.dot(face) > 0.999 {
+                    sharp += 1;
+                } else {
+                    smooth += 1;
+                }
+            }
+        }
+    }
+    assert!(sharp > 0 && smooth > 0, "the part has both flat faces along creases ({sharp}) and curved parts ({smooth})");
+    assert!(!strata::format::Reader::open_path(&none).unwrap().header().attributes.normals);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,17 +1,30 @@
 //! Invariants of the level meshes: every group of level ℓ is a non-empty, edge-connected patch of
-//! Mℓ, no level adds non-manifold edges, faces roughly halve, and node errors grow up the tree.
+//! Mℓ, no level adds non-manifold edges, faces roughly halve, node errors grow up the tree, and
+//! levels added above the grouping repeat its top partition only while the top is too large.
 
 use strata::fixtures;
 use strata::hierarchy::{build, HierarchyParams};
-use strata::levels;
+use strata::levels::{self, LevelParams};
 use strata::mesh::{Adjacency, Mesh, NO_FACE};
 
 fn check(name: &str, mesh: &Mesh) {
     let adj = Adjacency::build(mesh);
     let params = HierarchyParams { cluster_faces: 16, leaf_faces: 96, growth: 3, top_groups: 2, ..HierarchyParams::default() };
-    let h = build(mesh, &adj, &params);
-    let lv = levels::build(mesh.clone(), &h, 0.5, &mut |_| {});
+    let mut h = build(mesh, &adj, &params);
+    let grouped = h.levels.len();
+    let top_faces = 60;
+    let lv = levels::build(mesh.clone(), &mut h, &LevelParams { ratio: 0.5, top_faces }, &mut |_| {});
     assert_eq!(lv.levels.len(), h.levels.len(), "{name}: one mesh per level");
+    for l in grouped..h.levels.len() {
+        assert!(lv.levels[l - 1].mesh.face_count() > top_faces, "{name} level {l} added below a small enough top");
+        let (top, below) = (&h.levels[l], &h.levels[l - 1]);
+        assert_eq!(top.groups.len(), below.groups.len(), "{name} level {l} repeats the partition");
+        assert!((0..top.groups.len()).all(|g| top.children.get(g) == [g as u32] && below.parent[g] == g as u32));
+    }
+    if name == "noisy_sphere" {
+        assert!(h.levels.len() > grouped, "{name}: a 10k-face mesh gets levels above its grouping");
+    }
+    assert!(h.levels.last().is_some_and(|t| t.parent.iter().all(|&p| p == strata::hierarchy::NO_PARENT)));
     let input_nonmanifold = adj.nonmanifold_edges.len();
     for (l, level) in lv.levels.iter().enumerate() {
         let m = &level.mesh;
