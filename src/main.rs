@@ -63,8 +63,9 @@ struct StreamArgs {
     /// Frame time to keep, in ms, by steering the pixel threshold (refine + draw of the last frame).
     #[arg(long, value_name = "T")]
     target_ms: Option<f32>,
-    /// Refinement order under the budgets: silhouette (the paper's f(g)) or plain breadth-first.
-    #[arg(long, value_enum, default_value_t = StreamPriority::Silhouette)]
+    /// Refinement order under the budgets: largest projected error first, silhouette (the paper's
+    /// f(g)) or plain breadth-first.
+    #[arg(long, value_enum, default_value_t = StreamPriority::Error)]
     priority: StreamPriority,
     /// With --target-ms, only react to measured frame times: no predictive step for newly visible nodes.
     #[arg(long)]
@@ -90,6 +91,7 @@ struct StreamArgs {
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum StreamPriority {
+    Error,
     Silhouette,
     Breadth,
 }
@@ -634,6 +636,7 @@ fn stream(a: StreamArgs) -> Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
     let priority = match a.priority {
+        StreamPriority::Error => Priority::Error,
         StreamPriority::Silhouette => Priority::Silhouette,
         StreamPriority::Breadth => Priority::Breadth,
     };

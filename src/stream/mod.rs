@@ -1,7 +1,8 @@
 //! Streaming for display (METHOD.md §6): per frame, the front of the hierarchy a camera needs, its
 //! delta from the last frame, and the geometry of its nodes, read lazily from a chunk file.
 //!
-//! - [`refine`]: front selection, breadth-first with the neighbour rule and the paper's priority;
+//! - [`refine`]: front selection, breadth-first with the neighbour rule, largest projected error or
+//!   the paper's priority first;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
 //! - [`retention`]: shape retention of a front's image against the full-detail one;
@@ -47,7 +48,7 @@ pub struct Budgets {
 
 impl Default for Budgets {
     fn default() -> Self {
-        Budgets { faces: None, bytes: None, pixel_error: 1.0, target_ms: None, priority: Priority::Silhouette, predict: true }
+        Budgets { faces: None, bytes: None, pixel_error: 1.0, target_ms: None, priority: Priority::Error, predict: true }
     }
 }
 

@@ -21,8 +21,12 @@ pub struct Limits {
 /// The order in which a level's refinable nodes claim the budget.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Priority {
-    /// The paper's f(g), highest first: silhouette and wide-cone groups first.
+    /// Largest projected geometric error (pixels) first: the budget goes where the image is
+    /// furthest from full detail. Measured on the bunny, it keeps more of the full-detail image
+    /// under a face budget than either order below.
     #[default]
+    Error,
+    /// The paper's f(g), highest first: silhouette and wide-cone groups first.
     Silhouette,
     /// Plain breadth-first order (node id within the level), for comparison.
     Breadth,
@@ -99,13 +103,14 @@ impl Refiner {
         for _ in (1..=top).rev() {
             let mut candidates: Vec<(f32, u32)> = level_shown
                 .iter()
-                .filter(|&&i| {
+                .filter_map(|&i| {
                     let n = &nodes[i as usize];
-                    n.child_count > 0 && camera.projected_error(n.error, n.center, n.radius) >= limits.pixel_error
-                })
-                .map(|&i| match limits.priority {
-                    Priority::Silhouette => (priority(&nodes[i as usize], camera), i),
-                    Priority::Breadth => (0.0, i),
+                    let pixels = camera.projected_error(n.error, n.center, n.radius);
+                    (n.child_count > 0 && pixels >= limits.pixel_error).then(|| match limits.priority {
+                        Priority::Error => (pixels, i),
+                        Priority::Silhouette => (priority(n, camera), i),
+                        Priority::Breadth => (0.0, i),
+                    })
                 })
                 .collect();
             candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));

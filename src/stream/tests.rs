@@ -227,7 +227,7 @@ fn frame_time_target_steers_the_threshold() {
 }
 
 #[test]
-fn breadth_first_order_changes_fronts_under_a_face_budget_only() {
+fn refinement_order_changes_fronts_under_a_face_budget_only() {
     let frames = 16;
     let fronts = |budgets: Budgets| -> Vec<Vec<u32>> {
         let r = open();
@@ -243,17 +243,21 @@ fn breadth_first_order_changes_fronts_under_a_face_budget_only() {
             .collect()
     };
     let free = Budgets { pixel_error: 0.5, ..Budgets::default() };
-    assert_eq!(fronts(free), fronts(Budgets { priority: Priority::Breadth, ..free }));
+    for other in [Priority::Silhouette, Priority::Breadth] {
+        assert_eq!(fronts(free), fronts(Budgets { priority: other, ..free }));
+    }
     let top_faces: u64 = {
         let r = open();
         let top = r.levels().len() as u32 - 1;
         r.level_nodes(top).map(|i| r.nodes()[i as usize].faces as u64).sum()
     };
-    let differ = (2..8).any(|k| {
-        let tight = Budgets { faces: Some(top_faces * k / 2), pixel_error: 0.0, ..Budgets::default() };
-        fronts(tight) != fronts(Budgets { priority: Priority::Breadth, ..tight })
-    });
-    assert!(differ, "some face budget makes the two orders choose different fronts");
+    for other in [Priority::Silhouette, Priority::Breadth] {
+        let differ = (2..8).any(|k| {
+            let tight = Budgets { faces: Some(top_faces * k / 2), pixel_error: 0.0, ..Budgets::default() };
+            fronts(tight) != fronts(Budgets { priority: other, ..tight })
+        });
+        assert!(differ, "some face budget makes {other:?} choose a different front than {:?}", Priority::default());
+    }
 }
 
 #[test]
