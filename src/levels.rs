@@ -47,6 +47,10 @@ impl Default for LevelParams {
 /// At most this many levels are added above the grouping's top.
 const MAX_ADDED: usize = 32;
 
+/// Fewest faces per node, on average, of an added level: below this the per-node overhead is more
+/// than a sixth of the level's bytes.
+const MIN_ADDED_NODE_FACES: usize = 32;
+
 /// Build every level mesh of `h` from `mesh`, each aiming at `p.ratio` of the faces of the level
 /// below, and add levels on top of `h` while the top mesh has more than `p.top_faces` faces.
 /// `mesh` becomes level 0 (taken, not copied: it is the largest of them). `on_level` is called
@@ -64,8 +68,9 @@ pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn 
         levels.push(coarsen(&levels[l - 1], h, l, ratio));
         on_level(l);
     }
-    // An added level must get most of the way to its target, or it costs more (a node per top
-    // group, in the skeleton every reader loads) than it saves.
+    // An added level costs a node per top group in the skeleton every reader loads (a record,
+    // neighbours and a chunk frame: about as many bytes as 5 faces of geometry). It must get most
+    // of the way to its target, and keep nodes of MIN_ADDED_NODE_FACES faces on average.
     let worthwhile = ratio as f64 + (1.0 - ratio as f64) / 4.0;
     for _ in 0..MAX_ADDED {
         let below = levels.last().map_or(0, |t| t.mesh.face_count());
@@ -74,7 +79,8 @@ pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn 
         }
         h.repeat_top();
         let next = coarsen(&levels[levels.len() - 1], h, levels.len(), ratio);
-        if next.mesh.face_count() as f64 > below as f64 * worthwhile {
+        let nodes = h.levels[levels.len()].groups.len().max(1);
+        if next.mesh.face_count() as f64 > below as f64 * worthwhile || next.mesh.face_count() < MIN_ADDED_NODE_FACES * nodes {
             h.pop_top();
             break;
         }
@@ -85,7 +91,8 @@ pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn 
 }
 
 /// How many levels [`build`] is expected to make for `faces` input faces and a grouping of
-/// `grouped` levels (exact unless the simplifier stops short of its targets).
+/// `grouped` levels: exact unless the simplifier stops short of its targets or the added levels'
+/// nodes would be too small, when fewer are made.
 pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
     let ratio = p.ratio.clamp(0.0, 1.0) as f64;
     let mut top = faces as f64 * ratio.powi(grouped.saturating_sub(1) as i32);

@@ -48,6 +48,10 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 /// How far to simplify and which collapses to allow.
+///
+/// The default bounds on face turn and shape were chosen by measurement (`cargo bench --bench
+/// simplify`): 60° and 0.05 left the CT head at 3% of its faces with 31% more mean distance to the
+/// input than 75° and 0.02, and more than meshoptimizer's, while the bunny hardly changed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimplifyOptions {
     /// Stop once at most this many faces remain, as far as the rules allow. Default 0: only
@@ -57,11 +61,11 @@ pub struct SimplifyOptions {
     pub max_error: Option<f32>,
     /// Radians. A collapse that leaves any face normal turned by more than this from that face's
     /// normal in the input is rejected. Measured from the input, turns cannot add up over many
-    /// collapses into folds. Default 60°: freedom enough to reach 1% on scanned meshes.
+    /// collapses into folds. Default 75°.
     pub max_normal_turn: f32,
     /// Reject a collapse that leaves a face with quality below this and worse than before. Quality
     /// is 4√3·area / (sum of squared edge lengths): 1 for an equilateral triangle, 0 for a
-    /// degenerate one. Default 0.05 (a triangle about 30× longer than wide).
+    /// degenerate one. Default 0.02 (a triangle about 90× longer than wide).
     pub min_face_quality: f32,
     /// Weight of the border planes (perpendicular to the face through each open-border edge,
     /// weighted by the squared edge length) against the area-weighted face planes. Default 10:
@@ -76,8 +80,8 @@ impl Default for SimplifyOptions {
         SimplifyOptions {
             target_faces: 0,
             max_error: None,
-            max_normal_turn: 60f32.to_radians(),
-            min_face_quality: 0.05,
+            max_normal_turn: 75f32.to_radians(),
+            min_face_quality: 0.02,
             border_weight: 10.0,
             seam_weight: 1.0,
         }
