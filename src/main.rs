@@ -163,6 +163,10 @@ struct SimplifyArgs {
     /// Output mesh (.obj, .ply or .glb).
     #[arg(short, long)]
     output: PathBuf,
+    /// When the target cannot be reached otherwise, cut handles and drop closed tetrahedra (the
+    /// mesh stays manifold; its genus and components change).
+    #[arg(long)]
+    topology: bool,
     /// Also measure the sampled surface distance between input and output.
     #[arg(long)]
     measure: bool,
@@ -915,6 +919,7 @@ fn simplify(a: SimplifyArgs) -> Result<()> {
         anyhow::ensure!(e >= 0.0, "--error must not be negative, not {e}");
         opts.max_error = Some(e * diagonal);
     }
+    opts.topology = a.topology;
     let start = Instant::now();
     let out = strata::simplify::simplify(m, None, &opts);
     let simplify_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -924,6 +929,7 @@ fn simplify(a: SimplifyArgs) -> Result<()> {
         let mut v = serde_json::json!({
             "faces_in": m.face_count(),
             "faces_out": out.mesh.face_count(),
+            "target_faces": opts.target_faces,
             "simplify_ms": simplify_ms,
             "error_estimate": out.error,
             "error_estimate_over_diagonal": out.error / diagonal.max(f32::MIN_POSITIVE),
@@ -939,6 +945,10 @@ fn simplify(a: SimplifyArgs) -> Result<()> {
     }
     println!("{} -> {} faces in {simplify_ms:.1} ms, wrote {}", m.face_count(), out.mesh.face_count(), a.output.display());
     println!("error estimate {:.6} ({:.6} of the diagonal)", out.error, out.error / diagonal.max(f32::MIN_POSITIVE));
+    if out.mesh.face_count() > opts.target_faces && opts.max_error.is_none() {
+        let hint = if a.topology { "" } else { "; --topology lets handles and small components go" };
+        println!("stopped above the target of {} faces: no legal collapse is left (corners, handles, small components){hint}", opts.target_faces);
+    }
     if let Some(d) = distance {
         println!(
             "sampled distance: max {:.6} ({:.6} of the diagonal), mean {:.6} ({:.6}), rms {:.6}",

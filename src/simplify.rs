@@ -32,6 +32,12 @@
 //! face is duplicated), turns a face normal by more than `max_normal_turn` from its input normal, or
 //! creates a degenerate or sliver face.
 //!
+//! Topology (opt-in, without groups): a noisy scan has many tiny handles and components, each of
+//! which keeps a dozen faces that no collapse may remove. When the target is not reached, the
+//! simplification runs again, and where a collapse is blocked by the link condition alone the
+//! mesh is cut along the triangle of edges that blocks it (a handle or neck) and both sides are
+//! capped, or a closed tetrahedron is dropped: genus and components change, manifoldness not.
+//!
 //! Groups: group borders are feature lines, so a group's outline moves only along itself and the
 //! removed vertex of any collapse touches at most two groups (the method's condition 2). The
 //! method's condition 1 is applied in the form that is sufficient for connectivity: when both
@@ -73,6 +79,13 @@ pub struct SimplifyOptions {
     pub border_weight: f32,
     /// The same for seam edges (attribute, material and group borders). Default 1.
     pub seam_weight: f32,
+    /// When the target cannot be reached otherwise, simplify again allowing changes of topology
+    /// that keep the mesh manifold wherever a collapse is blocked by topology alone: a handle or
+    /// neck whose cross-section is a triangle of edges that is not a face is cut there and both
+    /// sides capped, and a closed tetrahedron is dropped. Without it a mesh of many handles and
+    /// components (a noisy scan) stops at a few faces per handle and component. Ignored with
+    /// groups (a cap would join or split groups). Default false.
+    pub topology: bool,
 }
 
 impl Default for SimplifyOptions {
@@ -84,6 +97,7 @@ impl Default for SimplifyOptions {
             min_face_quality: 0.02,
             border_weight: 10.0,
             seam_weight: 1.0,
+            topology: false,
         }
     }
 }
@@ -94,7 +108,8 @@ pub struct Simplified {
     /// Compacted (no unused vertices, which keep their input order), faces in input order,
     /// face normals and areas recomputed.
     pub mesh: Mesh,
-    /// Input face of each output face (output faces are the surviving input faces, in order).
+    /// Input face of each output face: output faces are the surviving input faces, in order,
+    /// then the caps of topology changes, each with the input face it took its attributes from.
     pub source_faces: Vec<u32>,
     /// Group label of each output face, copied from the input labels; empty without groups.
     pub face_groups: Vec<u32>,
@@ -124,8 +139,13 @@ pub fn simplify(mesh: &Mesh, groups: Option<&[u32]>, opts: &SimplifyOptions) -> 
     }
     let mut s = State::new(mesh, groups);
     if mesh.triangles.len() > opts.target_faces {
-        s.init(opts);
+        s.init(opts, false);
         s.run(opts);
+        if s.faces_left > opts.target_faces && opts.topology && groups.is_none() {
+            s = State::new(mesh, groups);
+            s.init(opts, true);
+            s.run(opts);
+        }
     }
     s.finish(mesh, groups.is_some())
 }
@@ -330,6 +350,13 @@ struct State {
     scratch_ends: Vec<(u32, u32, u32)>,
     scratch_r: Vec<u32>,
     scratch_k: Vec<u32>,
+    /// Topology changes are made (see [`SimplifyOptions::topology`]); never with groups.
+    topology: bool,
+    grouped: bool,
+    /// Faces of the input; faces past them are caps.
+    input_faces: usize,
+    /// Per cap, the input face whose attributes it took.
+    cap_source: Vec<u32>,
 }
 
 impl State {
@@ -382,6 +409,10 @@ impl State {
             scratch_ends: Vec::new(),
             scratch_r: Vec::new(),
             scratch_k: Vec::new(),
+            topology: false,
+            grouped: groups.is_some(),
+            input_faces: nf,
+            cap_source: Vec::new(),
         }
     }
 
@@ -415,8 +446,10 @@ impl State {
 
     /// Wedge ids, face planes, border and seam planes, locks and kinds. Locks unused vertices,
     /// vertices on non-manifold edges and bow-tie vertices (faces around them not one fan).
-    fn init(&mut self, opts: &SimplifyOptions) {
+    /// `topology`: make topology changes where they unblock a collapse.
+    fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
+        self.topology = topology && !self.grouped;
         self.min_quality = f64::from(opts.min_face_quality);
         let mut reps: Vec<usize> = Vec::new();
         for v in 0..self.verts.len() as u32 {
@@ -766,6 +799,7 @@ impl State {
         let mut touched = vec![0u32; self.verts.len()];
         let (mut survivors, mut retry, mut blocked) = (Vec::new(), Vec::new(), Vec::new());
         let mut plan = Plan::EMPTY;
+        let mut unblocked = Vec::new();
         let mut revived = false;
         self.entries.clear();
         for v in 0..self.verts.len() as u32 {
@@ -833,6 +867,19 @@ impl State {
                             for y in self.tri(f) {
                                 touched[y as usize] = pass;
                             }
+                        }
+                    }
+                    None if self.topology && plan.c[0].error_sq <= limit && self.unblock(u, v, &plan.e, &mut unblocked) => {
+                        changed.resize(self.verts.len(), false);
+                        touched.resize(self.verts.len(), 0);
+                        for &w in &unblocked {
+                            if !std::mem::replace(&mut changed[w as usize], true) {
+                                survivors.push(w);
+                            }
+                            touched[w as usize] = pass;
+                        }
+                        if !self.verts[u as usize].locked {
+                            queue.push(Reverse(entry(f64::from(entry_key(e)), [u, v, self.versions(u, v)])));
                         }
                     }
                     None => retry.push(Reverse(e)),
@@ -948,6 +995,170 @@ impl State {
         }
         let n_input = self.faces[f as usize].normal.as_dvec3();
         n_input == DVec3::ZERO || n_input.dot(n_new) >= self.cos_turn * len_new
+    }
+
+    /// Make a topology change that unblocks the collapse of edge (u, v), if there is one: drop
+    /// the closed tetrahedron the edge is on, or cut the mesh along a triangle of edges through
+    /// it that is not a face. `out` gets the vertices whose edges must be ranked again.
+    fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, out: &mut Vec<u32>) -> bool {
+        out.clear();
+        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 {
+            return false;
+        }
+        if self.drop_tetrahedron(u, v, e) {
+            return true;
+        }
+        // A third common neighbour y of u and v: (u, v, y) is a cycle of edges but no face.
+        self.stamp += 1;
+        let s = self.stamp;
+        for i in 0..self.verts[u as usize].len as usize {
+            for y in self.tri(self.face_of(u, i)) {
+                self.verts[y as usize].mark = s;
+            }
+        }
+        let third = self.faces_of(v).iter().flat_map(|&f| self.tri(f)).find(|&y| {
+            y != u && y != v && y != e.x[0] && y != e.x[1] && self.verts[y as usize].mark == s
+        });
+        third.is_some_and(|y| self.cut([u, v, y], out))
+    }
+
+    /// Remove a closed tetrahedron, a component that no collapse can shrink, if (u, v) is on one.
+    fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces) -> bool {
+        let corners = [u, v, e.x[0], e.x[1]];
+        if corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked) {
+            return false;
+        }
+        let mut faces: Vec<u32> = corners.iter().flat_map(|&w| self.faces_of(w).iter().copied()).collect();
+        faces.sort_unstable();
+        faces.dedup();
+        let spread_sq = self.spread_sq(&corners);
+        if faces.len() != 4 || faces.iter().any(|&f| self.tri(f).iter().any(|y| !corners.contains(y))) {
+            return false;
+        }
+        self.error_sq = self.error_sq.max(spread_sq);
+        for &w in &corners {
+            let x = &mut self.verts[w as usize];
+            x.len = 0;
+            x.locked = true;
+            self.version[w as usize] += 1;
+        }
+        for &f in &faces {
+            self.tris[f as usize] = [DEAD; 3];
+        }
+        self.faces_left -= 4;
+        true
+    }
+
+    /// The largest squared distance of the vertices `vs` from their centroid: how far a cap over
+    /// them, or their removal, moves the surface.
+    fn spread_sq(&self, vs: &[u32]) -> f64 {
+        let center = vs.iter().map(|&w| self.pos(w)).sum::<DVec3>() / vs.len() as f64;
+        vs.iter().map(|&w| (self.pos(w) - center).length_squared()).fold(0.0, f64::max)
+    }
+
+    /// Cut the mesh along the cycle of edges a → b → c → a, which is no face, and cap both sides:
+    /// each vertex keeps its faces on the left of the cycle and a new copy takes those on the
+    /// right. Only where every fan around the cycle is closed and manifold. A handle through the
+    /// cycle is removed, or the component split in two at a neck; the mesh stays manifold.
+    fn cut(&mut self, cycle: [u32; 3], out: &mut Vec<u32>) -> bool {
+        if cycle.iter().any(|&w| self.verts[w as usize].locked) {
+            return false;
+        }
+        let mut sides = Vec::with_capacity(3);
+        for i in 0..3 {
+            let (v, next, prev) = (cycle[i], cycle[(i + 1) % 3], cycle[(i + 2) % 3]);
+            let (Some(left), Some(right)) = (self.arc(v, next, prev), self.arc(v, prev, next)) else { return false };
+            let mut all: Vec<u32> = left.iter().chain(&right).copied().collect();
+            all.sort_unstable();
+            all.dedup();
+            if all.len() != self.verts[v as usize].len as usize || left.len() + right.len() != all.len() {
+                return false;
+            }
+            sides.push((left, right));
+        }
+        self.error_sq = self.error_sq.max(self.spread_sq(&cycle));
+        let copies: [u32; 3] = std::array::from_fn(|i| self.verts.len() as u32 + i as u32);
+        for (i, &v) in cycle.iter().enumerate() {
+            let x = self.verts[v as usize];
+            self.verts.push(Vertex { len: 0, kind: Kind::Unknown, ..x });
+            self.quadrics.push(self.quadrics[v as usize]);
+            self.err_sq.push(self.err_sq[v as usize]);
+            self.version.push(0);
+            for &f in &sides[i].1 {
+                for w in &mut self.tris[f as usize] {
+                    if *w == v {
+                        *w = copies[i];
+                    }
+                }
+            }
+        }
+        // The left side is closed by the cycle reversed, the right side by the copies in order.
+        let first = self.tris.len() as u32;
+        for (side, order) in [[0, 2, 1], [0, 1, 2]].into_iter().enumerate() {
+            let f = self.tris.len();
+            let cap = order.map(|i| if side == 0 { cycle[i] } else { copies[i] });
+            let p = cap.map(|w| self.pos(w));
+            let normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero().as_vec3();
+            let source = if side == 0 { sides[0].0[0] } else { sides[0].1[0] };
+            self.tris.push(cap);
+            self.faces.push(Face { wedge: [0; 3], group: 0, normal });
+            self.face_materials.push(self.face_materials[source as usize]);
+            self.cap_source.push(if (source as usize) < self.input_faces { source } else { self.cap_source[source as usize - self.input_faces] });
+            // Corner attributes, copied below from the fans' corners.
+            if !self.normals.is_empty() {
+                self.normals.extend([Vec3::ZERO; 3]);
+            }
+            if !self.uvs.is_empty() {
+                self.uvs.extend([Vec2::ZERO; 3]);
+            }
+            if !self.colors.is_empty() {
+                self.colors.extend([[0; 4]; 3]);
+            }
+            for (k, (&i, &w)) in order.iter().zip(&cap).enumerate() {
+                let arc = if side == 0 { &sides[i].0 } else { &sides[i].1 };
+                let from = self.corner(arc[0], w);
+                self.copy_corner(from, 3 * f + k);
+            }
+        }
+        self.faces_left += 2;
+        for (i, &v) in cycle.iter().enumerate() {
+            for (w, arc, cap) in [(v, &sides[i].0, first), (copies[i], &sides[i].1, first + 1)] {
+                let start = self.face_lists.len() as u32;
+                self.face_lists.extend_from_slice(arc);
+                self.face_lists.push(cap);
+                let x = &mut self.verts[w as usize];
+                x.start = start;
+                x.len = arc.len() as u32 + 1;
+                x.kind = Kind::Unknown;
+            }
+            self.version[v as usize] += 1;
+        }
+        out.extend(cycle.iter().chain(&copies));
+        true
+    }
+
+    /// The faces around `v` from the one where `from` follows `v` on to the one where `to`
+    /// precedes it, turning the way faces are wound; None if the fan is open or not manifold.
+    fn arc(&self, v: u32, from: u32, to: u32) -> Option<Vec<u32>> {
+        let after = |w: u32| {
+            self.faces_of(v).iter().copied().find(|&f| {
+                let t = self.tri(f);
+                (0..3).any(|i| t[i] == v && t[(i + 1) % 3] == w)
+            })
+        };
+        let mut f = after(from)?;
+        let mut out = Vec::new();
+        for _ in 0..self.verts[v as usize].len {
+            out.push(f);
+            let t = self.tri(f);
+            let i = t.iter().position(|&w| w == v)?;
+            let prev = t[(i + 2) % 3];
+            if prev == to {
+                return Some(out);
+            }
+            f = after(prev)?;
+        }
+        None
     }
 
     fn copy_corner(&mut self, from: usize, to: usize) {
@@ -1146,7 +1357,7 @@ impl State {
         } else {
             (Vec::new(), Vec::new())
         };
-        let source_faces = alive.iter().map(|&f| f as u32).collect();
+        let source_faces = alive.iter().map(|&f| if f < self.input_faces { f as u32 } else { self.cap_source[f - self.input_faces] }).collect();
         Simplified { mesh: out, source_faces, face_groups, group_error, error: self.error_sq.sqrt() as f32 }
     }
 }
@@ -1357,6 +1568,14 @@ mod tests {
     /// Properties every output must have: valid arrays, no degenerate or duplicate face, no new
     /// non-manifold edge or vertex, same Euler characteristic and border count on manifold input.
     fn check(input: &Mesh, out: &Simplified) {
+        check_manifold(input, out);
+        if Adjacency::build(input).nonmanifold_edges.is_empty() {
+            assert_eq!(euler(&out.mesh), euler(input), "topology changed");
+        }
+    }
+
+    /// Valid, no repeated or degenerate faces, no more non-manifold edges or vertices than the input.
+    fn check_manifold(input: &Mesh, out: &Simplified) {
         let m = &out.mesh;
         assert_eq!(m.validate(), Ok(()));
         let mut keys: Vec<[u32; 3]> = m.triangles.iter().map(|t| { let mut k = *t; k.sort_unstable(); k }).collect();
@@ -1368,9 +1587,6 @@ mod tests {
         let (ai, ao) = (Adjacency::build(input), Adjacency::build(m));
         assert!(ao.nonmanifold_edges.len() <= ai.nonmanifold_edges.len());
         assert!(bowtie_vertices(m) <= bowtie_vertices(input));
-        if ai.nonmanifold_edges.is_empty() {
-            assert_eq!(euler(m), euler(input), "topology changed");
-        }
         let used = m.triangles.iter().flatten().collect::<std::collections::HashSet<_>>().len();
         assert_eq!(used, m.vertex_count(), "unused vertices");
         assert!(out.error.is_finite() && out.error >= 0.0);
@@ -1512,6 +1728,58 @@ mod tests {
         }
     }
 
+    /// `n` tori side by side, each a ring of `ring` triangular cross-sections: thin handles.
+    fn tori(n: u32, ring: u32) -> Mesh {
+        let mut m = Mesh::default();
+        for k in 0..n {
+            let base = m.positions.len() as u32;
+            for i in 0..ring {
+                let phi = i as f32 / ring as f32 * std::f32::consts::TAU;
+                for j in 0..3 {
+                    let theta = j as f32 / 3.0 * std::f32::consts::TAU;
+                    let r = 1.0 + 0.1 * theta.cos();
+                    m.positions.push(Vec3::new(3.0 * k as f32 + r * phi.cos(), r * phi.sin(), 0.1 * theta.sin()));
+                }
+            }
+            let id = |i: u32, j: u32| base + (i % ring) * 3 + j % 3;
+            for i in 0..ring {
+                for j in 0..3 {
+                    m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                    m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+                }
+            }
+        }
+        m.face_materials = vec![0; m.triangles.len()];
+        m.materials = vec![Material::default()];
+        m.compute_face_geometry();
+        m
+    }
+
+    #[test]
+    fn topology_changes_reach_targets_that_handles_block() {
+        let m = tori(3, 40);
+        assert_eq!(Adjacency::build(&m).boundary_edges, 0);
+        let kept = simplify(&m, None, &opts(12));
+        check(&m, &kept);
+        assert!(kept.mesh.face_count() > 12, "a torus keeps more than 4 faces: {}", kept.mesh.face_count());
+        for target in [60, 12, 0] {
+            let changed = simplify(&m, None, &SimplifyOptions { topology: true, ..opts(target) });
+            check_manifold(&m, &changed);
+            assert!(changed.mesh.face_count() <= target, "{} faces for {target}", changed.mesh.face_count());
+            let a = Adjacency::build(&changed.mesh);
+            assert_eq!((a.boundary_edges, a.nonmanifold_edges.len()), (0, 0), "still closed and manifold");
+            assert_eq!(changed.source_faces.len(), changed.mesh.face_count());
+            assert!(changed.source_faces.iter().all(|&f| (f as usize) < m.face_count()));
+        }
+        // A target the rules reach without changing topology is reached the same way with the option.
+        let easy = opts(m.face_count() / 2);
+        assert_eq!(simplify(&m, None, &easy), simplify(&m, None, &SimplifyOptions { topology: true, ..easy.clone() }));
+        // Groups forbid it.
+        let groups = patches(&m, 3);
+        let grouped = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
+        check(&m, &grouped);
+    }
+
     #[test]
     fn non_manifold_fin_is_left_alone() {
         let m = fin();
@@ -1585,6 +1853,9 @@ mod tests {
             prop_assert!(pieces.iter().all(|&p| p == 1), "{:?}", pieces);
             let plain = simplify(&m, None, &opts(target));
             check(&m, &plain);
+            let free = simplify(&m, None, &SimplifyOptions { topology: true, ..opts(target) });
+            check_manifold(&m, &free);
+            prop_assert!(free.mesh.face_count() <= plain.mesh.face_count().max(target));
         }
     }
 }
