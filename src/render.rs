@@ -288,16 +288,29 @@ impl StripFrame<'_> {
         (clip, row)
     }
 
+    /// Corner `i` of `part` from the cache, transformed (and shaded when `smooth`) on a miss.
+    fn corner(&self, part: &Part<'_>, i: u32, smooth: bool, cache: &mut VertexCache) -> Corner {
+        let slot = &mut cache.entries[i as usize % CACHE_SIZE];
+        if slot.index != i || slot.generation != cache.generation {
+            let (p, row) = self.transform(part.positions[i as usize]);
+            let shade = if smooth { self.lit(part.normals[i as usize]) } else { 0.0 };
+            *slot = Corner { clip: ClipVertex { p, shade }, row, index: i, generation: cache.generation };
+        }
+        *slot
+    }
+
     /// Rows the faces of each block of `part` may cover, conservatively (`(first, last)`, empty
-    /// when first > last), into `out` (one per [`BLOCK_FACES`] faces); `rows` is scratch.
-    fn block_rows(&self, part: &Part<'_>, rows: &mut Vec<i32>, out: &mut [(i32, i32)]) {
-        rows.clear();
-        rows.extend(part.positions.iter().map(|&p| self.transform(p).1));
+    /// when first > last), into `out` (one per [`BLOCK_FACES`] faces).
+    fn block_rows(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [(i32, i32)]) {
+        cache.next_generation();
+        let n = part.positions.len();
         for (block, range) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
             let (mut lo, mut hi) = (i32::MAX, i32::MIN);
             for tri in block.chunks_exact(3) {
-                let corner = |k: usize| rows.get(tri[k] as usize).copied().unwrap_or(BAD_ROW);
-                let r = [corner(0), corner(1), corner(2)];
+                if tri.iter().any(|&i| i as usize >= n) {
+                    continue;
+                }
+                let r = [0, 1, 2].map(|k| self.corner(part, tri[k], false, cache).row);
                 if r.contains(&BAD_ROW) {
                     continue;
                 }
@@ -330,18 +343,9 @@ impl StripFrame<'_> {
             if ranges.iter().all(|&(a, b)| b < lo || a > hi) {
                 continue;
             }
-            // Corners are transformed when a face first needs them, once per part and strip.
             let n = part.positions.len();
-            if s.generation == u32::MAX {
-                s.stamps.fill(0);
-                s.generation = 0;
-            }
-            s.generation += 1;
-            if s.stamps.len() < n {
-                s.stamps.resize(n, 0);
-                s.vertices.resize(n, (ClipVertex { p: Vec4::ZERO, shade: 0.0 }, BAD_ROW));
-            }
             let smooth = part.normals.len() == n;
+            s.cache.next_generation();
             for (b, &(a, z)) in ranges.iter().enumerate() {
                 if z < lo || a > hi {
                     continue;
@@ -352,27 +356,18 @@ impl StripFrame<'_> {
                     if tri.iter().any(|&i| i as usize >= n) {
                         continue;
                     }
-                    for &i in &tri {
-                        let i = i as usize;
-                        if s.stamps[i] != s.generation {
-                            s.stamps[i] = s.generation;
-                            let (p, row) = self.transform(part.positions[i]);
-                            let shade = if smooth { self.lit(part.normals[i]) } else { 0.0 };
-                            s.vertices[i] = (ClipVertex { p, shade }, row);
-                        }
-                    }
-                    let v = tri.map(|i| s.vertices[i as usize]);
-                    if v.iter().any(|v| v.1 == BAD_ROW) {
+                    let v = tri.map(|i| self.corner(part, i, smooth, &mut s.cache));
+                    if v.iter().any(|v| v.row == BAD_ROW) {
                         continue;
                     }
-                    if v.iter().all(|v| v.1 != NO_ROW) {
-                        let rows = v.map(|v| v.1);
+                    if v.iter().all(|v| v.row != NO_ROW) {
+                        let rows = v.map(|v| v.row);
                         let (a, b) = (rows[0].min(rows[1]).min(rows[2]) - ROW_MARGIN, rows[0].max(rows[1]).max(rows[2]) + ROW_MARGIN);
                         if b < lo || a > hi {
                             continue;
                         }
                     }
-                    let mut corners = v.map(|v| v.0);
+                    let mut corners = v.map(|v| v.clip);
                     if !smooth {
                         let p = tri.map(|i| part.positions[i as usize]);
                         let shade = self.lit((p[1] - p[0]).cross(p[2] - p[0]));
@@ -397,16 +392,47 @@ impl StripFrame<'_> {
     }
 }
 
+/// Entries of a [`VertexCache`]: faces of a block mostly share nearby vertices.
+const CACHE_SIZE: usize = 1024;
+
+/// A transformed corner, cached under its vertex index.
+#[derive(Clone, Copy)]
+struct Corner {
+    clip: ClipVertex,
+    row: i32,
+    index: u32,
+    generation: u32,
+}
+
+/// Recently transformed vertices of the current part, direct-mapped by index: a small fixed
+/// buffer however large the part is.
+struct VertexCache {
+    entries: Vec<Corner>,
+    generation: u32,
+}
+
+impl Default for VertexCache {
+    fn default() -> Self {
+        let none = Corner { clip: ClipVertex { p: Vec4::ZERO, shade: 0.0 }, row: BAD_ROW, index: 0, generation: 0 };
+        VertexCache { entries: vec![none; CACHE_SIZE], generation: 0 }
+    }
+}
+
+impl VertexCache {
+    /// Forget every entry (a new part, or new shading).
+    fn next_generation(&mut self) {
+        if self.generation == u32::MAX {
+            self.entries.iter_mut().for_each(|e| e.generation = 0);
+            self.generation = 0;
+        }
+        self.generation += 1;
+    }
+}
+
 /// Reusable buffers of one strip in flight.
 #[derive(Default)]
 struct StripScratch {
-    /// Per vertex of the current part: clip position and shade, and screen row; valid where
-    /// `stamps` holds `generation`.
-    vertices: Vec<(ClipVertex, i32)>,
-    stamps: Vec<u32>,
-    generation: u32,
-    /// Screen rows of a part's vertices, for the block rows.
-    rows: Vec<i32>,
+    cache: VertexCache,
     setups: Vec<Setup>,
     clip: Clip,
 }
@@ -451,12 +477,8 @@ impl Strips {
         let frame = StripFrame { parts, view_projection: camera.view_projection(), light: -camera.forward(), width, height };
         // Scratch is sized here, so that the workers do not allocate (their arenas would keep
         // the memory).
-        let most = parts.iter().map(|p| p.positions.len()).max().unwrap_or(0);
         for slot in &mut self.slots {
             let s = &mut slot.scratch;
-            s.rows.reserve(most);
-            s.stamps.reserve(most);
-            s.vertices.reserve(most);
             s.setups.reserve(16);
             for v in [&mut s.clip.polygon, &mut s.clip.clipped] {
                 v.reserve(16);
@@ -482,7 +504,7 @@ impl Strips {
         }
         self.slots.par_iter_mut().zip(lanes).for_each(|(slot, lane)| {
             for (part, out) in lane {
-                frame.block_rows(part, &mut slot.scratch.rows, out);
+                frame.block_rows(part, &mut slot.scratch.cache, out);
             }
         });
         let strips = height.div_ceil(STRIP_ROWS);
