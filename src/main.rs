@@ -659,13 +659,14 @@ fn stream(a: StreamArgs) -> Result<()> {
         Vec::new()
     };
     let mut streamer = Streamer::new(reader, budgets)?;
-    let mut image = strata::render::Image::new(width, height);
+    // Frames are drawn strip by strip; a whole one is kept only to be written out.
+    let mut strips = strata::render::Strips::new(width, height);
+    let mut frame_rgba = if a.frames_dir.is_some() { vec![0u8; 4 * width as usize * height as usize] } else { Vec::new() };
     let (mut plain_front, mut plain_full) = (image_if(a.compare_full, width, height), image_if(a.compare_full, width, height));
     let mut last_ms = None;
     for (k, camera) in cameras.iter().enumerate() {
         let rep = streamer.update(camera, last_ms)?;
         let start = Instant::now();
-        image.clear();
         let parts: Vec<strata::render::Part> = rep
             .front
             .iter()
@@ -674,10 +675,15 @@ fn stream(a: StreamArgs) -> Result<()> {
                 Some(strata::render::Part { positions: &g.positions, normals: &g.normals, indices: &g.indices, color: strata::render::palette(i) })
             })
             .collect();
-        image.draw_parts(camera, &parts);
+        let row_bytes = 4 * width as usize;
+        strips.draw(camera, &parts, |row, rgba| {
+            if let Some(out) = frame_rgba.get_mut(row as usize * row_bytes..row as usize * row_bytes + rgba.len()) {
+                out.copy_from_slice(rgba);
+            }
+        });
         let draw_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(d) = &a.frames_dir {
-            image.write_png(&d.join(format!("frame{k:05}.png")))?;
+            strata::render::write_rgba_png(&d.join(format!("frame{k:05}.png")), width, height, &frame_rgba)?;
         }
         last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
         let since_open_ms = opened.elapsed().as_secs_f64() * 1e3;

@@ -7,6 +7,10 @@
 //! overlap nor leave cracks. Depth is z/w, interpolated linearly in screen space. Faces are set up
 //! in parallel, then filled in parallel by horizontal bands, each band drawing its faces in input
 //! order, so the image does not depend on the thread count.
+//!
+//! [`Strips`] draws the same image without ever holding all of it (for streaming, where memory is
+//! what is measured): a few horizontal strips at a time, each with its own small color and depth
+//! buffers, handed over row by row when done.
 
 use crate::atomic::write_file;
 use crate::camera::Camera;
@@ -146,7 +150,7 @@ impl Image {
             .collect();
         let chunks: Vec<(Vec<Setup>, usize)> = work
             .par_iter()
-            .map(|&(k, c)| {
+            .map_init(Clip::default, |clip, &(k, c)| {
                 let Part { positions, indices, color, .. } = parts[k];
                 let vertex_shade = &vertex_shades[k];
                 let face_count = indices.len() / 3;
@@ -169,7 +173,7 @@ impl Image {
                     let corners: [ClipVertex; 3] =
                         std::array::from_fn(|k| ClipVertex { p: view_projection * p[k].extend(1.0), shade: shade[k] });
                     let before = out.len();
-                    setup_face(corners, width, height, color, &mut out);
+                    setup_face(corners, width, height, color, &mut out, clip);
                     drawn += (out.len() > before) as usize;
                 }
                 (out, drawn)
@@ -208,30 +212,344 @@ impl Image {
 
     /// Write the image as an RGBA PNG, all or nothing.
     pub fn write_png(&self, path: &Path) -> Result<()> {
-        let bytes = self.encode().map_err(|e| Error::invalid(path, None, format!("cannot encode PNG: {e}")))?;
-        write_file(path, |w| w.write_all(&bytes))
+        write_rgba_png(path, self.width, self.height, &self.rgba)
     }
 
     /// The image as an RGBA PNG file's bytes; empty if the fields disagree on the size.
     pub fn encode_png(&self) -> Vec<u8> {
-        self.encode().unwrap_or_default()
+        encode(self.width, self.height, &self.rgba).unwrap_or_default()
+    }
+}
+
+/// Write `width` × `height` RGBA8 pixels (top row first) as a PNG, all or nothing.
+pub fn write_rgba_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
+    let bytes = encode(width, height, rgba).map_err(|e| Error::invalid(path, None, format!("cannot encode PNG: {e}")))?;
+    write_file(path, |w| w.write_all(&bytes))
+}
+
+fn encode(width: u32, height: u32, rgba: &[u8]) -> std::result::Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, width, height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header()?;
+    writer.write_image_data(rgba)?;
+    writer.finish()?;
+    Ok(bytes)
+}
+
+/// Rows per strip of [`Strips`].
+pub const STRIP_ROWS: u32 = 64;
+/// Faces per block of a part: the unit of the per-strip test.
+const BLOCK_FACES: usize = 32;
+/// Rows a face's pixels may reach beyond the rows of its corners' projections (rounding and
+/// clipping error), for the strip test.
+const ROW_MARGIN: i32 = 2;
+/// Row of a vertex whose faces are skipped (non-finite in clip space).
+const BAD_ROW: i32 = i32::MIN;
+/// Row of a vertex with no usable screen row (at or behind the eye plane): its faces are set up
+/// in every strip.
+const NO_ROW: i32 = i32::MIN + 1;
+/// Rows of a block no strip test can rule out.
+const ALL_ROWS: (i32, i32) = (i32::MIN, i32::MAX);
+
+/// Per-frame constants of a strip draw.
+struct StripFrame<'a> {
+    parts: &'a [Part<'a>],
+    view_projection: glam::Mat4,
+    light: Vec3,
+    width: u32,
+    height: u32,
+}
+
+impl StripFrame<'_> {
+    fn lit(&self, n: Vec3) -> f32 {
+        AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(self.light).max(0.0)
     }
 
-    fn encode(&self) -> std::result::Result<Vec<u8>, png::EncodingError> {
-        let mut bytes = Vec::new();
-        let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
-        encoder.set_color(png::ColorType::Rgba);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header()?;
-        writer.write_image_data(&self.rgba)?;
-        writer.finish()?;
-        Ok(bytes)
+    /// A position in clip space and its screen row: the floor of its screen y, clamped to a few
+    /// rows around the image; or [`BAD_ROW`], [`NO_ROW`].
+    fn transform(&self, p: Vec3) -> (Vec4, i32) {
+        let clip = self.view_projection * p.extend(1.0);
+        let row = if !clip.is_finite() {
+            BAD_ROW
+        } else if clip.w > 0.0 {
+            // With w > 0 at all three corners, every clipped point projects between them: the
+            // face's rows lie within its corners' rows.
+            let y = (1.0 - clip.y / clip.w) * 0.5 * self.height as f32;
+            if y.is_finite() {
+                y.floor().clamp(-16.0, self.height as f32 + 16.0) as i32
+            } else {
+                NO_ROW
+            }
+        } else {
+            NO_ROW
+        };
+        (clip, row)
     }
+
+    /// Corner `i` of `part` from the cache, transformed (and shaded when `smooth`) on a miss.
+    fn corner(&self, part: &Part<'_>, i: u32, smooth: bool, cache: &mut VertexCache) -> Corner {
+        let slot = &mut cache.entries[i as usize % CACHE_SIZE];
+        if slot.index != i || slot.generation != cache.generation {
+            let (p, row) = self.transform(part.positions[i as usize]);
+            let shade = if smooth { self.lit(part.normals[i as usize]) } else { 0.0 };
+            *slot = Corner { clip: ClipVertex { p, shade }, row, index: i, generation: cache.generation };
+        }
+        *slot
+    }
+
+    /// Rows the faces of each block of `part` may cover, conservatively (`(first, last)`, empty
+    /// when first > last), into `out` (one per [`BLOCK_FACES`] faces).
+    fn block_rows(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [(i32, i32)]) {
+        cache.next_generation();
+        let n = part.positions.len();
+        for (block, range) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
+            let (mut lo, mut hi) = (i32::MAX, i32::MIN);
+            for tri in block.chunks_exact(3) {
+                if tri.iter().any(|&i| i as usize >= n) {
+                    continue;
+                }
+                let r = [0, 1, 2].map(|k| self.corner(part, tri[k], false, cache).row);
+                if r.contains(&BAD_ROW) {
+                    continue;
+                }
+                if r.contains(&NO_ROW) {
+                    (lo, hi) = ALL_ROWS;
+                    break;
+                }
+                lo = lo.min(r[0].min(r[1]).min(r[2]) - ROW_MARGIN);
+                hi = hi.max(r[0].max(r[1]).max(r[2]) + ROW_MARGIN);
+            }
+            *range = (lo, hi);
+        }
+    }
+
+    /// Draw every face reaching strip `strip` (rows `strip · STRIP_ROWS ..`) into its buffers, in
+    /// input order, as [`Image::draw_parts`] draws them into the whole image. `blocks` are the
+    /// parts' block rows, one after the other. Returns the faces whose topmost pixel row lies in
+    /// this strip, so that each drawn face counts once.
+    fn draw_strip(&self, strip: u32, blocks: &[(i32, i32)], rgba: &mut [u8], depth: &mut [f32], s: &mut StripScratch) -> usize {
+        let (width, height) = (self.width, self.height);
+        let first = strip * STRIP_ROWS;
+        let last = (first + STRIP_ROWS).min(height) - 1;
+        let (lo, hi) = (first as i32, last as i32);
+        let mut drawn = 0;
+        let mut block = 0;
+        for part in self.parts {
+            let count = (part.indices.len() / 3).div_ceil(BLOCK_FACES);
+            let ranges = &blocks[block..block + count];
+            block += count;
+            if ranges.iter().all(|&(a, b)| b < lo || a > hi) {
+                continue;
+            }
+            let n = part.positions.len();
+            let smooth = part.normals.len() == n;
+            s.cache.next_generation();
+            for (b, &(a, z)) in ranges.iter().enumerate() {
+                if z < lo || a > hi {
+                    continue;
+                }
+                let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
+                for tri in part.indices[3 * b * BLOCK_FACES..end].chunks_exact(3) {
+                    let tri = [tri[0], tri[1], tri[2]];
+                    if tri.iter().any(|&i| i as usize >= n) {
+                        continue;
+                    }
+                    let v = tri.map(|i| self.corner(part, i, smooth, &mut s.cache));
+                    if v.iter().any(|v| v.row == BAD_ROW) {
+                        continue;
+                    }
+                    if v.iter().all(|v| v.row != NO_ROW) {
+                        let rows = v.map(|v| v.row);
+                        let (a, b) = (rows[0].min(rows[1]).min(rows[2]) - ROW_MARGIN, rows[0].max(rows[1]).max(rows[2]) + ROW_MARGIN);
+                        if b < lo || a > hi {
+                            continue;
+                        }
+                    }
+                    let mut corners = v.map(|v| v.clip);
+                    if !smooth {
+                        let p = tri.map(|i| part.positions[i as usize]);
+                        let shade = self.lit((p[1] - p[0]).cross(p[2] - p[0]));
+                        for c in &mut corners {
+                            c.shade = shade;
+                        }
+                    }
+                    s.setups.clear();
+                    setup_face(corners, width, height, part.color, &mut s.setups, &mut s.clip);
+                    if s.setups.iter().map(|f| f.y0).min().is_some_and(|top| top / STRIP_ROWS == strip) {
+                        drawn += 1;
+                    }
+                    for f in &s.setups {
+                        if f.y1 >= first && f.y0 <= last {
+                            fill(f, width, first, last, rgba, depth);
+                        }
+                    }
+                }
+            }
+        }
+        drawn
+    }
+}
+
+/// Entries of a [`VertexCache`]: faces of a block mostly share nearby vertices.
+const CACHE_SIZE: usize = 1024;
+
+/// A transformed corner, cached under its vertex index.
+#[derive(Clone, Copy)]
+struct Corner {
+    clip: ClipVertex,
+    row: i32,
+    index: u32,
+    generation: u32,
+}
+
+/// Recently transformed vertices of the current part, direct-mapped by index: a small fixed
+/// buffer however large the part is.
+struct VertexCache {
+    entries: Vec<Corner>,
+    generation: u32,
+}
+
+impl Default for VertexCache {
+    fn default() -> Self {
+        let none = Corner { clip: ClipVertex { p: Vec4::ZERO, shade: 0.0 }, row: BAD_ROW, index: 0, generation: 0 };
+        VertexCache { entries: vec![none; CACHE_SIZE], generation: 0 }
+    }
+}
+
+impl VertexCache {
+    /// Forget every entry (a new part, or new shading).
+    fn next_generation(&mut self) {
+        if self.generation == u32::MAX {
+            self.entries.iter_mut().for_each(|e| e.generation = 0);
+            self.generation = 0;
+        }
+        self.generation += 1;
+    }
+}
+
+/// Reusable buffers of one strip in flight.
+#[derive(Default)]
+struct StripScratch {
+    cache: VertexCache,
+    setups: Vec<Setup>,
+    clip: Clip,
+}
+
+/// One strip in flight: its color and depth rows and scratch.
+#[derive(Default)]
+struct Slot {
+    rgba: Vec<u8>,
+    depth: Vec<f32>,
+    scratch: StripScratch,
+}
+
+/// A renderer that never holds a whole frame: the image is drawn in horizontal strips of
+/// [`STRIP_ROWS`] rows, a few strips at a time in parallel, each handed over as soon as it is
+/// done. Only the strips in flight have color and depth buffers; faces are tested against a
+/// strip by blocks, whose rows are found once per frame. Draws the same image as
+/// [`Image::draw_parts`] on a cleared image, row for row. Buffers are kept between frames.
+pub struct Strips {
+    width: u32,
+    height: u32,
+    slots: Vec<Slot>,
+    /// Rows of each block of [`BLOCK_FACES`] faces, parts one after the other (this frame).
+    blocks: Vec<(i32, i32)>,
+}
+
+impl Strips {
+    /// A renderer for `width` × `height` images (at least 1 × 1).
+    pub fn new(width: u32, height: u32) -> Strips {
+        let (width, height) = (width.max(1), height.max(1));
+        let strips = height.div_ceil(STRIP_ROWS) as usize;
+        let count = rayon::current_num_threads().clamp(1, strips);
+        let n = width as usize * STRIP_ROWS as usize;
+        let slots = (0..count).map(|_| Slot { rgba: vec![0; 4 * n], depth: vec![f32::INFINITY; n], ..Slot::default() }).collect();
+        Strips { width, height, slots, blocks: Vec::new() }
+    }
+
+    /// Draw `parts` seen by `camera` over the background, as [`Image::draw_parts`] would on a
+    /// cleared image; each strip's rows go to `put_rows(first_row, rgba)` (RGBA8, top row first),
+    /// top strip first. Returns the faces drawn.
+    pub fn draw(&mut self, camera: &Camera, parts: &[Part<'_>], mut put_rows: impl FnMut(u32, &[u8])) -> usize {
+        let (width, height) = (self.width, self.height);
+        let frame = StripFrame { parts, view_projection: camera.view_projection(), light: -camera.forward(), width, height };
+        // Scratch is sized here, so that the workers do not allocate (their arenas would keep
+        // the memory).
+        for slot in &mut self.slots {
+            let s = &mut slot.scratch;
+            s.setups.reserve(16);
+            for v in [&mut s.clip.polygon, &mut s.clip.clipped] {
+                v.reserve(16);
+            }
+            s.clip.d.reserve(16);
+            s.clip.screen.reserve(16);
+        }
+        let counts = parts.iter().map(|p| (p.indices.len() / 3).div_ceil(BLOCK_FACES));
+        self.blocks.clear();
+        self.blocks.resize(counts.clone().sum(), ALL_ROWS);
+        // Each slot finds the block rows of every slots.len()-th part.
+        let mut per_part: Vec<&mut [(i32, i32)]> = Vec::with_capacity(parts.len());
+        let mut rest = &mut self.blocks[..];
+        for c in counts {
+            let (head, tail) = rest.split_at_mut(c);
+            per_part.push(head);
+            rest = tail;
+        }
+        let stride = self.slots.len();
+        let mut lanes: Vec<Vec<(&Part, &mut [(i32, i32)])>> = (0..stride).map(|_| Vec::new()).collect();
+        for (k, (part, out)) in parts.iter().zip(per_part).enumerate() {
+            lanes[k % stride].push((part, out));
+        }
+        self.slots.par_iter_mut().zip(lanes).for_each(|(slot, lane)| {
+            for (part, out) in lane {
+                frame.block_rows(part, &mut slot.scratch.cache, out);
+            }
+        });
+        let strips = height.div_ceil(STRIP_ROWS);
+        let blocks = &self.blocks;
+        let mut drawn = 0;
+        for wave in (0..strips).step_by(self.slots.len()) {
+            let busy = (strips - wave).min(self.slots.len() as u32) as usize;
+            drawn += self.slots[..busy]
+                .par_iter_mut()
+                .enumerate()
+                .map(|(k, slot)| {
+                    let strip = wave + k as u32;
+                    let n = (width * (((strip + 1) * STRIP_ROWS).min(height) - strip * STRIP_ROWS)) as usize;
+                    for px in slot.rgba[..4 * n].chunks_exact_mut(4) {
+                        px.copy_from_slice(&BACKGROUND);
+                    }
+                    slot.depth[..n].fill(f32::INFINITY);
+                    frame.draw_strip(strip, blocks, &mut slot.rgba[..4 * n], &mut slot.depth[..n], &mut slot.scratch)
+                })
+                .sum::<usize>();
+            for (k, slot) in self.slots[..busy].iter().enumerate() {
+                let strip = wave + k as u32;
+                let n = (width * (((strip + 1) * STRIP_ROWS).min(height) - strip * STRIP_ROWS)) as usize;
+                put_rows(strip * STRIP_ROWS, &slot.rgba[..4 * n]);
+            }
+        }
+        drawn
+    }
+}
+
+/// A screen vertex: x right and y down in pixels, depth z/w, shade.
+type Screen = (f32, f32, f32, f32);
+
+/// Reusable buffers of [`setup_face`]'s clipping, so that drawing allocates nothing per face.
+#[derive(Default)]
+struct Clip {
+    polygon: Vec<ClipVertex>,
+    clipped: Vec<ClipVertex>,
+    d: Vec<f32>,
+    screen: Vec<Screen>,
 }
 
 /// Clip a face, cull it if it faces away, and append its fill setups (none, or one per triangle of
 /// the clipped polygon).
-fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4], out: &mut Vec<Setup>) {
+fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4], out: &mut Vec<Setup>, clip: &mut Clip) {
     if !corners.iter().all(|c| c.p.is_finite()) {
         return;
     }
@@ -250,7 +568,7 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
         let n = v.p.truncate() / v.p.w;
         ((n.x + 1.0) * 0.5 * w, (1.0 - n.y) * 0.5 * h, n.z, v.shade)
     };
-    let finite = |s: &(f32, f32, f32, f32)| s.0.is_finite() && s.1.is_finite() && s.2.is_finite();
+    let finite = |s: &Screen| s.0.is_finite() && s.1.is_finite() && s.2.is_finite();
     if PLANES.iter().all(|plane| corners.iter().all(|c| plane.dot(c.p) >= 0.0)) {
         let screen = corners.map(|c| to_screen(&c));
         if screen.iter().all(finite) {
@@ -258,16 +576,19 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
         }
         return;
     }
-    let mut polygon: Vec<ClipVertex> = corners.to_vec();
+    let Clip { polygon, clipped, d, screen } = clip;
+    polygon.clear();
+    polygon.extend_from_slice(&corners);
     for plane in PLANES {
-        let d: Vec<f32> = polygon.iter().map(|v| plane.dot(v.p)).collect();
+        d.clear();
+        d.extend(polygon.iter().map(|v| plane.dot(v.p)));
         if d.iter().all(|&d| d >= 0.0) {
             continue;
         }
         if d.iter().all(|&d| d < 0.0) {
             return;
         }
-        let mut clipped = Vec::with_capacity(polygon.len() + 1);
+        clipped.clear();
         for i in 0..polygon.len() {
             let j = (i + 1) % polygon.len();
             if d[i] >= 0.0 {
@@ -281,9 +602,10 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
                 });
             }
         }
-        polygon = clipped;
+        std::mem::swap(polygon, clipped);
     }
-    let screen: Vec<(f32, f32, f32, f32)> = polygon.iter().map(to_screen).collect();
+    screen.clear();
+    screen.extend(polygon.iter().map(to_screen));
     if !screen.iter().all(finite) {
         return;
     }
@@ -294,7 +616,7 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
 
 /// Snap a screen triangle to the fixed-point grid; `None` if it faces away, has no area, or lies
 /// outside the image.
-fn setup_triangle(v: [(f32, f32, f32, f32); 3], width: u32, height: u32, color: [u8; 4]) -> Option<Setup> {
+fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4]) -> Option<Setup> {
     let mut x = v.map(|s| (s.0 * SUBPIXEL).round() as i64);
     let mut y = v.map(|s| (s.1 * SUBPIXEL).round() as i64);
     let mut z = v.map(|s| s.2);
@@ -506,6 +828,64 @@ mod tests {
         assert_eq!(batched.rgba, one_by_one.rgba);
         assert_eq!(batched.depth, one_by_one.depth);
         assert!(drawn > 0);
+    }
+
+    /// The strip renderer's rows, assembled into an image.
+    fn draw_in_strips(camera: &Camera, parts: &[Part<'_>], width: u32, height: u32) -> (Vec<u8>, usize) {
+        let mut rgba = vec![0; 4 * (width * height) as usize];
+        let mut next = 0;
+        let drawn = Strips::new(width, height).draw(camera, parts, |row, rows| {
+            assert_eq!(row, next, "strips in order");
+            let at = 4 * (row * width) as usize;
+            rgba[at..at + rows.len()].copy_from_slice(rows);
+            next += (rows.len() / 4) as u32 / width;
+        });
+        assert_eq!(next, height);
+        (rgba, drawn)
+    }
+
+    #[test]
+    fn strips_draw_what_the_whole_image_draws() {
+        let (positions, indices) = sphere(0.7);
+        let shifted = |d: Vec3| positions.iter().map(|p| *p + d).collect::<Vec<Vec3>>();
+        let (left, right, far) = (shifted(Vec3::new(-0.4, 0.1, 0.0)), shifted(Vec3::new(0.4, -0.2, 0.3)), shifted(Vec3::new(0.0, 0.0, -2.0)));
+        let normals: Vec<Vec3> = positions.iter().map(|p| p.normalize()).collect();
+        let mut bad = indices.clone();
+        bad.extend([0, 1, u32::MAX, 5]);
+        let nan = [Vec3::NAN, Vec3::X, Vec3::Y, Vec3::new(0.0, 1.0, 0.1)];
+        let parts = [
+            Part { positions: &left, normals: &normals, indices: &indices, color: palette(1) },
+            Part { positions: &right, normals: &[], indices: &bad, color: palette(2) },
+            Part { positions: &far, normals: &normals, indices: &indices, color: palette(3) },
+            Part { positions: &nan, normals: &[], indices: &[0, 1, 2, 1, 2, 3], color: palette(4) },
+            Part { positions: &[], normals: &[], indices: &[], color: palette(5) },
+        ];
+        let perspective = |eye: Vec3, target: Vec3, width, height| Camera {
+            eye,
+            target,
+            up: Vec3::Y,
+            projection: Projection::Perspective { fov_y: 70f32.to_radians() },
+            width,
+            height,
+            near: 0.05,
+            far: 20.0,
+        };
+        let cameras = [
+            (ortho(), 100, 100),
+            (perspective(Vec3::new(0.5, 0.8, 4.0), Vec3::ZERO, 97, 131), 97, 131),
+            // Inside a sphere and grazing the others: faces cross the near plane and the guard band.
+            (perspective(Vec3::new(-0.4, 0.1, 0.2), Vec3::new(1.0, -0.3, -1.0), 160, 90), 160, 90),
+            (perspective(Vec3::new(0.0, 0.0, 0.75), Vec3::new(0.0, 0.0, -5.0), 64, 200), 64, 200),
+            (ortho(), 1, 1),
+        ];
+        for (camera, width, height) in cameras {
+            let mut whole = Image::new(width, height);
+            let drawn = whole.draw_parts(&camera, &parts);
+            let (rgba, strip_drawn) = draw_in_strips(&camera, &parts, width, height);
+            assert!(rgba == whole.rgba, "{width}x{height} from {}: images differ", camera.eye);
+            assert_eq!(strip_drawn, drawn, "{width}x{height} from {}", camera.eye);
+            assert!(drawn > 0);
+        }
     }
 
     #[test]
