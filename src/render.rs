@@ -239,7 +239,7 @@ fn encode(width: u32, height: u32, rgba: &[u8]) -> std::result::Result<Vec<u8>, 
 }
 
 /// Rows per strip of [`Strips`].
-pub const STRIP_ROWS: u32 = 64;
+pub const STRIP_ROWS: u32 = 32;
 /// Faces per block of a part: the unit of the per-strip test.
 const BLOCK_FACES: usize = 32;
 /// Rows a face's pixels may reach beyond the rows of its corners' projections (rounding and

@@ -58,6 +58,8 @@ pub struct Reader<R> {
     skeleton_chunks: Vec<ChunkInfo>,
     /// Offset just after `SKEL` and its padding.
     skeleton_end: u64,
+    /// The last node chunk read, kept so that reading a node allocates only its geometry.
+    scratch: Vec<u8>,
 }
 
 impl Reader<File> {
@@ -89,6 +91,7 @@ impl<R: Read + Seek> Reader<R> {
             materials: Vec::new(),
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
+            scratch: Vec::new(),
         };
         rd.read_prologue()?;
         let mut pos = PROLOGUE_BYTES;
@@ -191,13 +194,18 @@ impl<R: Read + Seek> Reader<R> {
 
     /// Read, check and decode node `i`'s geometry.
     pub fn read_node(&mut self, i: u32) -> Result<NodeGeometry> {
-        let (rec, _, payload, subs) = self.node_subs(i)?;
-        self.decode(i, &rec, &payload, &subs)
+        let mut buf = std::mem::take(&mut self.scratch);
+        let out = self.node_subs(i, &mut buf).and_then(|(rec, _, payload, subs)| self.decode(i, &rec, &buf[payload], &subs));
+        self.scratch = buf;
+        out
     }
 
     /// The sub-chunks of node `i`'s `GEOM` chunk (read and checked).
     pub fn node_chunks(&mut self, i: u32) -> Result<Vec<ChunkInfo>> {
-        let (rec, frame, _, subs) = self.node_subs(i)?;
+        let mut buf = std::mem::take(&mut self.scratch);
+        let read = self.node_subs(i, &mut buf);
+        self.scratch = buf;
+        let (rec, frame, _, subs) = read?;
         let mut out = vec![ChunkInfo::new(&frame, rec.offset, 0)];
         out.extend(subs.iter().map(|s| ChunkInfo::new(&s.frame, s.offset, 1)));
         Ok(out)
@@ -218,15 +226,23 @@ impl<R: Read + Seek> Reader<R> {
 
     /// Read `len` bytes at `offset`, which the caller has checked lie in the file.
     pub(crate) fn read_at(&mut self, offset: u64, len: u64) -> Result<Vec<u8>> {
+        let mut buf = Vec::new();
+        self.read_into(offset, len, &mut buf)?;
+        Ok(buf)
+    }
+
+    /// `read_at` into `buf`, reusing its allocation.
+    fn read_into(&mut self, offset: u64, len: u64, buf: &mut Vec<u8>) -> Result<()> {
         let end = offset.checked_add(len).filter(|&e| e <= self.len);
         if end.is_none() {
             return Err(Error::at_byte(&self.path, offset, format!("{len} bytes at offset {offset} run past the end of the file ({} bytes)", self.len)));
         }
-        let mut buf = vec![0u8; len as usize];
+        buf.clear();
+        buf.resize(len as usize, 0);
         self.r.seek(SeekFrom::Start(offset)).map_err(|e| Error::io(&self.path, e))?;
-        self.r.read_exact(&mut buf).map_err(|e| Error::io(&self.path, e))?;
+        self.r.read_exact(buf).map_err(|e| Error::io(&self.path, e))?;
         self.bytes_read += len;
-        Ok(buf)
+        Ok(())
     }
 
     fn err(&self, at: u64, id: &[u8; 4], chunk_offset: u64, msg: impl std::fmt::Display) -> Error {
@@ -545,12 +561,14 @@ impl<R: Read + Seek> Reader<R> {
 
     /// Node `i`'s record, `GEOM` payload and sub-chunks, CRC checked against the trailer and the
     /// node table.
-    fn node_subs(&mut self, i: u32) -> Result<(NodeRecord, Frame, Vec<u8>, Vec<Sub>)> {
+    /// Read node `i`'s chunk into `buf` and check it: its record, frame, the range of its payload
+    /// in `buf`, and the payload's sub-chunks.
+    fn node_subs(&mut self, i: u32, buf: &mut Vec<u8>) -> Result<(NodeRecord, Frame, std::ops::Range<usize>, Vec<Sub>)> {
         let rec = *self
             .nodes
             .get(i as usize)
             .ok_or_else(|| Error::at_element(&self.path, format!("node {i}"), format!("no such node; the file has {}", self.nodes.len())))?;
-        let mut buf = self.read_at(rec.offset, rec.size as u64)?;
+        self.read_into(rec.offset, rec.size as u64, buf)?;
         let mut head = [0u8; 16];
         head.copy_from_slice(&buf[..16]);
         let frame = Frame::parse(&head);
@@ -572,10 +590,8 @@ impl<R: Read + Seek> Reader<R> {
                 format!("CRC {actual:08x}, stored {stored:08x}, node table {:08x}", rec.crc),
             ));
         }
-        buf.truncate(end);
-        buf.drain(..16);
-        let subs = chunk::subs(&self.path, &id::GEOM, at, &buf, at + HEADER_BYTES)?;
-        Ok((rec, frame, buf, subs))
+        let subs = chunk::subs(&self.path, &id::GEOM, at, &buf[16..end], at + HEADER_BYTES)?;
+        Ok((rec, frame, 16..end, subs))
     }
 
     fn decode(&self, i: u32, rec: &NodeRecord, payload: &[u8], subs: &[Sub]) -> Result<NodeGeometry> {

@@ -81,11 +81,14 @@ impl Cache {
                 }
                 continue;
             }
+            // Make room before reading, so the peak stays within the budget too.
+            if let Some(b) = self.budget {
+                let rec = reader.nodes().get(a as usize).copied();
+                let expected = rec.map_or(0, |n| record_bytes(&n, reader.header().attributes));
+                self.evict_to(b.saturating_sub(expected));
+            }
             let geometry = reader.read_node(a)?;
             let bytes = geometry_bytes(&geometry);
-            if let Some(b) = self.budget {
-                self.evict_to(b.saturating_sub(bytes));
-            }
             self.resident += bytes;
             self.displayed += bytes;
             self.entries.insert(a, Entry { geometry, bytes, stamp: 0, displayed: true });
