@@ -5,7 +5,7 @@
 //! `cargo bench --bench stream [-- mesh ...]`; without arguments it runs on the bunny and the CT
 //! head from ../shared/meshes when present (and says so when not) and on the noisy-sphere fixture.
 //! Each mesh is converted with `strata convert` (default options) into a temporary file first.
-//!
+//! `STRATA_BENCH_BIN=path` also measures the memory rows with another build of strata.
 
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -24,11 +24,11 @@ fn ms(start: Instant) -> f64 {
     start.elapsed().as_secs_f64() * 1e3
 }
 
-/// Run the strata binary with `args`, output discarded; its peak resident set in MB.
+/// Run the strata binary `bin` with `args`, output discarded; its peak resident set in MB.
 #[cfg(unix)]
-fn peak_rss_mb(args: &[&str]) -> Option<f64> {
+fn peak_rss_mb(bin: &Path, args: &[&str]) -> Option<f64> {
     use std::process::{Command, Stdio};
-    let child = Command::new(env!("CARGO_BIN_EXE_strata")).args(args).stdout(Stdio::null()).stderr(Stdio::null()).spawn().ok()?;
+    let child = Command::new(bin).args(args).stdout(Stdio::null()).stderr(Stdio::null()).spawn().ok()?;
     let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
     // SAFETY: waits for our own child; `status` and `usage` are valid for writes.
     let pid = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage) };
@@ -36,7 +36,7 @@ fn peak_rss_mb(args: &[&str]) -> Option<f64> {
 }
 
 #[cfg(not(unix))]
-fn peak_rss_mb(_: &[&str]) -> Option<f64> {
+fn peak_rss_mb(_: &Path, _: &[&str]) -> Option<f64> {
     None
 }
 
@@ -108,15 +108,26 @@ fn whole_vs_streamed(mesh: &Path, file: &Path) -> strata::error::Result<()> {
 /// Peak resident sets of `strata info` (importing the mesh whole) and of `strata stream` (a
 /// 32-frame orbit under a 4 MB geometry budget), each its own process. Run while this process is
 /// still small: a child's peak counts the parent's pages at the time it was spawned.
+/// Peak RSS of `strata info` on the mesh against `strata stream` on its file, with this build of
+/// strata and, when `STRATA_BENCH_BIN` names one, with that build too (the README's static build,
+/// say: shared libraries count in a process's RSS).
 fn memory(mesh: &Path, file: &Path) -> String {
     let (mesh_arg, file_arg) = (mesh.to_string_lossy(), file.to_string_lossy());
-    let whole = peak_rss_mb(&["info", &mesh_arg]);
-    let streamed = peak_rss_mb(&["stream", &file_arg, "--orbit", "32", "--budget-bytes", "4000000", "--json"]);
-    let ratio = match (streamed, whole) {
-        (Some(s), Some(w)) => format!("; ratio {:.3}", s / w),
-        _ => String::new(),
-    };
-    format!("  peak RSS: strata info {}; strata stream, 4 MB budget, 32-frame orbit {}{ratio}", fmt_mb(whole), fmt_mb(streamed))
+    let mut bins = vec![("this build".to_string(), PathBuf::from(env!("CARGO_BIN_EXE_strata")))];
+    if let Some(other) = std::env::var_os("STRATA_BENCH_BIN") {
+        bins.push((format!("STRATA_BENCH_BIN={}", other.to_string_lossy()), PathBuf::from(other)));
+    }
+    let mut out = Vec::new();
+    for (name, bin) in bins {
+        let whole = peak_rss_mb(&bin, &["info", &mesh_arg]);
+        let streamed = peak_rss_mb(&bin, &["stream", &file_arg, "--orbit", "32", "--budget-bytes", "4000000", "--json"]);
+        let ratio = match (streamed, whole) {
+            (Some(s), Some(w)) => format!("; ratio {:.3}", s / w),
+            _ => String::new(),
+        };
+        out.push(format!("  peak RSS ({name}): strata info {}; strata stream, 4 MB budget, 32-frame orbit {}{ratio}", fmt_mb(whole), fmt_mb(streamed)));
+    }
+    out.join("\n")
 }
 
 /// Shape retention over 8 views around the model, per face budget and refinement order.
