@@ -175,3 +175,22 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
     let msg = damaged(&bytes, node + 16 + 52, &crc, &[node, skel]);
     assert!(msg.contains("VPOS") && msg.contains("parent has"), "{msg}");
 }
+
+/// A node box that is on the grid but too small opens fine (the reader keeps no boxes) and is
+/// caught by `verify`, which reads the boxes from the node table.
+#[test]
+fn a_shrunken_node_box_is_found_by_verify() {
+    let good = small_file();
+    let at = offsets(&good);
+    let (skel, node) = (at("SKEL"), at("NODE"));
+    let mut bytes = good.clone();
+    let min = bytes[node + 16 + 12..node + 16 + 20].to_vec();
+    bytes[node + 16 + 20..node + 16 + 28].copy_from_slice(&min);
+    reseal(&mut bytes, node);
+    reseal(&mut bytes, skel);
+    let mut rd = Reader::open(Cursor::new(&bytes)).expect("the box is not checked at open");
+    let boxes = rd.node_boxes().expect("boxes");
+    assert_eq!(boxes[0].0, boxes[0].1);
+    let v = format::verify(Cursor::new(&bytes), Path::new("shrunk"));
+    assert!(v.problems.iter().any(|e| e.to_string().contains("node 0") && e.to_string().contains("box")), "{:?}", v.problems);
+}

@@ -155,11 +155,10 @@ pub struct NodeRecord {
     pub neighbor_count: u32,
     /// Contains every face normal of this node and every cone of its descendants.
     pub cone: Cone,
-    /// Bounding sphere and box of this node's vertices and of its descendants' bounds.
+    /// Bounding sphere of this node's vertices and of its descendants' spheres. The file also
+    /// holds a bounding box, which only verification needs: [`Reader::node_boxes`] reads it.
     pub center: Vec3,
     pub radius: f32,
-    pub min: Vec3,
-    pub max: Vec3,
     /// Geometric error in model units, never smaller than a child's; includes the position
     /// quantization bound [`Grid::error`].
     pub error: f32,

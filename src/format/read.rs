@@ -60,6 +60,8 @@ pub struct Reader<R> {
     skeleton_end: u64,
     /// The last node chunk read, kept so that reading a node allocates only its geometry.
     scratch: Vec<u8>,
+    /// Where the node table's records start.
+    node_table_at: u64,
 }
 
 impl Reader<File> {
@@ -92,6 +94,7 @@ impl<R: Read + Seek> Reader<R> {
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
             scratch: Vec::new(),
+            node_table_at: 0,
         };
         rd.read_prologue()?;
         let mut pos = PROLOGUE_BYTES;
@@ -222,6 +225,15 @@ impl<R: Read + Seek> Reader<R> {
             pos = self.next(pos, &f)?;
         }
         Ok(out)
+    }
+
+    /// Every node's bounding box (min, max), read again from the node table: the records in
+    /// memory leave it out, since only verification needs it (24 bytes per node).
+    pub fn node_boxes(&mut self) -> Result<Vec<(Vec3, Vec3)>> {
+        let table = self.read_at(self.node_table_at, self.nodes.len() as u64 * NODE_RECORD_BYTES)?;
+        let grid = self.header.grid;
+        let corner = |b: &[u8]| unpack(LE::read_u64(b)).map_or(Vec3::NAN, |g| grid.decode(g));
+        Ok(table.chunks_exact(NODE_RECORD_BYTES as usize).map(|r| (corner(&r[12..20]), corner(&r[20..28]))).collect())
     }
 
     /// Read `len` bytes at `offset`, which the caller has checked lie in the file.
@@ -449,6 +461,7 @@ impl<R: Read + Seek> Reader<R> {
             return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
         }
         let grid = h.grid;
+        let node_table_at = f.offset();
         let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
         let mut neighbor_first = 0u64;
         let mut offset = self.skeleton_end;
@@ -480,7 +493,7 @@ impl<R: Read + Seek> Reader<R> {
                     return Err(bad(format!("neighbours run past the {} of NBRS", neighbors.len())));
                 }
                 let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
-                let (Some(lo), Some(hi), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
+                let (Some(_), Some(_), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
                     return Err(bad(format!("box or sphere center off the {}-bit grid", grid.bits)));
                 };
                 let in_file = size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= self.len);
@@ -497,8 +510,6 @@ impl<R: Read + Seek> Reader<R> {
                     cone: Cone { axis, half_angle: angle_decode(half) },
                     center: grid.decode(center),
                     radius: grid.length(radius_decode(radius_code)),
-                    min: grid.decode(lo),
-                    max: grid.decode(hi),
                     error,
                     faces,
                     vertices,
@@ -555,6 +566,7 @@ impl<R: Read + Seek> Reader<R> {
         self.levels = levels;
         self.nodes = nodes;
         self.neighbors = neighbors;
+        self.node_table_at = node_table_at;
         self.materials = materials;
         Ok(())
     }

@@ -61,8 +61,15 @@ pub fn verify<R: Read + Seek>(r: R, name: &Path) -> Verification {
         }
     };
     walk(&mut rd, &mut v);
-    structure(&rd, &mut v);
-    geometry(&mut rd, &mut v);
+    let boxes = match rd.node_boxes() {
+        Ok(b) => b,
+        Err(e) => {
+            v.push(e);
+            return v;
+        }
+    };
+    structure(&rd, &boxes, &mut v);
+    geometry(&mut rd, &boxes, &mut v);
     v
 }
 
@@ -153,7 +160,7 @@ fn cone_covers(half: f32, needed: f64) -> bool {
 }
 
 /// The node table's rules: tree shape, breadth-first numbering, neighbours, bounds, cones, errors.
-fn structure<R: Read + Seek>(rd: &Reader<R>, v: &mut Verification) {
+fn structure<R: Read + Seek>(rd: &Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut Verification) {
     let path = rd.path();
     let nodes = rd.nodes();
     let nl = rd.levels().len() as u32;
@@ -188,12 +195,13 @@ fn structure<R: Read + Seek>(rd: &Reader<R>, v: &mut Verification) {
                 v.push(problem(i, format!("children start at {}, breadth-first order needs {next_child}", n.first_child)));
             }
             next_child = next_child.max(n.first_child) + n.child_count;
-            let finite = n.cone.axis.is_finite() && n.center.is_finite() && n.min.is_finite() && n.max.is_finite();
+            let (min, max) = boxes[i];
+            let finite = n.cone.axis.is_finite() && n.center.is_finite() && min.is_finite() && max.is_finite();
             let sane = finite
                 && (n.cone.axis.length() - 1.0).abs() < 1e-3
                 && (0.0..=std::f32::consts::PI).contains(&n.cone.half_angle)
                 && n.radius >= 0.0
-                && n.min.cmple(n.max).all()
+                && min.cmple(max).all()
                 && n.error.is_finite();
             if !sane {
                 v.push(problem(i, "cone, bounds or error out of range".into()));
@@ -204,7 +212,8 @@ fn structure<R: Read + Seek>(rd: &Reader<R>, v: &mut Verification) {
                 if !cone_covers(n.cone.half_angle, angle(n.cone.axis, ch.cone.axis) + ch.cone.half_angle as f64) {
                     v.push(problem(i, format!("cone does not contain child {c}'s")));
                 }
-                if !(n.min.cmple(ch.min).all() && ch.max.cmple(n.max).all()) {
+                let (cmin, cmax) = boxes[c as usize];
+                if !(min.cmple(cmin).all() && cmax.cmple(max).all()) {
                     v.push(problem(i, format!("box does not contain child {c}'s")));
                 }
                 if n.center.distance(ch.center) + ch.radius > n.radius * (1.0 + 1e-5) + 1e-30 {
@@ -231,8 +240,8 @@ fn structure<R: Read + Seek>(rd: &Reader<R>, v: &mut Verification) {
     let h = rd.header();
     let top = rd.level_nodes(nl - 1);
     for i in top {
-        let n = &nodes[i as usize];
-        if !(h.min.cmple(n.min).all() && n.max.cmple(h.max).all()) {
+        let (min, max) = boxes[i as usize];
+        if !(h.min.cmple(min).all() && max.cmple(h.max).all()) {
             v.push(problem(i as usize, "box lies outside the HEAD bounds".into()));
         }
     }
@@ -240,7 +249,7 @@ fn structure<R: Read + Seek>(rd: &Reader<R>, v: &mut Verification) {
 
 /// Read every node's geometry: CRCs and ranges (by the reader), then bounds, cones, counts per
 /// level, and level 0 covering every input face exactly once.
-fn geometry<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
+fn geometry<R: Read + Seek>(rd: &mut Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut Verification) {
     let path = rd.path().to_path_buf();
     let nl = rd.levels().len();
     let mut faces = vec![0u64; nl];
@@ -266,7 +275,8 @@ fn geometry<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
         v.nodes += 1;
         let problem = |msg: String| Error::at_element(&path, format!("node {i}"), msg);
         clusters += g.clusters.len() as u64;
-        if let Some(k) = g.positions.iter().position(|p| !(n.min.cmple(*p).all() && p.cmple(n.max).all())) {
+        let (min, max) = boxes[i as usize];
+        if let Some(k) = g.positions.iter().position(|p| !(min.cmple(*p).all() && p.cmple(max).all())) {
             v.push(problem(format!("vertex {k} lies outside the node's box")));
         }
         if let Some(k) = g.positions.iter().position(|p| n.center.distance(*p) > n.radius * (1.0 + 1e-5) + 1e-30) {

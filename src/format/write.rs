@@ -181,9 +181,9 @@ fn write_named<W: Write + Seek>(
     }
 
     header.file_size = pos;
-    let top = &records[..plan.level_nodes[nl - 1] as usize];
-    header.min = top.iter().fold(Vec3::splat(f32::MAX), |m, r| m.min(r.min));
-    header.max = top.iter().fold(Vec3::splat(f32::MIN), |m, r| m.max(r.max));
+    let top = &codes[..plan.level_nodes[nl - 1] as usize];
+    header.min = top.iter().fold(Vec3::splat(f32::MAX), |m, c| m.min(grid.decode(c.min)));
+    header.max = top.iter().fold(Vec3::splat(f32::MIN), |m, c| m.max(grid.decode(c.max)));
     let mut skeleton = head_chunk(&header);
     skeleton.extend(skel_chunk(&levels, &records, &codes, &neighbors, &materials));
     if skeleton.len() != reserved {
@@ -441,8 +441,6 @@ fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan, grid: &Grid, quant: &[Qu
             cone: Cone { axis: Vec3::Z, half_angle: 0.0 },
             center: Vec3::ZERO,
             radius: 0.0,
-            min: Vec3::ZERO,
-            max: Vec3::ZERO,
             error: 0.0,
             faces: 0,
             vertices: 0,
@@ -520,8 +518,6 @@ fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan, grid: &Grid, quant: &[Qu
             r.cone = cone;
             r.center = grid.decode(center);
             r.radius = radius;
-            r.min = grid.decode(lo);
-            r.max = grid.decode(hi);
             r.error = error;
         }
     }

@@ -224,8 +224,6 @@ mod tests {
             cone: Cone { axis, half_angle },
             center: Vec3::ZERO,
             radius: 0.1,
-            min: Vec3::splat(-0.1),
-            max: Vec3::splat(0.1),
             error: 0.01,
             faces: 1,
             vertices: 3,
