@@ -106,11 +106,10 @@ fn whole_vs_streamed(mesh: &Path, file: &Path) -> strata::error::Result<()> {
 }
 
 /// Peak resident sets of `strata info` (importing the mesh whole) and of `strata stream` (a
-/// 32-frame orbit under a 4 MB geometry budget), each its own process. Run while this process is
-/// still small: a child's peak counts the parent's pages at the time it was spawned.
-/// Peak RSS of `strata info` on the mesh against `strata stream` on its file, with this build of
-/// strata and, when `STRATA_BENCH_BIN` names one, with that build too (the README's static build,
-/// say: shared libraries count in a process's RSS).
+/// 32-frame orbit under a 4 MB geometry budget), each its own process, with this build of strata
+/// and, when `STRATA_BENCH_BIN` names one, with that build too (the README's lean build, say:
+/// shared libraries count in a process's RSS). Run while this process is still small: a child's
+/// peak counts the parent's pages at the time it was spawned.
 fn memory(mesh: &Path, file: &Path) -> String {
     let (mesh_arg, file_arg) = (mesh.to_string_lossy(), file.to_string_lossy());
     let mut bins = vec![("this build".to_string(), PathBuf::from(env!("CARGO_BIN_EXE_strata")))];
