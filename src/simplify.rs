@@ -294,6 +294,15 @@ struct Face {
     normal: Vec3,
 }
 
+/// A face around an end of an edge being checked: its corner positions, which corner moves, and
+/// its input normal.
+#[derive(Clone, Copy, Debug)]
+struct Around {
+    p: [DVec3; 3],
+    moved: usize,
+    normal: Vec3,
+}
+
 const DEAD: u32 = u32::MAX;
 
 struct State {
@@ -762,6 +771,7 @@ impl State {
         let mut touched = vec![0u32; self.verts.len()];
         let (mut survivors, mut retry, mut blocked) = (Vec::new(), Vec::new(), Vec::new());
         let mut plan = Plan::EMPTY;
+        let (mut around_u, mut around_v) = (Vec::new(), Vec::new());
         let mut revived = false;
         self.entries.clear();
         for v in 0..self.verts.len() as u32 {
@@ -817,7 +827,14 @@ impl State {
                 if !self.plan(u, v, edge, &mut plan) {
                     continue;
                 }
-                match plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.legal(&plan.e, c)) {
+                let found = if plan.c[..plan.n].iter().any(|c| c.error_sq <= limit) && self.topology_ok(u, v, &plan.e) {
+                    self.gather(u, &plan.e, &mut around_u);
+                    self.gather(v, &plan.e, &mut around_v);
+                    plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.shapes_ok(u, c, &around_u, &around_v))
+                } else {
+                    None
+                };
+                match found {
                     // Cheaper candidates were illegal: rank the edge by the legal one.
                     Some(&c) if c.cost as f32 > entry_key(e) => queue.push(Reverse(entry(c.cost, [u, v, versions]))),
                     Some(&c) => {
@@ -863,22 +880,22 @@ impl State {
         }
     }
 
-    /// Link condition, group survival and face shape for one candidate.
-    fn legal(&mut self, e: &EdgeFaces, c: &Candidate) -> bool {
-        let (r, k) = (c.remove, c.keep);
+    /// Link condition and group survival for collapsing edge (u, v) with faces `e`. Both are
+    /// symmetric in the two ends, so they hold for every candidate of the edge or for none.
+    fn topology_ok(&mut self, u: u32, v: u32, e: &EdgeFaces) -> bool {
         let (x0, x1) = (e.x[0], if e.n == 2 { e.x[1] } else { e.x[0] });
-        // Link condition: the common neighbours of r and k are exactly the opposite vertices.
+        // Link condition: the common neighbours of u and v are exactly the opposite vertices.
         self.stamp += 2;
         let s = self.stamp;
-        for i in 0..self.verts[r as usize].len as usize {
-            for y in self.tri(self.face_of(r, i)) {
+        for i in 0..self.verts[u as usize].len as usize {
+            for y in self.tri(self.face_of(u, i)) {
                 self.verts[y as usize].mark = s;
             }
         }
         let mut common = 0;
-        for i in 0..self.verts[k as usize].len as usize {
-            for y in self.tri(self.face_of(k, i)) {
-                if y != k && y != r && self.verts[y as usize].mark == s {
+        for i in 0..self.verts[v as usize].len as usize {
+            for y in self.tri(self.face_of(v, i)) {
+                if y != v && y != u && self.verts[y as usize].mark == s {
                     if y != x0 && y != x1 {
                         return false;
                     }
@@ -891,8 +908,8 @@ impl State {
             return false;
         }
         if e.n == 2 {
-            let spans = |v: u32| self.faces_of(v).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
-            if spans(r) && spans(k) {
+            let spans = |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
+            if spans(u) && spans(v) {
                 return false;
             }
         }
@@ -903,34 +920,45 @@ impl State {
             if other != NO_FACE && self.faces[other as usize].group == g {
                 continue;
             }
-            let kept = |v: u32| {
-                self.faces_of(v).iter().any(|&h| h != f && h != other && self.faces[h as usize].group == g && self.tri(h).contains(&e.x[i]))
+            let kept = |w: u32| {
+                self.faces_of(w).iter().any(|&h| h != f && h != other && self.faces[h as usize].group == g && self.tri(h).contains(&e.x[i]))
             };
-            if !kept(r) && !kept(k) {
+            if !kept(u) && !kept(v) {
                 return false;
-            }
-        }
-        // Shape: no flip beyond the bound, no degenerate or new sliver face.
-        for &f in self.faces_of(r) {
-            if !e.f.contains(&f) && !self.shape_ok(f, r, c.pos) {
-                return false;
-            }
-        }
-        if c.pos != self.pos(k) {
-            for &f in self.faces_of(k) {
-                if !e.f.contains(&f) && !self.shape_ok(f, k, c.pos) {
-                    return false;
-                }
             }
         }
         true
     }
 
-    /// Whether face `f` with vertex `moved` at `to` keeps its orientation and shape.
-    fn shape_ok(&self, f: u32, moved: u32, to: DVec3) -> bool {
-        let t = self.tri(f);
-        let old = t.map(|v| self.pos(v));
-        let new = t.map(|v| if v == moved { to } else { self.pos(v) });
+    /// The faces around `w` other than the edge's faces `e`, with their corner positions, for
+    /// `shape_ok` of every candidate of the edge.
+    fn gather(&self, w: u32, e: &EdgeFaces, out: &mut Vec<Around>) {
+        out.clear();
+        for &f in self.faces_of(w) {
+            if !e.f.contains(&f) {
+                let t = self.tri(f);
+                let moved = if t[0] == w { 0 } else if t[1] == w { 1 } else { 2 };
+                out.push(Around { p: t.map(|y| self.pos(y)), moved, normal: self.faces[f as usize].normal });
+            }
+        }
+    }
+
+    /// Face shape for one candidate of the edge (u, v) whose faces around u and v, other than
+    /// the edge's own, are `around_u` and `around_v`: no flip beyond the bound, no degenerate or
+    /// new sliver face.
+    fn shapes_ok(&self, u: u32, c: &Candidate, around_u: &[Around], around_v: &[Around]) -> bool {
+        let (at_r, at_k) = if c.remove == u { (around_u, around_v) } else { (around_v, around_u) };
+        if !at_r.iter().all(|a| self.shape_ok(a, c.pos)) {
+            return false;
+        }
+        c.pos == self.pos(c.keep) || at_k.iter().all(|a| self.shape_ok(a, c.pos))
+    }
+
+    /// Whether face `a` with its moving corner at `to` keeps its orientation and shape.
+    fn shape_ok(&self, a: &Around, to: DVec3) -> bool {
+        let old = a.p;
+        let mut new = old;
+        new[a.moved] = to;
         let n_old = (old[1] - old[0]).cross(old[2] - old[0]);
         let n_new = (new[1] - new[0]).cross(new[2] - new[0]);
         let len_new = n_new.length();
@@ -942,7 +970,7 @@ impl State {
         if q_new <= 1e-6 || (q_new < self.min_quality && q_new < quality(&old, n_old.length())) {
             return false;
         }
-        let n_input = self.faces[f as usize].normal.as_dvec3();
+        let n_input = a.normal.as_dvec3();
         n_input == DVec3::ZERO || n_input.dot(n_new) >= self.cos_turn * len_new
     }
 
