@@ -8,7 +8,7 @@
 //! (each end's quadric over its own face area, so that a small spike is not hidden by a large
 //! neighbour).
 //!
-//! Collapses run cheapest first, in passes over a binary heap with lazy invalidation: a collapse
+//! Collapses run cheapest first, in passes over a sorted queue with lazy invalidation: a collapse
 //! bumps the version counters of its two vertices, which makes their other queued edges stale, and
 //! the survivor's edges are ranked again for the next pass (see `State::run`). Data are flat arrays:
 //! per-vertex records and quadrics, vertex ids per face, and per-vertex face lists in one arena.
@@ -45,6 +45,7 @@
 use crate::mesh::{Mesh, VertexFaces, NO_FACE};
 use glam::{DVec3, Vec2, Vec3};
 use std::cmp::Reverse;
+use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
 /// How far to simplify and which collapses to allow.
@@ -325,7 +326,7 @@ struct State {
     colors: Vec<[u8; 4]>,
     stamp: u32,
     /// Entries of the current pass (see `entry`), in a vector while it is filled.
-    entries: Vec<Reverse<u128>>,
+    entries: Vec<u128>,
     faces_left: usize,
     error_sq: f64,
     cos_turn: f64,
@@ -749,7 +750,7 @@ impl State {
             }
             if let Some(key) = self.key(v, y, &e) {
                 let versions = self.versions(v, y);
-                self.entries.push(Reverse(entry(key, [v, y, versions])));
+                self.entries.push(entry(key, [v, y, versions]));
             }
         }
         self.scratch_fans = fans;
@@ -757,7 +758,8 @@ impl State {
     }
 
     /// Passes of collapses, cheapest first, until the target, the error limit, or no legal
-    /// collapse is left. Each pass heaps the queued edges and pops them; a collapse makes the
+    /// collapse is left. Each pass sorts the queued edges (in parallel) and takes them in order,
+    /// merged with a small heap of the edges it re-ranks upwards; a collapse makes the
     /// entries of its two vertices stale, and the edges of the survivor are ranked again for the
     /// next pass, together with the entries the pass did not reach. A pass ends once its keys
     /// exceed 1.5× the key of the edge that would reach the target if every collapse succeeded
@@ -792,31 +794,43 @@ impl State {
             }
             let goal = self.faces_left - opts.target_faces;
             let nth = (goal / 2).min(self.entries.len() - 1);
-            let goal_key = 1.5 * entry_key(self.entries.select_nth_unstable_by_key(nth, |e| e.0).1 .0);
-            // Heap only the entries the pass will likely reach; the rest joins if it gets there.
+            let goal_key = 1.5 * entry_key(*self.entries.select_nth_unstable(nth).1);
+            // Sort only the entries the pass will likely reach; the rest joins if it gets there.
             let mut split = nth + 1;
             for j in split..self.entries.len() {
-                if entry_key(self.entries[j].0) <= goal_key {
+                if entry_key(self.entries[j]) <= goal_key {
                     self.entries.swap(split, j);
                     split += 1;
                 }
             }
             let mut rest = self.entries.split_off(split);
-            let mut queue = BinaryHeap::from(std::mem::take(&mut self.entries));
+            // The queue: `sorted[next..]` merged with a small heap of re-ranked edges.
+            let mut sorted = std::mem::take(&mut self.entries);
+            sorted.par_sort_unstable();
+            let mut next = 0;
+            let mut pushed = BinaryHeap::new();
             let before = self.faces_left;
             loop {
-                let Some(Reverse(e)) = queue.pop() else {
-                    if rest.is_empty() {
-                        break;
+                let e = match (sorted.get(next), pushed.peek()) {
+                    (Some(&a), Some(&Reverse(b))) if b < a => pushed.pop().map_or(b, |r| r.0),
+                    (Some(&a), _) => {
+                        next += 1;
+                        a
                     }
-                    queue.extend(rest.drain(..));
-                    continue;
+                    (None, Some(&Reverse(b))) => pushed.pop().map_or(b, |r| r.0),
+                    (None, None) if rest.is_empty() => break,
+                    (None, None) => {
+                        sorted = std::mem::take(&mut rest);
+                        sorted.par_sort_unstable();
+                        next = 0;
+                        continue;
+                    }
                 };
                 if self.faces_left <= opts.target_faces {
                     return;
                 }
                 if entry_key(e) > goal_key && 6 * (before - self.faces_left) > goal {
-                    queue.push(Reverse(e));
+                    pushed.push(Reverse(e));
                     break;
                 }
                 let [u, v, versions] = entry_edge(e);
@@ -836,7 +850,7 @@ impl State {
                 };
                 match found {
                     // Cheaper candidates were illegal: rank the edge by the legal one.
-                    Some(&c) if c.cost as f32 > entry_key(e) => queue.push(Reverse(entry(c.cost, [u, v, versions]))),
+                    Some(&c) if c.cost as f32 > entry_key(e) => pushed.push(Reverse(entry(c.cost, [u, v, versions]))),
                     Some(&c) => {
                         self.collapse(&plan.e, c);
                         if !std::mem::replace(&mut changed[c.keep as usize], true) {
@@ -848,24 +862,26 @@ impl State {
                             }
                         }
                     }
-                    None => retry.push(Reverse(e)),
+                    None => retry.push(e),
                 }
             }
             if self.faces_left < before {
                 revived = false;
             }
-            let mut entries = queue.into_vec();
+            sorted.drain(..next);
+            let mut entries = sorted;
+            entries.extend(pushed.into_iter().map(|r| r.0));
             entries.append(&mut rest);
             for e in retry.drain(..) {
-                let [u, v, _] = entry_edge(e.0);
+                let [u, v, _] = entry_edge(e);
                 if touched[u as usize] == pass || touched[v as usize] == pass {
                     entries.push(e);
                 } else {
                     blocked.push(e);
                 }
             }
-            let current = |e: &Reverse<u128>| {
-                let [u, v, versions] = entry_edge(e.0);
+            let current = |&e: &u128| {
+                let [u, v, versions] = entry_edge(e);
                 self.versions(u, v) == versions
             };
             entries.retain(current);
