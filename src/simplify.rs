@@ -332,8 +332,6 @@ struct State {
     cos_turn: f64,
     min_quality: f64,
     scratch_edges: Vec<u64>,
-    scratch_fans: Vec<(u32, EdgeFaces)>,
-    scratch_ends: Vec<(u32, u32, u32)>,
     scratch_r: Vec<u32>,
     scratch_k: Vec<u32>,
 }
@@ -384,8 +382,6 @@ impl State {
             cos_turn: 1.0,
             min_quality: 0.0,
             scratch_edges: Vec::new(),
-            scratch_fans: Vec::new(),
-            scratch_ends: Vec::new(),
             scratch_r: Vec::new(),
             scratch_k: Vec::new(),
         }
@@ -571,7 +567,15 @@ impl State {
             return self.verts[v as usize].kind;
         }
         let mut edges = std::mem::take(&mut self.scratch_edges);
-        self.edges_around(v, &mut edges);
+        let kind = self.compute_kind(v, &mut edges);
+        self.scratch_edges = edges;
+        self.verts[v as usize].kind = kind;
+        kind
+    }
+
+    /// The kind of `v` from its current faces; `edges` is scratch.
+    fn compute_kind(&self, v: u32, edges: &mut Vec<u64>) -> Kind {
+        self.edges_around(v, edges);
         let mut features = 0;
         let mut manifold = true;
         for run in edges.chunk_by(|a, b| a >> 32 == b >> 32) {
@@ -586,14 +590,11 @@ impl State {
                 _ => manifold = false,
             }
         }
-        self.scratch_edges = edges;
-        let kind = match features {
+        match features {
             0 if manifold => Kind::Free,
             2 if manifold => Kind::Line,
             _ => Kind::Corner,
-        };
-        self.verts[v as usize].kind = kind;
-        kind
+        }
     }
 
     fn edge_faces(&self, u: u32, v: u32) -> Option<EdgeFaces> {
@@ -618,6 +619,11 @@ impl State {
             return Allowed::Nothing;
         }
         let (ku, kv) = (self.kind(u), self.kind(v));
+        self.allowed_kinds(u, v, e, ku, kv)
+    }
+
+    /// `allowed` for two unlocked ends of kinds `ku` and `kv`.
+    fn allowed_kinds(&self, u: u32, v: u32, e: &EdgeFaces, ku: Kind, kv: Kind) -> Allowed {
         if ku == Kind::Free && kv == Kind::Free {
             return Allowed::Anywhere;
         }
@@ -642,8 +648,10 @@ impl State {
 
     /// The ordering key of the best collapse of edge (u, v) the rules allow, to queue it: at the
     /// optimum of the summed quadric when there is one, else the cheapest of ends and midpoint.
-    fn key(&mut self, u: u32, v: u32, e: &EdgeFaces) -> Option<f64> {
-        let allowed = self.allowed(u, v, e);
+    /// Both ends' kinds must be known (see `rank`).
+    fn key(&self, u: u32, v: u32, e: &EdgeFaces) -> Option<f64> {
+        let (xu, xv) = (&self.verts[u as usize], &self.verts[v as usize]);
+        let allowed = if xu.locked || xv.locked { Allowed::Nothing } else { self.allowed_kinds(u, v, e, xu.kind, xv.kind) };
         let (pu, pv) = (self.pos(u), self.pos(v));
         let (qu, qv) = (&self.quadrics[u as usize], &self.quadrics[v as usize]);
         let cost = |p: DVec3| (qu.eval(p) / qu.area.max(f64::MIN_POSITIVE)).max(qv.eval(p) / qv.area.max(f64::MIN_POSITIVE));
@@ -738,23 +746,56 @@ impl State {
         }
     }
 
-    /// Queue the edges (v, y) with y above v or, given `changed`, with y not changed (a changed
-    /// y queues its own): every edge once.
-    fn queue_edges(&mut self, v: u32, changed: Option<&[bool]>) {
-        let mut fans = std::mem::take(&mut self.scratch_fans);
-        let mut ends = std::mem::take(&mut self.scratch_ends);
-        self.edge_fans(v, &mut fans, &mut ends);
-        for &(y, e) in &fans {
-            if y < v && changed.is_none_or(|c| c[y as usize]) {
+    /// Queue the edges of the vertices `vs`, ranked in parallel: for each v, the edges (v, y)
+    /// with y above v or, given `changed`, with y not changed (a changed y queues its own), so
+    /// every edge once. The unknown kinds of their unlocked ends are computed first (in
+    /// parallel too) and cached, as ranking them one by one would.
+    fn rank(&mut self, vs: &[u32], changed: Option<&[bool]>) {
+        let mut unknown = Vec::new();
+        for &v in vs {
+            if self.verts[v as usize].locked {
                 continue;
             }
-            if let Some(key) = self.key(v, y, &e) {
-                let versions = self.versions(v, y);
-                self.entries.push(entry(key, [v, y, versions]));
+            for &f in self.faces_of(v) {
+                for y in self.tri(f) {
+                    if y != v && !self.verts[y as usize].locked {
+                        unknown.extend([v, y].into_iter().filter(|&w| self.verts[w as usize].kind == Kind::Unknown));
+                    }
+                }
             }
         }
-        self.scratch_fans = fans;
-        self.scratch_ends = ends;
+        unknown.sort_unstable();
+        unknown.dedup();
+        let this = &*self;
+        let kinds: Vec<Kind> = unknown.par_iter().map_init(Vec::new, |edges, &w| this.compute_kind(w, edges)).collect();
+        for (&w, kind) in unknown.iter().zip(kinds) {
+            self.verts[w as usize].kind = kind;
+        }
+        let this = &*self;
+        let ranked: Vec<Vec<u128>> = vs
+            .par_chunks(256)
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(fans, ends), chunk| {
+                    let mut out = Vec::new();
+                    for &v in chunk {
+                        this.edge_fans(v, fans, ends);
+                        for &(y, e) in fans.iter() {
+                            if y < v && changed.is_none_or(|c| c[y as usize]) {
+                                continue;
+                            }
+                            if let Some(key) = this.key(v, y, &e) {
+                                out.push(entry(key, [v, y, this.versions(v, y)]));
+                            }
+                        }
+                    }
+                    out
+                },
+            )
+            .collect();
+        for r in ranked {
+            self.entries.extend_from_slice(&r);
+        }
     }
 
     /// Passes of collapses, cheapest first, until the target, the error limit, or no legal
@@ -776,11 +817,8 @@ impl State {
         let (mut around_u, mut around_v) = (Vec::new(), Vec::new());
         let mut revived = false;
         self.entries.clear();
-        for v in 0..self.verts.len() as u32 {
-            if !self.verts[v as usize].locked {
-                self.queue_edges(v, None);
-            }
-        }
+        let all: Vec<u32> = (0..self.verts.len() as u32).filter(|&v| !self.verts[v as usize].locked).collect();
+        self.rank(&all, None);
         for pass in 1u32.. {
             if self.faces_left <= opts.target_faces {
                 return;
@@ -887,9 +925,7 @@ impl State {
             entries.retain(current);
             blocked.retain(current);
             self.entries = entries;
-            for &k in &survivors {
-                self.queue_edges(k, Some(&changed));
-            }
+            self.rank(&survivors, Some(&changed));
             for k in survivors.drain(..) {
                 changed[k as usize] = false;
             }
