@@ -276,8 +276,6 @@ struct Vertex {
     /// Its faces: `face_lists[start..start + len]`.
     start: u32,
     len: u32,
-    /// Scratch stamp for neighbourhood scans.
-    mark: u32,
     /// Cached classification, `Unknown` when it must be recomputed.
     kind: Kind,
     /// Never collapsed: non-manifold, unused or removed.
@@ -306,6 +304,20 @@ struct Around {
 
 const DEAD: u32 = u32::MAX;
 
+/// A hint to start fetching `x` into the cache, for data the queue will soon need; none off x86_64.
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint: it never faults, reads nothing into the program and
+    // writes nothing; the pointer comes from a live reference anyway.
+    #[allow(unused_unsafe)]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 struct State {
     verts: Vec<Vertex>,
     quadrics: Vec<Quadric>,
@@ -324,7 +336,6 @@ struct State {
     normals: Vec<Vec3>,
     uvs: Vec<Vec2>,
     colors: Vec<[u8; 4]>,
-    stamp: u32,
     /// Entries of the current pass (see `entry`), in a vector while it is filled.
     entries: Vec<u128>,
     faces_left: usize,
@@ -348,7 +359,6 @@ impl State {
                 pos,
                 start: w[0],
                 len: w[1] - w[0],
-                mark: 0,
                 kind: Kind::Unknown,
                 locked: false,
             })
@@ -375,7 +385,6 @@ impl State {
             normals: mesh.normals.clone(),
             uvs: mesh.uvs.clone(),
             colors: mesh.colors.clone(),
-            stamp: 0,
             entries: Vec::new(),
             faces_left: nf,
             error_sq: 0.0,
@@ -648,10 +657,9 @@ impl State {
 
     /// The ordering key of the best collapse of edge (u, v) the rules allow, to queue it: at the
     /// optimum of the summed quadric when there is one, else the cheapest of ends and midpoint.
-    /// Both ends' kinds must be known (see `rank`).
-    fn key(&self, u: u32, v: u32, e: &EdgeFaces) -> Option<f64> {
-        let (xu, xv) = (&self.verts[u as usize], &self.verts[v as usize]);
-        let allowed = if xu.locked || xv.locked { Allowed::Nothing } else { self.allowed_kinds(u, v, e, xu.kind, xv.kind) };
+    /// Both ends are unlocked, of kinds `ku` and `kv`.
+    fn key(&self, u: u32, v: u32, e: &EdgeFaces, ku: Kind, kv: Kind) -> Option<f64> {
+        let allowed = self.allowed_kinds(u, v, e, ku, kv);
         let (pu, pv) = (self.pos(u), self.pos(v));
         let (qu, qv) = (&self.quadrics[u as usize], &self.quadrics[v as usize]);
         let cost = |p: DVec3| (qu.eval(p) / qu.area.max(f64::MIN_POSITIVE)).max(qv.eval(p) / qv.area.max(f64::MIN_POSITIVE));
@@ -719,6 +727,25 @@ impl State {
         true
     }
 
+    /// Start fetching the vertex records and versions of a queued edge's ends.
+    fn prefetch_ends(&self, e: u128) {
+        let [u, v, _] = entry_edge(e);
+        for w in [u as usize, v as usize] {
+            prefetch(&self.verts[w]);
+            prefetch(&self.version[w]);
+        }
+    }
+
+    /// Start fetching the face lists of a queued edge's ends (their records fetched earlier).
+    fn prefetch_faces(&self, e: u128) {
+        let [u, v, _] = entry_edge(e);
+        for w in [u, v] {
+            if let Some(f) = self.face_lists.get(self.verts[w as usize].start as usize) {
+                prefetch(f);
+            }
+        }
+    }
+
     fn versions(&self, u: u32, v: u32) -> u32 {
         self.version[u as usize].wrapping_add(self.version[v as usize])
     }
@@ -748,53 +775,51 @@ impl State {
 
     /// Queue the edges of the vertices `vs`, ranked in parallel: for each v, the edges (v, y)
     /// with y above v or, given `changed`, with y not changed (a changed y queues its own), so
-    /// every edge once. The unknown kinds of their unlocked ends are computed first (in
-    /// parallel too) and cached, as ranking them one by one would.
+    /// every edge once. Ends of unknown kind get it computed and cached, as ranking the edges one
+    /// by one would: ranking changes nothing else, so the order of ranking does not matter.
     fn rank(&mut self, vs: &[u32], changed: Option<&[bool]>) {
-        let mut unknown = Vec::new();
-        for &v in vs {
-            if self.verts[v as usize].locked {
-                continue;
-            }
-            for &f in self.faces_of(v) {
-                for y in self.tri(f) {
-                    if y != v && !self.verts[y as usize].locked {
-                        unknown.extend([v, y].into_iter().filter(|&w| self.verts[w as usize].kind == Kind::Unknown));
-                    }
-                }
-            }
-        }
-        unknown.sort_unstable();
-        unknown.dedup();
         let this = &*self;
-        let kinds: Vec<Kind> = unknown.par_iter().map_init(Vec::new, |edges, &w| this.compute_kind(w, edges)).collect();
-        for (&w, kind) in unknown.iter().zip(kinds) {
-            self.verts[w as usize].kind = kind;
-        }
-        let this = &*self;
-        let ranked: Vec<Vec<u128>> = vs
+        let ranked: Vec<(Vec<u128>, Vec<(u32, Kind)>)> = vs
             .par_chunks(256)
             .map_init(
-                || (Vec::new(), Vec::new()),
-                |(fans, ends), chunk| {
-                    let mut out = Vec::new();
+                || (Vec::new(), Vec::new(), Vec::new()),
+                |(fans, ends, edges), chunk| {
+                    let (mut out, mut found) = (Vec::new(), Vec::<(u32, Kind)>::new());
+                    let mut kind = |w: u32| match this.verts[w as usize].kind {
+                        Kind::Unknown => match found.iter().find(|f| f.0 == w) {
+                            Some(&(_, k)) => k,
+                            None => {
+                                let k = this.compute_kind(w, edges);
+                                found.push((w, k));
+                                k
+                            }
+                        },
+                        k => k,
+                    };
                     for &v in chunk {
+                        if this.verts[v as usize].locked {
+                            continue;
+                        }
                         this.edge_fans(v, fans, ends);
                         for &(y, e) in fans.iter() {
-                            if y < v && changed.is_none_or(|c| c[y as usize]) {
+                            if y < v && changed.is_none_or(|c| c[y as usize]) || this.verts[y as usize].locked {
                                 continue;
                             }
-                            if let Some(key) = this.key(v, y, &e) {
+                            let (kv, ky) = (kind(v), kind(y));
+                            if let Some(key) = this.key(v, y, &e, kv, ky) {
                                 out.push(entry(key, [v, y, this.versions(v, y)]));
                             }
                         }
                     }
-                    out
+                    (out, found)
                 },
             )
             .collect();
-        for r in ranked {
-            self.entries.extend_from_slice(&r);
+        for (out, found) in ranked {
+            self.entries.extend_from_slice(&out);
+            for (w, k) in found {
+                self.verts[w as usize].kind = k;
+            }
         }
     }
 
@@ -814,7 +839,7 @@ impl State {
         let mut touched = vec![0u32; self.verts.len()];
         let (mut survivors, mut retry, mut blocked) = (Vec::new(), Vec::new(), Vec::new());
         let mut plan = Plan::EMPTY;
-        let (mut around_u, mut around_v) = (Vec::new(), Vec::new());
+        let (mut around_u, mut around_v, mut link) = (Vec::new(), Vec::new(), Vec::new());
         let mut revived = false;
         self.entries.clear();
         let all: Vec<u32> = (0..self.verts.len() as u32).filter(|&v| !self.verts[v as usize].locked).collect();
@@ -852,6 +877,12 @@ impl State {
                 let e = match (sorted.get(next), pushed.peek()) {
                     (Some(&a), Some(&Reverse(b))) if b < a => pushed.pop().map_or(b, |r| r.0),
                     (Some(&a), _) => {
+                        if let Some(&far) = sorted.get(next + 8) {
+                            self.prefetch_ends(far);
+                        }
+                        if let Some(&near) = sorted.get(next + 4) {
+                            self.prefetch_faces(near);
+                        }
                         next += 1;
                         a
                     }
@@ -879,7 +910,7 @@ impl State {
                 if !self.plan(u, v, edge, &mut plan) {
                     continue;
                 }
-                let found = if plan.c[..plan.n].iter().any(|c| c.error_sq <= limit) && self.topology_ok(u, v, &plan.e) {
+                let found = if plan.c[..plan.n].iter().any(|c| c.error_sq <= limit) && self.topology_ok(u, v, &plan.e, &mut link) {
                     self.gather(u, &plan.e, &mut around_u);
                     self.gather(v, &plan.e, &mut around_v);
                     plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.shapes_ok(u, c, &around_u, &around_v))
@@ -934,29 +965,25 @@ impl State {
 
     /// Link condition and group survival for collapsing edge (u, v) with faces `e`. Both are
     /// symmetric in the two ends, so they hold for every candidate of the edge or for none.
-    fn topology_ok(&mut self, u: u32, v: u32, e: &EdgeFaces) -> bool {
+    fn topology_ok(&self, u: u32, v: u32, e: &EdgeFaces, around: &mut Vec<u32>) -> bool {
         let (x0, x1) = (e.x[0], if e.n == 2 { e.x[1] } else { e.x[0] });
         // Link condition: the common neighbours of u and v are exactly the opposite vertices.
-        self.stamp += 2;
-        let s = self.stamp;
-        for i in 0..self.verts[u as usize].len as usize {
-            for y in self.tri(self.face_of(u, i)) {
-                self.verts[y as usize].mark = s;
-            }
+        around.clear();
+        for &f in self.faces_of(u) {
+            around.extend(self.tri(f));
         }
-        let mut common = 0;
-        for i in 0..self.verts[v as usize].len as usize {
-            for y in self.tri(self.face_of(v, i)) {
-                if y != v && y != u && self.verts[y as usize].mark == s {
+        let mut seen = [false; 2];
+        for &f in self.faces_of(v) {
+            for y in self.tri(f) {
+                if y != v && y != u && around.contains(&y) {
                     if y != x0 && y != x1 {
                         return false;
                     }
-                    self.verts[y as usize].mark = s + 1;
-                    common += 1;
+                    seen[usize::from(y != x0)] = true;
                 }
             }
         }
-        if common != e.n {
+        if usize::from(seen[0]) + usize::from(seen[1]) != e.n {
             return false;
         }
         if e.n == 2 {
