@@ -282,12 +282,13 @@ struct Vertex {
     locked: bool,
 }
 
-/// What the checks need of a face besides its vertices.
+/// A face: its vertices and what the checks need with them, in one 32-byte record so that a
+/// face costs one cache line at most.
 #[derive(Clone, Copy, Debug)]
+#[repr(align(32))]
 struct Face {
-    /// Per corner: the first corner of the vertex with the same attributes, material and group
-    /// (kept consistent as corners move), so corners of one vertex compare by one integer.
-    wedge: [u32; 3],
+    /// Its vertices, `DEAD` once collapsed away.
+    v: [u32; 3],
     group: u32,
     /// Unit normal in the input: turns are measured from it, so they cannot add up.
     normal: Vec3,
@@ -323,12 +324,13 @@ struct State {
     quadrics: Vec<Quadric>,
     /// Per vertex, the largest squared error estimate of the collapses merged into it.
     err_sq: Vec<f64>,
-    /// The vertices of each face, `DEAD` once collapsed away.
-    tris: Vec<[u32; 3]>,
+    faces: Vec<Face>,
+    /// Per corner: the first corner of the vertex with the same attributes, material and group
+    /// (kept consistent as corners move), so corners of one vertex compare by one integer.
+    wedges: Vec<[u32; 3]>,
     /// Per vertex, bumped whenever it changes; invalidates its queue entries. Kept apart from
     /// `verts` so that checking an entry touches a small array.
     version: Vec<u32>,
-    faces: Vec<Face>,
     /// The per-vertex face lists; a list that changes is appended, the arena compacted now and then.
     face_lists: Vec<u32>,
     compact_at: usize,
@@ -363,19 +365,12 @@ impl State {
                 locked: false,
             })
             .collect();
-        let faces = mesh
-            .triangles
-            .iter()
-            .enumerate()
-            .map(|(f, _)| {
-                let c = 3 * f as u32;
-                Face { wedge: [c, c + 1, c + 2], group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }
-            })
-            .collect();
+        let faces = mesh.triangles.iter().enumerate().map(|(f, &v)| Face { v, group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }).collect();
+        let wedges = (0..3 * nf as u32).step_by(3).map(|c| [c, c + 1, c + 2]).collect();
         State {
             quadrics: vec![Quadric::default(); mesh.positions.len()],
             err_sq: vec![0.0; mesh.positions.len()],
-            tris: mesh.triangles.clone(),
+            wedges,
             version: vec![0; mesh.positions.len()],
             verts,
             faces,
@@ -407,7 +402,7 @@ impl State {
     }
 
     fn tri(&self, f: u32) -> [u32; 3] {
-        self.tris[f as usize]
+        self.faces[f as usize].v
     }
 
     fn pos(&self, v: u32) -> DVec3 {
@@ -421,7 +416,7 @@ impl State {
     }
 
     fn wedge(&self, c: usize) -> u32 {
-        self.faces[c / 3].wedge[c % 3]
+        self.wedges[c / 3][c % 3]
     }
 
     /// Wedge ids, face planes, border and seam planes, locks and kinds. Locks unused vertices,
@@ -435,13 +430,13 @@ impl State {
             for i in 0..self.verts[v as usize].len as usize {
                 let c = self.corner(self.face_of(v, i), v);
                 match reps.iter().find(|&&r| self.same_attributes(r, c)) {
-                    Some(&r) => self.faces[c / 3].wedge[c % 3] = self.wedge(r),
+                    Some(&r) => self.wedges[c / 3][c % 3] = self.wedge(r),
                     None => reps.push(c),
                 }
             }
         }
         for f in 0..self.faces.len() {
-            let t = self.tris[f];
+            let t = self.faces[f].v;
             let [a, b, c] = t.map(|v| self.pos(v));
             let cross = (b - a).cross(c - a);
             let len = cross.length();
@@ -1054,7 +1049,7 @@ impl State {
     }
 
     fn copy_corner(&mut self, from: usize, to: usize) {
-        self.faces[to / 3].wedge[to % 3] = self.wedge(from);
+        self.wedges[to / 3][to % 3] = self.wedge(from);
         if !self.normals.is_empty() {
             self.normals[to] = self.normals[from];
         }
@@ -1116,11 +1111,11 @@ impl State {
         }
 
         for &f in &e.f[..e.n] {
-            self.tris[f as usize] = [DEAD; 3];
+            self.faces[f as usize].v = [DEAD; 3];
         }
         self.faces_left -= e.n;
         for &f in &rf {
-            for v in &mut self.tris[f as usize] {
+            for v in &mut self.faces[f as usize].v {
                 if *v == r {
                     *v = k;
                 }
@@ -1200,10 +1195,10 @@ impl State {
     }
 
     fn finish(self, mesh: &Mesh, with_groups: bool) -> Simplified {
-        let alive: Vec<usize> = (0..self.tris.len()).filter(|&f| self.tris[f][0] != DEAD).collect();
+        let alive: Vec<usize> = (0..self.faces.len()).filter(|&f| self.faces[f].v[0] != DEAD).collect();
         let mut used = vec![false; self.verts.len()];
         for &f in &alive {
-            for v in self.tris[f] {
+            for v in self.faces[f].v {
                 used[v as usize] = true;
             }
         }
@@ -1226,7 +1221,7 @@ impl State {
         }
         let mut out = Mesh {
             positions,
-            triangles: alive.iter().map(|&f| self.tris[f].map(|v| remap[v as usize])).collect(),
+            triangles: alive.iter().map(|&f| self.faces[f].v.map(|v| remap[v as usize])).collect(),
             normals: corners(&self.normals, &alive),
             uvs: corners(&self.uvs, &alive),
             colors: corners(&self.colors, &alive),
