@@ -722,12 +722,21 @@ impl State {
         true
     }
 
+    /// Start fetching what ranking an edge needs of its end `w`: record, version and quadric.
+    fn prefetch_vertex(&self, w: u32) {
+        let w = w as usize;
+        prefetch(&self.verts[w]);
+        prefetch(&self.version[w]);
+        let q = &self.quadrics[w];
+        prefetch(&q.a[0]);
+        prefetch(&q.area);
+    }
+
     /// Start fetching the vertex records and versions of a queued edge's ends.
     fn prefetch_ends(&self, e: u128) {
         let [u, v, _] = entry_edge(e);
-        for w in [u as usize, v as usize] {
-            prefetch(&self.verts[w]);
-            prefetch(&self.version[w]);
+        for w in [u, v] {
+            self.prefetch_vertex(w);
         }
     }
 
@@ -796,6 +805,9 @@ impl State {
                             continue;
                         }
                         this.edge_fans(v, fans, ends);
+                        for &(y, _) in fans.iter() {
+                            this.prefetch_vertex(y);
+                        }
                         for &(y, e) in fans.iter() {
                             if y < v && changed.is_none_or(|c| c[y as usize]) || this.verts[y as usize].locked {
                                 continue;
