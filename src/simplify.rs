@@ -740,13 +740,35 @@ impl State {
         }
     }
 
-    /// Start fetching the face lists of a queued edge's ends (their records fetched earlier).
-    fn prefetch_faces(&self, e: u128) {
-        let [u, v, _] = entry_edge(e);
-        for w in [u, v] {
-            if let Some(f) = self.face_lists.get(self.verts[w as usize].start as usize) {
-                prefetch(f);
+    /// Start fetching the face lists of a current queued edge's ends (records fetched earlier).
+    fn prefetch_lists(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                self.prefetch_list(w);
             }
+        }
+    }
+
+    fn prefetch_list(&self, w: u32) {
+        if let Some(f) = self.face_lists.get(self.verts[w as usize].start as usize) {
+            prefetch(f);
+        }
+    }
+
+    /// Start fetching the faces of a current queued edge's ends (lists fetched earlier).
+    fn prefetch_faces(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                self.prefetch_faces_of(w);
+            }
+        }
+    }
+
+    fn prefetch_faces_of(&self, w: u32) {
+        for &f in self.faces_of(w) {
+            prefetch(&self.faces[f as usize]);
         }
     }
 
@@ -800,7 +822,16 @@ impl State {
                         },
                         k => k,
                     };
-                    for &v in chunk {
+                    for (i, &v) in chunk.iter().enumerate() {
+                        if let Some(&w) = chunk.get(i + 4) {
+                            prefetch(&this.verts[w as usize]);
+                        }
+                        if let Some(&w) = chunk.get(i + 2) {
+                            this.prefetch_list(w);
+                        }
+                        if let Some(&w) = chunk.get(i + 1) {
+                            this.prefetch_faces_of(w);
+                        }
                         if this.verts[v as usize].locked {
                             continue;
                         }
@@ -888,7 +919,10 @@ impl State {
                             self.prefetch_ends(far);
                         }
                         if let Some(&near) = sorted.get(next + 4) {
-                            self.prefetch_faces(near);
+                            self.prefetch_lists(near);
+                        }
+                        if let Some(&nearer) = sorted.get(next + 2) {
+                            self.prefetch_faces(nearer);
                         }
                         next += 1;
                         a
