@@ -766,6 +766,31 @@ impl State {
         }
     }
 
+    /// Start fetching what checking and collapsing a current queued edge needs of the faces
+    /// around it (faces fetched earlier): their vertices' records and their corners.
+    fn prefetch_around(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                for &f in self.faces_of(w) {
+                    let f = f as usize;
+                    for y in self.faces[f].v {
+                        if let Some(x) = self.verts.get(y as usize) {
+                            prefetch(x);
+                        }
+                    }
+                    prefetch(&self.wedges[f]);
+                    if let Some(n) = self.normals.get(3 * f) {
+                        prefetch(n);
+                    }
+                    if let Some(uv) = self.uvs.get(3 * f) {
+                        prefetch(uv);
+                    }
+                }
+            }
+        }
+    }
+
     fn prefetch_faces_of(&self, w: u32) {
         for &f in self.faces_of(w) {
             prefetch(&self.faces[f as usize]);
@@ -923,6 +948,9 @@ impl State {
                         }
                         if let Some(&nearer) = sorted.get(next + 2) {
                             self.prefetch_faces(nearer);
+                        }
+                        if let Some(&following) = sorted.get(next + 1) {
+                            self.prefetch_around(following);
                         }
                         next += 1;
                         a
