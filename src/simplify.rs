@@ -791,6 +791,20 @@ impl State {
         }
     }
 
+    /// Start fetching the face lists of the vertices opposite a current queued edge, which its
+    /// collapse edits (their records fetched earlier).
+    fn prefetch_opposite(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for &f in self.faces_of(u) {
+                let t = self.tri(f);
+                if t.contains(&v) {
+                    self.prefetch_list(t[0] ^ t[1] ^ t[2] ^ u ^ v);
+                }
+            }
+        }
+    }
+
     fn prefetch_faces_of(&self, w: u32) {
         for &f in self.faces_of(w) {
             prefetch(&self.faces[f as usize]);
@@ -940,17 +954,21 @@ impl State {
                 let e = match (sorted.get(next), pushed.peek()) {
                     (Some(&a), Some(&Reverse(b))) if b < a => pushed.pop().map_or(b, |r| r.0),
                     (Some(&a), _) => {
-                        if let Some(&far) = sorted.get(next + 8) {
-                            self.prefetch_ends(far);
+                        // Each step fetches what the next needs, for entries ever closer.
+                        if let Some(&e) = sorted.get(next + 12) {
+                            self.prefetch_ends(e);
                         }
-                        if let Some(&near) = sorted.get(next + 4) {
-                            self.prefetch_lists(near);
+                        if let Some(&e) = sorted.get(next + 8) {
+                            self.prefetch_lists(e);
                         }
-                        if let Some(&nearer) = sorted.get(next + 2) {
-                            self.prefetch_faces(nearer);
+                        if let Some(&e) = sorted.get(next + 5) {
+                            self.prefetch_faces(e);
                         }
-                        if let Some(&following) = sorted.get(next + 1) {
-                            self.prefetch_around(following);
+                        if let Some(&e) = sorted.get(next + 3) {
+                            self.prefetch_around(e);
+                        }
+                        if let Some(&e) = sorted.get(next + 1) {
+                            self.prefetch_opposite(e);
                         }
                         next += 1;
                         a
