@@ -732,11 +732,12 @@ impl State {
         prefetch(&q.area);
     }
 
-    /// Start fetching the vertex records and versions of a queued edge's ends.
+    /// Start fetching what planning a queued edge needs of its ends.
     fn prefetch_ends(&self, e: u128) {
         let [u, v, _] = entry_edge(e);
         for w in [u, v] {
             self.prefetch_vertex(w);
+            prefetch(&self.err_sq[w as usize]);
         }
     }
 
