@@ -863,22 +863,26 @@ impl State {
                         k => k,
                     };
                     for (i, &v) in chunk.iter().enumerate() {
-                        if let Some(&w) = chunk.get(i + 4) {
+                        if let Some(&w) = chunk.get(i + 8) {
                             prefetch(&this.verts[w as usize]);
                         }
-                        if let Some(&w) = chunk.get(i + 2) {
+                        if let Some(&w) = chunk.get(i + 6) {
                             this.prefetch_list(w);
                         }
-                        if let Some(&w) = chunk.get(i + 1) {
+                        if let Some(&w) = chunk.get(i + 4) {
                             this.prefetch_faces_of(w);
+                        }
+                        if let Some(&w) = chunk.get(i + 2) {
+                            for &f in this.faces_of(w) {
+                                for y in this.tri(f) {
+                                    this.prefetch_vertex(y);
+                                }
+                            }
                         }
                         if this.verts[v as usize].locked {
                             continue;
                         }
                         this.edge_fans(v, fans, ends);
-                        for &(y, _) in fans.iter() {
-                            this.prefetch_vertex(y);
-                        }
                         for &(y, e) in fans.iter() {
                             if y < v && changed.is_none_or(|c| c[y as usize]) || this.verts[y as usize].locked {
                                 continue;
@@ -1044,6 +1048,8 @@ impl State {
             entries.retain(current);
             blocked.retain(current);
             self.entries = entries;
+            // In id order, neighbouring survivors share cache lines.
+            survivors.sort_unstable();
             self.rank(&survivors, Some(&changed));
             for k in survivors.drain(..) {
                 changed[k as usize] = false;
