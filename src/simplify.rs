@@ -845,7 +845,9 @@ impl State {
     /// by one would: ranking changes nothing else, so the order of ranking does not matter.
     fn rank(&mut self, vs: &[u32], changed: Option<&[bool]>) {
         let this = &*self;
-        let ranked: Vec<(Vec<u128>, Vec<(u32, Kind)>)> = vs
+        // Per chunk: its entries, and the kinds it found.
+        type Ranked = (Vec<u128>, Vec<(u32, Kind)>);
+        let ranked: Vec<Ranked> = vs
             .par_chunks(256)
             .map_init(
                 || (Vec::new(), Vec::new(), Vec::new()),
