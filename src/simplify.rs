@@ -8,7 +8,7 @@
 //! (each end's quadric over its own face area, so that a small spike is not hidden by a large
 //! neighbour).
 //!
-//! Collapses run cheapest first, in passes over a binary heap with lazy invalidation: a collapse
+//! Collapses run cheapest first, in passes over a sorted queue with lazy invalidation: a collapse
 //! bumps the version counters of its two vertices, which makes their other queued edges stale, and
 //! the survivor's edges are ranked again for the next pass (see `State::run`). Data are flat arrays:
 //! per-vertex records and quadrics, vertex ids per face, and per-vertex face lists in one arena.
@@ -51,6 +51,7 @@
 use crate::mesh::{Mesh, VertexFaces, NO_FACE};
 use glam::{DVec3, Vec2, Vec3};
 use std::cmp::Reverse;
+use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
 /// How far to simplify and which collapses to allow.
@@ -299,38 +300,61 @@ struct Vertex {
     /// Its faces: `face_lists[start..start + len]`.
     start: u32,
     len: u32,
-    /// Scratch stamp for neighbourhood scans.
-    mark: u32,
     /// Cached classification, `Unknown` when it must be recomputed.
     kind: Kind,
     /// Never collapsed: non-manifold, unused or removed.
     locked: bool,
 }
 
-/// What the checks need of a face besides its vertices.
+/// A face: its vertices and what the checks need with them, in one 32-byte record so that a
+/// face costs one cache line at most.
 #[derive(Clone, Copy, Debug)]
+#[repr(align(32))]
 struct Face {
-    /// Per corner: the first corner of the vertex with the same attributes, material and group
-    /// (kept consistent as corners move), so corners of one vertex compare by one integer.
-    wedge: [u32; 3],
+    /// Its vertices, `DEAD` once collapsed away.
+    v: [u32; 3],
     group: u32,
     /// Unit normal in the input: turns are measured from it, so they cannot add up.
     normal: Vec3,
 }
 
+/// A face around an end of an edge being checked: its corner positions, which corner moves, and
+/// its input normal.
+#[derive(Clone, Copy, Debug)]
+struct Around {
+    p: [DVec3; 3],
+    moved: usize,
+    normal: Vec3,
+}
+
 const DEAD: u32 = u32::MAX;
+
+/// A hint to start fetching `x` into the cache, for data the queue will soon need; none off x86_64.
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is only a hint: it never faults, reads nothing into the program and
+    // writes nothing; the pointer comes from a live reference anyway.
+    #[allow(unused_unsafe)]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
 
 struct State {
     verts: Vec<Vertex>,
     quadrics: Vec<Quadric>,
     /// Per vertex, the largest squared error estimate of the collapses merged into it.
     err_sq: Vec<f64>,
-    /// The vertices of each face, `DEAD` once collapsed away.
-    tris: Vec<[u32; 3]>,
+    faces: Vec<Face>,
+    /// Per corner: the first corner of the vertex with the same attributes, material and group
+    /// (kept consistent as corners move), so corners of one vertex compare by one integer.
+    wedges: Vec<[u32; 3]>,
     /// Per vertex, bumped whenever it changes; invalidates its queue entries. Kept apart from
     /// `verts` so that checking an entry touches a small array.
     version: Vec<u32>,
-    faces: Vec<Face>,
     /// The per-vertex face lists; a list that changes is appended, the arena compacted now and then.
     face_lists: Vec<u32>,
     compact_at: usize,
@@ -338,16 +362,13 @@ struct State {
     normals: Vec<Vec3>,
     uvs: Vec<Vec2>,
     colors: Vec<[u8; 4]>,
-    stamp: u32,
     /// Entries of the current pass (see `entry`), in a vector while it is filled.
-    entries: Vec<Reverse<u128>>,
+    entries: Vec<u128>,
     faces_left: usize,
     error_sq: f64,
     cos_turn: f64,
     min_quality: f64,
     scratch_edges: Vec<u64>,
-    scratch_fans: Vec<(u32, EdgeFaces)>,
-    scratch_ends: Vec<(u32, u32, u32)>,
     scratch_r: Vec<u32>,
     scratch_k: Vec<u32>,
     /// Topology changes are made (see [`SimplifyOptions::topology`]); never with groups.
@@ -371,24 +392,16 @@ impl State {
                 pos,
                 start: w[0],
                 len: w[1] - w[0],
-                mark: 0,
                 kind: Kind::Unknown,
                 locked: false,
             })
             .collect();
-        let faces = mesh
-            .triangles
-            .iter()
-            .enumerate()
-            .map(|(f, _)| {
-                let c = 3 * f as u32;
-                Face { wedge: [c, c + 1, c + 2], group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }
-            })
-            .collect();
+        let faces = mesh.triangles.iter().enumerate().map(|(f, &v)| Face { v, group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }).collect();
+        let wedges = (0..3 * nf as u32).step_by(3).map(|c| [c, c + 1, c + 2]).collect();
         State {
             quadrics: vec![Quadric::default(); mesh.positions.len()],
             err_sq: vec![0.0; mesh.positions.len()],
-            tris: mesh.triangles.clone(),
+            wedges,
             version: vec![0; mesh.positions.len()],
             verts,
             faces,
@@ -398,15 +411,12 @@ impl State {
             normals: mesh.normals.clone(),
             uvs: mesh.uvs.clone(),
             colors: mesh.colors.clone(),
-            stamp: 0,
             entries: Vec::new(),
             faces_left: nf,
             error_sq: 0.0,
             cos_turn: 1.0,
             min_quality: 0.0,
             scratch_edges: Vec::new(),
-            scratch_fans: Vec::new(),
-            scratch_ends: Vec::new(),
             scratch_r: Vec::new(),
             scratch_k: Vec::new(),
             topology: false,
@@ -427,7 +437,7 @@ impl State {
     }
 
     fn tri(&self, f: u32) -> [u32; 3] {
-        self.tris[f as usize]
+        self.faces[f as usize].v
     }
 
     fn pos(&self, v: u32) -> DVec3 {
@@ -441,7 +451,7 @@ impl State {
     }
 
     fn wedge(&self, c: usize) -> u32 {
-        self.faces[c / 3].wedge[c % 3]
+        self.wedges[c / 3][c % 3]
     }
 
     /// Wedge ids, face planes, border and seam planes, locks and kinds. Locks unused vertices,
@@ -457,13 +467,13 @@ impl State {
             for i in 0..self.verts[v as usize].len as usize {
                 let c = self.corner(self.face_of(v, i), v);
                 match reps.iter().find(|&&r| self.same_attributes(r, c)) {
-                    Some(&r) => self.faces[c / 3].wedge[c % 3] = self.wedge(r),
+                    Some(&r) => self.wedges[c / 3][c % 3] = self.wedge(r),
                     None => reps.push(c),
                 }
             }
         }
         for f in 0..self.faces.len() {
-            let t = self.tris[f];
+            let t = self.faces[f].v;
             let [a, b, c] = t.map(|v| self.pos(v));
             let cross = (b - a).cross(c - a);
             let len = cross.length();
@@ -598,7 +608,15 @@ impl State {
             return self.verts[v as usize].kind;
         }
         let mut edges = std::mem::take(&mut self.scratch_edges);
-        self.edges_around(v, &mut edges);
+        let kind = self.compute_kind(v, &mut edges);
+        self.scratch_edges = edges;
+        self.verts[v as usize].kind = kind;
+        kind
+    }
+
+    /// The kind of `v` from its current faces; `edges` is scratch.
+    fn compute_kind(&self, v: u32, edges: &mut Vec<u64>) -> Kind {
+        self.edges_around(v, edges);
         let mut features = 0;
         let mut manifold = true;
         for run in edges.chunk_by(|a, b| a >> 32 == b >> 32) {
@@ -613,14 +631,11 @@ impl State {
                 _ => manifold = false,
             }
         }
-        self.scratch_edges = edges;
-        let kind = match features {
+        match features {
             0 if manifold => Kind::Free,
             2 if manifold => Kind::Line,
             _ => Kind::Corner,
-        };
-        self.verts[v as usize].kind = kind;
-        kind
+        }
     }
 
     fn edge_faces(&self, u: u32, v: u32) -> Option<EdgeFaces> {
@@ -645,6 +660,11 @@ impl State {
             return Allowed::Nothing;
         }
         let (ku, kv) = (self.kind(u), self.kind(v));
+        self.allowed_kinds(u, v, e, ku, kv)
+    }
+
+    /// `allowed` for two unlocked ends of kinds `ku` and `kv`.
+    fn allowed_kinds(&self, u: u32, v: u32, e: &EdgeFaces, ku: Kind, kv: Kind) -> Allowed {
         if ku == Kind::Free && kv == Kind::Free {
             return Allowed::Anywhere;
         }
@@ -669,8 +689,9 @@ impl State {
 
     /// The ordering key of the best collapse of edge (u, v) the rules allow, to queue it: at the
     /// optimum of the summed quadric when there is one, else the cheapest of ends and midpoint.
-    fn key(&mut self, u: u32, v: u32, e: &EdgeFaces) -> Option<f64> {
-        let allowed = self.allowed(u, v, e);
+    /// Both ends are unlocked, of kinds `ku` and `kv`.
+    fn key(&self, u: u32, v: u32, e: &EdgeFaces, ku: Kind, kv: Kind) -> Option<f64> {
+        let allowed = self.allowed_kinds(u, v, e, ku, kv);
         let (pu, pv) = (self.pos(u), self.pos(v));
         let (qu, qv) = (&self.quadrics[u as usize], &self.quadrics[v as usize]);
         let cost = |p: DVec3| (qu.eval(p) / qu.area.max(f64::MIN_POSITIVE)).max(qv.eval(p) / qv.area.max(f64::MIN_POSITIVE));
@@ -738,6 +759,96 @@ impl State {
         true
     }
 
+    /// Start fetching what ranking an edge needs of its end `w`: record, version and quadric.
+    fn prefetch_vertex(&self, w: u32) {
+        let w = w as usize;
+        prefetch(&self.verts[w]);
+        prefetch(&self.version[w]);
+        let q = &self.quadrics[w];
+        prefetch(&q.a[0]);
+        prefetch(&q.area);
+    }
+
+    /// Start fetching what planning a queued edge needs of its ends.
+    fn prefetch_ends(&self, e: u128) {
+        let [u, v, _] = entry_edge(e);
+        for w in [u, v] {
+            self.prefetch_vertex(w);
+            prefetch(&self.err_sq[w as usize]);
+        }
+    }
+
+    /// Start fetching the face lists of a current queued edge's ends (records fetched earlier).
+    fn prefetch_lists(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                self.prefetch_list(w);
+            }
+        }
+    }
+
+    fn prefetch_list(&self, w: u32) {
+        if let Some(f) = self.face_lists.get(self.verts[w as usize].start as usize) {
+            prefetch(f);
+        }
+    }
+
+    /// Start fetching the faces of a current queued edge's ends (lists fetched earlier).
+    fn prefetch_faces(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                self.prefetch_faces_of(w);
+            }
+        }
+    }
+
+    /// Start fetching what checking and collapsing a current queued edge needs of the faces
+    /// around it (faces fetched earlier): their vertices' records and their corners.
+    fn prefetch_around(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for w in [u, v] {
+                for &f in self.faces_of(w) {
+                    let f = f as usize;
+                    for y in self.faces[f].v {
+                        if let Some(x) = self.verts.get(y as usize) {
+                            prefetch(x);
+                        }
+                    }
+                    prefetch(&self.wedges[f]);
+                    if let Some(n) = self.normals.get(3 * f) {
+                        prefetch(n);
+                    }
+                    if let Some(uv) = self.uvs.get(3 * f) {
+                        prefetch(uv);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Start fetching the face lists of the vertices opposite a current queued edge, which its
+    /// collapse edits (their records fetched earlier).
+    fn prefetch_opposite(&self, e: u128) {
+        let [u, v, versions] = entry_edge(e);
+        if self.versions(u, v) == versions {
+            for &f in self.faces_of(u) {
+                let t = self.tri(f);
+                if t.contains(&v) {
+                    self.prefetch_list(t[0] ^ t[1] ^ t[2] ^ u ^ v);
+                }
+            }
+        }
+    }
+
+    fn prefetch_faces_of(&self, w: u32) {
+        for &f in self.faces_of(w) {
+            prefetch(&self.faces[f as usize]);
+        }
+    }
+
     fn versions(&self, u: u32, v: u32) -> u32 {
         self.version[u as usize].wrapping_add(self.version[v as usize])
     }
@@ -765,27 +876,77 @@ impl State {
         }
     }
 
-    /// Queue the edges (v, y) with y above v or, given `changed`, with y not changed (a changed
-    /// y queues its own): every edge once.
-    fn queue_edges(&mut self, v: u32, changed: Option<&[bool]>) {
-        let mut fans = std::mem::take(&mut self.scratch_fans);
-        let mut ends = std::mem::take(&mut self.scratch_ends);
-        self.edge_fans(v, &mut fans, &mut ends);
-        for &(y, e) in &fans {
-            if y < v && changed.is_none_or(|c| c[y as usize]) {
-                continue;
-            }
-            if let Some(key) = self.key(v, y, &e) {
-                let versions = self.versions(v, y);
-                self.entries.push(Reverse(entry(key, [v, y, versions])));
+    /// Queue the edges of the vertices `vs`, ranked in parallel: for each v, the edges (v, y)
+    /// with y above v or, given `changed`, with y not changed (a changed y queues its own), so
+    /// every edge once. Ends of unknown kind get it computed and cached, as ranking the edges one
+    /// by one would: ranking changes nothing else, so the order of ranking does not matter.
+    fn rank(&mut self, vs: &[u32], changed: Option<&[bool]>) {
+        let this = &*self;
+        // Per chunk: its entries, and the kinds it found.
+        type Ranked = (Vec<u128>, Vec<(u32, Kind)>);
+        let ranked: Vec<Ranked> = vs
+            .par_chunks(256)
+            .map_init(
+                || (Vec::new(), Vec::new(), Vec::new()),
+                |(fans, ends, edges), chunk| {
+                    let (mut out, mut found) = (Vec::new(), Vec::<(u32, Kind)>::new());
+                    let mut kind = |w: u32| match this.verts[w as usize].kind {
+                        Kind::Unknown => match found.iter().find(|f| f.0 == w) {
+                            Some(&(_, k)) => k,
+                            None => {
+                                let k = this.compute_kind(w, edges);
+                                found.push((w, k));
+                                k
+                            }
+                        },
+                        k => k,
+                    };
+                    for (i, &v) in chunk.iter().enumerate() {
+                        if let Some(&w) = chunk.get(i + 8) {
+                            prefetch(&this.verts[w as usize]);
+                        }
+                        if let Some(&w) = chunk.get(i + 6) {
+                            this.prefetch_list(w);
+                        }
+                        if let Some(&w) = chunk.get(i + 4) {
+                            this.prefetch_faces_of(w);
+                        }
+                        if let Some(&w) = chunk.get(i + 2) {
+                            for &f in this.faces_of(w) {
+                                for y in this.tri(f) {
+                                    this.prefetch_vertex(y);
+                                }
+                            }
+                        }
+                        if this.verts[v as usize].locked {
+                            continue;
+                        }
+                        this.edge_fans(v, fans, ends);
+                        for &(y, e) in fans.iter() {
+                            if y < v && changed.is_none_or(|c| c[y as usize]) || this.verts[y as usize].locked {
+                                continue;
+                            }
+                            let (kv, ky) = (kind(v), kind(y));
+                            if let Some(key) = this.key(v, y, &e, kv, ky) {
+                                out.push(entry(key, [v, y, this.versions(v, y)]));
+                            }
+                        }
+                    }
+                    (out, found)
+                },
+            )
+            .collect();
+        for (out, found) in ranked {
+            self.entries.extend_from_slice(&out);
+            for (w, k) in found {
+                self.verts[w as usize].kind = k;
             }
         }
-        self.scratch_fans = fans;
-        self.scratch_ends = ends;
     }
 
     /// Passes of collapses, cheapest first, until the target, the error limit, or no legal
-    /// collapse is left. Each pass heaps the queued edges and pops them; a collapse makes the
+    /// collapse is left. Each pass sorts the queued edges (in parallel) and takes them in order,
+    /// merged with a small heap of the edges it re-ranks upwards; a collapse makes the
     /// entries of its two vertices stale, and the edges of the survivor are ranked again for the
     /// next pass, together with the entries the pass did not reach. A pass ends once its keys
     /// exceed 1.5× the key of the edge that would reach the target if every collapse succeeded
@@ -800,13 +961,11 @@ impl State {
         let (mut survivors, mut retry, mut blocked) = (Vec::new(), Vec::new(), Vec::new());
         let mut plan = Plan::EMPTY;
         let mut unblocked = Vec::new();
+        let (mut around_u, mut around_v, mut link) = (Vec::new(), Vec::new(), Vec::new());
         let mut revived = false;
         self.entries.clear();
-        for v in 0..self.verts.len() as u32 {
-            if !self.verts[v as usize].locked {
-                self.queue_edges(v, None);
-            }
-        }
+        let all: Vec<u32> = (0..self.verts.len() as u32).filter(|&v| !self.verts[v as usize].locked).collect();
+        self.rank(&all, None);
         for pass in 1u32.. {
             if self.faces_left <= opts.target_faces {
                 return;
@@ -820,31 +979,59 @@ impl State {
             }
             let goal = self.faces_left - opts.target_faces;
             let nth = (goal / 2).min(self.entries.len() - 1);
-            let goal_key = 1.5 * entry_key(self.entries.select_nth_unstable_by_key(nth, |e| e.0).1 .0);
-            // Heap only the entries the pass will likely reach; the rest joins if it gets there.
+            let goal_key = 1.5 * entry_key(*self.entries.select_nth_unstable(nth).1);
+            // Sort only the entries the pass will likely reach; the rest joins if it gets there.
             let mut split = nth + 1;
             for j in split..self.entries.len() {
-                if entry_key(self.entries[j].0) <= goal_key {
+                if entry_key(self.entries[j]) <= goal_key {
                     self.entries.swap(split, j);
                     split += 1;
                 }
             }
             let mut rest = self.entries.split_off(split);
-            let mut queue = BinaryHeap::from(std::mem::take(&mut self.entries));
+            // The queue: `sorted[next..]` merged with a small heap of re-ranked edges.
+            let mut sorted = std::mem::take(&mut self.entries);
+            sorted.par_sort_unstable();
+            let mut next = 0;
+            let mut pushed = BinaryHeap::new();
             let before = self.faces_left;
             loop {
-                let Some(Reverse(e)) = queue.pop() else {
-                    if rest.is_empty() {
-                        break;
+                let e = match (sorted.get(next), pushed.peek()) {
+                    (Some(&a), Some(&Reverse(b))) if b < a => pushed.pop().map_or(b, |r| r.0),
+                    (Some(&a), _) => {
+                        // Each step fetches what the next needs, for entries ever closer.
+                        if let Some(&e) = sorted.get(next + 12) {
+                            self.prefetch_ends(e);
+                        }
+                        if let Some(&e) = sorted.get(next + 8) {
+                            self.prefetch_lists(e);
+                        }
+                        if let Some(&e) = sorted.get(next + 5) {
+                            self.prefetch_faces(e);
+                        }
+                        if let Some(&e) = sorted.get(next + 3) {
+                            self.prefetch_around(e);
+                        }
+                        if let Some(&e) = sorted.get(next + 1) {
+                            self.prefetch_opposite(e);
+                        }
+                        next += 1;
+                        a
                     }
-                    queue.extend(rest.drain(..));
-                    continue;
+                    (None, Some(&Reverse(b))) => pushed.pop().map_or(b, |r| r.0),
+                    (None, None) if rest.is_empty() => break,
+                    (None, None) => {
+                        sorted = std::mem::take(&mut rest);
+                        sorted.par_sort_unstable();
+                        next = 0;
+                        continue;
+                    }
                 };
                 if self.faces_left <= opts.target_faces {
                     return;
                 }
                 if entry_key(e) > goal_key && 6 * (before - self.faces_left) > goal {
-                    queue.push(Reverse(e));
+                    pushed.push(Reverse(e));
                     break;
                 }
                 let [u, v, versions] = entry_edge(e);
@@ -855,9 +1042,16 @@ impl State {
                 if !self.plan(u, v, edge, &mut plan) {
                     continue;
                 }
-                match plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.legal(&plan.e, c)) {
+                let found = if plan.c[..plan.n].iter().any(|c| c.error_sq <= limit) && self.topology_ok(u, v, &plan.e, &mut link) {
+                    self.gather(u, &plan.e, &mut around_u);
+                    self.gather(v, &plan.e, &mut around_v);
+                    plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.shapes_ok(u, c, &around_u, &around_v))
+                } else {
+                    None
+                };
+                match found {
                     // Cheaper candidates were illegal: rank the edge by the legal one.
-                    Some(&c) if c.cost as f32 > entry_key(e) => queue.push(Reverse(entry(c.cost, [u, v, versions]))),
+                    Some(&c) if c.cost as f32 > entry_key(e) => pushed.push(Reverse(entry(c.cost, [u, v, versions]))),
                     Some(&c) => {
                         self.collapse(&plan.e, c);
                         if !std::mem::replace(&mut changed[c.keep as usize], true) {
@@ -879,71 +1073,69 @@ impl State {
                             touched[w as usize] = pass;
                         }
                         if !self.verts[u as usize].locked {
-                            queue.push(Reverse(entry(f64::from(entry_key(e)), [u, v, self.versions(u, v)])));
+                            pushed.push(Reverse(entry(f64::from(entry_key(e)), [u, v, self.versions(u, v)])));
                         }
                     }
-                    None => retry.push(Reverse(e)),
+                    None => retry.push(e),
                 }
             }
             if self.faces_left < before {
                 revived = false;
             }
-            let mut entries = queue.into_vec();
+            sorted.drain(..next);
+            let mut entries = sorted;
+            entries.extend(pushed.into_iter().map(|r| r.0));
             entries.append(&mut rest);
             for e in retry.drain(..) {
-                let [u, v, _] = entry_edge(e.0);
+                let [u, v, _] = entry_edge(e);
                 if touched[u as usize] == pass || touched[v as usize] == pass {
                     entries.push(e);
                 } else {
                     blocked.push(e);
                 }
             }
-            let current = |e: &Reverse<u128>| {
-                let [u, v, versions] = entry_edge(e.0);
+            let current = |&e: &u128| {
+                let [u, v, versions] = entry_edge(e);
                 self.versions(u, v) == versions
             };
             entries.retain(current);
             blocked.retain(current);
             self.entries = entries;
-            for &k in &survivors {
-                self.queue_edges(k, Some(&changed));
-            }
+            // In id order, neighbouring survivors share cache lines.
+            survivors.sort_unstable();
+            self.rank(&survivors, Some(&changed));
             for k in survivors.drain(..) {
                 changed[k as usize] = false;
             }
         }
     }
 
-    /// Link condition, group survival and face shape for one candidate.
-    fn legal(&mut self, e: &EdgeFaces, c: &Candidate) -> bool {
-        let (r, k) = (c.remove, c.keep);
+    /// Link condition and group survival for collapsing edge (u, v) with faces `e`. Both are
+    /// symmetric in the two ends, so they hold for every candidate of the edge or for none.
+    fn topology_ok(&self, u: u32, v: u32, e: &EdgeFaces, around: &mut Vec<u32>) -> bool {
         let (x0, x1) = (e.x[0], if e.n == 2 { e.x[1] } else { e.x[0] });
-        // Link condition: the common neighbours of r and k are exactly the opposite vertices.
-        self.stamp += 2;
-        let s = self.stamp;
-        for i in 0..self.verts[r as usize].len as usize {
-            for y in self.tri(self.face_of(r, i)) {
-                self.verts[y as usize].mark = s;
-            }
+        // Link condition: the common neighbours of u and v are exactly the opposite vertices.
+        around.clear();
+        for &f in self.faces_of(u) {
+            around.extend(self.tri(f));
         }
-        let mut common = 0;
-        for i in 0..self.verts[k as usize].len as usize {
-            for y in self.tri(self.face_of(k, i)) {
-                if y != k && y != r && self.verts[y as usize].mark == s {
+        let mut seen = [false; 2];
+        for &f in self.faces_of(v) {
+            for y in self.tri(f) {
+                if y != v && y != u && around.contains(&y) {
                     if y != x0 && y != x1 {
                         return false;
                     }
-                    self.verts[y as usize].mark = s + 1;
-                    common += 1;
+                    seen[usize::from(y != x0)] = true;
                 }
             }
         }
-        if common != e.n {
+        if usize::from(seen[0]) + usize::from(seen[1]) != e.n {
             return false;
         }
         if e.n == 2 {
-            let spans = |v: u32| self.faces_of(v).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
-            if spans(r) && spans(k) {
+            let spans = |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
+            if spans(u) && spans(v) {
                 return false;
             }
         }
@@ -954,34 +1146,45 @@ impl State {
             if other != NO_FACE && self.faces[other as usize].group == g {
                 continue;
             }
-            let kept = |v: u32| {
-                self.faces_of(v).iter().any(|&h| h != f && h != other && self.faces[h as usize].group == g && self.tri(h).contains(&e.x[i]))
+            let kept = |w: u32| {
+                self.faces_of(w).iter().any(|&h| h != f && h != other && self.faces[h as usize].group == g && self.tri(h).contains(&e.x[i]))
             };
-            if !kept(r) && !kept(k) {
+            if !kept(u) && !kept(v) {
                 return false;
-            }
-        }
-        // Shape: no flip beyond the bound, no degenerate or new sliver face.
-        for &f in self.faces_of(r) {
-            if !e.f.contains(&f) && !self.shape_ok(f, r, c.pos) {
-                return false;
-            }
-        }
-        if c.pos != self.pos(k) {
-            for &f in self.faces_of(k) {
-                if !e.f.contains(&f) && !self.shape_ok(f, k, c.pos) {
-                    return false;
-                }
             }
         }
         true
     }
 
-    /// Whether face `f` with vertex `moved` at `to` keeps its orientation and shape.
-    fn shape_ok(&self, f: u32, moved: u32, to: DVec3) -> bool {
-        let t = self.tri(f);
-        let old = t.map(|v| self.pos(v));
-        let new = t.map(|v| if v == moved { to } else { self.pos(v) });
+    /// The faces around `w` other than the edge's faces `e`, with their corner positions, for
+    /// `shape_ok` of every candidate of the edge.
+    fn gather(&self, w: u32, e: &EdgeFaces, out: &mut Vec<Around>) {
+        out.clear();
+        for &f in self.faces_of(w) {
+            if !e.f.contains(&f) {
+                let t = self.tri(f);
+                let moved = if t[0] == w { 0 } else if t[1] == w { 1 } else { 2 };
+                out.push(Around { p: t.map(|y| self.pos(y)), moved, normal: self.faces[f as usize].normal });
+            }
+        }
+    }
+
+    /// Face shape for one candidate of the edge (u, v) whose faces around u and v, other than
+    /// the edge's own, are `around_u` and `around_v`: no flip beyond the bound, no degenerate or
+    /// new sliver face.
+    fn shapes_ok(&self, u: u32, c: &Candidate, around_u: &[Around], around_v: &[Around]) -> bool {
+        let (at_r, at_k) = if c.remove == u { (around_u, around_v) } else { (around_v, around_u) };
+        if !at_r.iter().all(|a| self.shape_ok(a, c.pos)) {
+            return false;
+        }
+        c.pos == self.pos(c.keep) || at_k.iter().all(|a| self.shape_ok(a, c.pos))
+    }
+
+    /// Whether face `a` with its moving corner at `to` keeps its orientation and shape.
+    fn shape_ok(&self, a: &Around, to: DVec3) -> bool {
+        let old = a.p;
+        let mut new = old;
+        new[a.moved] = to;
         let n_old = (old[1] - old[0]).cross(old[2] - old[0]);
         let n_new = (new[1] - new[0]).cross(new[2] - new[0]);
         let len_new = n_new.length();
@@ -993,7 +1196,7 @@ impl State {
         if q_new <= 1e-6 || (q_new < self.min_quality && q_new < quality(&old, n_old.length())) {
             return false;
         }
-        let n_input = self.faces[f as usize].normal.as_dvec3();
+        let n_input = a.normal.as_dvec3();
         n_input == DVec3::ZERO || n_input.dot(n_new) >= self.cos_turn * len_new
     }
 
@@ -1009,15 +1212,10 @@ impl State {
             return true;
         }
         // A third common neighbour y of u and v: (u, v, y) is a cycle of edges but no face.
-        self.stamp += 1;
-        let s = self.stamp;
-        for i in 0..self.verts[u as usize].len as usize {
-            for y in self.tri(self.face_of(u, i)) {
-                self.verts[y as usize].mark = s;
-            }
-        }
+        let mut around_u: Vec<u32> = self.faces_of(u).iter().flat_map(|&f| self.tri(f)).collect();
+        around_u.sort_unstable();
         let third = self.faces_of(v).iter().flat_map(|&f| self.tri(f)).find(|&y| {
-            y != u && y != v && y != e.x[0] && y != e.x[1] && self.verts[y as usize].mark == s
+            y != u && y != v && y != e.x[0] && y != e.x[1] && around_u.binary_search(&y).is_ok()
         });
         third.is_some_and(|y| self.cut([u, v, y], out))
     }
@@ -1043,7 +1241,7 @@ impl State {
             self.version[w as usize] += 1;
         }
         for &f in &faces {
-            self.tris[f as usize] = [DEAD; 3];
+            self.faces[f as usize].v = [DEAD; 3];
         }
         self.faces_left -= 4;
         true
@@ -1085,7 +1283,7 @@ impl State {
             self.err_sq.push(self.err_sq[v as usize]);
             self.version.push(0);
             for &f in &sides[i].1 {
-                for w in &mut self.tris[f as usize] {
+                for w in &mut self.faces[f as usize].v {
                     if *w == v {
                         *w = copies[i];
                     }
@@ -1093,15 +1291,15 @@ impl State {
             }
         }
         // The left side is closed by the cycle reversed, the right side by the copies in order.
-        let first = self.tris.len() as u32;
+        let first = self.faces.len() as u32;
         for (side, order) in [[0, 2, 1], [0, 1, 2]].into_iter().enumerate() {
-            let f = self.tris.len();
+            let f = self.faces.len();
             let cap = order.map(|i| if side == 0 { cycle[i] } else { copies[i] });
             let p = cap.map(|w| self.pos(w));
             let normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero().as_vec3();
             let source = if side == 0 { sides[0].0[0] } else { sides[0].1[0] };
-            self.tris.push(cap);
-            self.faces.push(Face { wedge: [0; 3], group: 0, normal });
+            self.faces.push(Face { v: cap, group: 0, normal });
+            self.wedges.push([0; 3]);
             self.face_materials.push(self.face_materials[source as usize]);
             self.cap_source.push(if (source as usize) < self.input_faces { source } else { self.cap_source[source as usize - self.input_faces] });
             // Corner attributes, copied below from the fans' corners.
@@ -1162,7 +1360,7 @@ impl State {
     }
 
     fn copy_corner(&mut self, from: usize, to: usize) {
-        self.faces[to / 3].wedge[to % 3] = self.wedge(from);
+        self.wedges[to / 3][to % 3] = self.wedge(from);
         if !self.normals.is_empty() {
             self.normals[to] = self.normals[from];
         }
@@ -1224,11 +1422,11 @@ impl State {
         }
 
         for &f in &e.f[..e.n] {
-            self.tris[f as usize] = [DEAD; 3];
+            self.faces[f as usize].v = [DEAD; 3];
         }
         self.faces_left -= e.n;
         for &f in &rf {
-            for v in &mut self.tris[f as usize] {
+            for v in &mut self.faces[f as usize].v {
                 if *v == r {
                     *v = k;
                 }
@@ -1308,10 +1506,10 @@ impl State {
     }
 
     fn finish(self, mesh: &Mesh, with_groups: bool) -> Simplified {
-        let alive: Vec<usize> = (0..self.tris.len()).filter(|&f| self.tris[f][0] != DEAD).collect();
+        let alive: Vec<usize> = (0..self.faces.len()).filter(|&f| self.faces[f].v[0] != DEAD).collect();
         let mut used = vec![false; self.verts.len()];
         for &f in &alive {
-            for v in self.tris[f] {
+            for v in self.faces[f].v {
                 used[v as usize] = true;
             }
         }
@@ -1334,7 +1532,7 @@ impl State {
         }
         let mut out = Mesh {
             positions,
-            triangles: alive.iter().map(|&f| self.tris[f].map(|v| remap[v as usize])).collect(),
+            triangles: alive.iter().map(|&f| self.faces[f].v.map(|v| remap[v as usize])).collect(),
             normals: corners(&self.normals, &alive),
             uvs: corners(&self.uvs, &alive),
             colors: corners(&self.colors, &alive),
