@@ -14,6 +14,7 @@ use strata::camera::Camera;
 use strata::format::Reader;
 use strata::render::{Image, Part};
 use strata::stream::retention::retention;
+use strata::stream::budget::MIN_PIXELS;
 use strata::stream::{Budgets, Priority, Streamer};
 
 const WIDTH: u32 = 640;
@@ -199,12 +200,32 @@ fn controller_trace(file: &Path, target_ms: f32) -> strata::error::Result<()> {
     let rd = Reader::open_path(file)?;
     let (center, radius) = ((rd.header().min + rd.header().max) * 0.5, (rd.header().max - rd.header().min).length() * 0.5);
     drop(rd);
-    let (width, height) = (1280, 960);
+    // The smallest of these sizes at which the finest front the controller may ask for (its
+    // smallest threshold) takes well over the target, so that it has to hold detail back: on a
+    // fast machine that front may fit in the target, and the controller rightly stops there.
+    let finest_ms = |width: u32, height: u32| -> strata::error::Result<f64> {
+        let cam = Camera::framing(center, radius, Vec3::new(0.0, 0.3, 1.0), FOV, width, height);
+        let mut s = Streamer::new(Reader::open_path(file)?, Budgets { pixel_error: MIN_PIXELS, ..Budgets::default() })?;
+        let rep = s.update(&cam, None)?;
+        let mut image = Image::new(width, height);
+        draw_front(&s, &rep.front, &cam, &mut image);
+        let start = Instant::now();
+        draw_front(&s, &rep.front, &cam, &mut image);
+        Ok(rep.stats.refine_ms + ms(start))
+    };
+    let mut size = (1280, 960, 0.0);
+    for (w, h) in [(1280, 960), (1920, 1440), (2560, 1920), (3840, 2880)] {
+        size = (w, h, finest_ms(w, h)?);
+        if size.2 >= 1.5 * target_ms as f64 {
+            break;
+        }
+    }
+    let (width, height, finest) = size;
     let on = Camera::framing(center, radius, Vec3::new(0.0, 0.3, 1.0), FOV, width, height);
     let mut away = on.clone();
     away.target = on.eye + (on.eye - on.target);
     let path: Vec<&Camera> = (0..30).map(|k| if k < 12 { &away } else { &on }).collect();
-    println!("  frame-time controller at {width}x{height}, target {target_ms} ms, 12 frames looking away, then the model: frame ms (faces)");
+    println!("  frame-time controller at {width}x{height} (finest front, {MIN_PIXELS} px: {finest:.1} ms), target {target_ms} ms, 12 frames looking away, then the model: frame ms (faces)");
     for predict in [true, false] {
         let budgets = Budgets { target_ms: Some(target_ms), predict, ..Budgets::default() };
         let mut s = Streamer::new(Reader::open_path(file)?, budgets)?;
