@@ -222,7 +222,7 @@ fn controller_trace(file: &Path, target_ms: f32) -> strata::error::Result<()> {
     }
     let (width, height, finest) = size;
     let on = Camera::framing(center, radius, Vec3::new(0.0, 0.3, 1.0), FOV, width, height);
-    let mut away = on.clone();
+    let mut away = on;
     away.target = on.eye + (on.eye - on.target);
     let path: Vec<&Camera> = (0..30).map(|k| if k < 12 { &away } else { &on }).collect();
     println!("  frame-time controller at {width}x{height} (finest front, {MIN_PIXELS} px: {finest:.1} ms), target {target_ms} ms, 12 frames looking away, then the model: frame ms (faces)");
