@@ -206,6 +206,8 @@ fn controller_trace(file: &Path, target_ms: f32) -> strata::error::Result<()> {
     let finest_ms = |width: u32, height: u32| -> strata::error::Result<f64> {
         let cam = Camera::framing(center, radius, Vec3::new(0.0, 0.3, 1.0), FOV, width, height);
         let mut s = Streamer::new(Reader::open_path(file)?, Budgets { pixel_error: MIN_PIXELS, ..Budgets::default() })?;
+        s.update(&cam, None)?;
+        // A second update from the same view: refinement without reading, as in the trace.
         let rep = s.update(&cam, None)?;
         let mut image = Image::new(width, height);
         draw_front(&s, &rep.front, &cam, &mut image);

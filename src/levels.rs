@@ -47,8 +47,8 @@ impl Default for LevelParams {
 /// At most this many levels are added above the grouping's top.
 const MAX_ADDED: usize = 32;
 
-/// Fewest faces per node, on average, of an added level: below this the per-node overhead is more
-/// than a sixth of the level's bytes.
+/// Fewest faces per node, on average, of an added level: below this the per-node overhead (about
+/// 5 faces' worth of bytes) is more than a sixth of the node's own faces.
 const MIN_ADDED_NODE_FACES: usize = 32;
 
 /// Build every level mesh of `h` from `mesh`, each aiming at `p.ratio` of the faces of the level
@@ -77,9 +77,12 @@ pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn 
         if below <= p.top_faces {
             break;
         }
+        let nodes = h.levels[levels.len() - 1].groups.len().max(1);
+        if (below as f64 * ratio as f64) < (MIN_ADDED_NODE_FACES * nodes) as f64 {
+            break;
+        }
         h.repeat_top();
         let next = coarsen(&levels[levels.len() - 1], h, levels.len(), ratio);
-        let nodes = h.levels[levels.len()].groups.len().max(1);
         if next.mesh.face_count() as f64 > below as f64 * worthwhile || next.mesh.face_count() < MIN_ADDED_NODE_FACES * nodes {
             h.pop_top();
             break;

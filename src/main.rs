@@ -163,8 +163,8 @@ struct SimplifyArgs {
     /// Output mesh (.obj, .ply or .glb).
     #[arg(short, long)]
     output: PathBuf,
-    /// When the target cannot be reached otherwise, cut handles and drop closed tetrahedra (the
-    /// mesh stays manifold; its genus and components change).
+    /// With --ratio or --faces: when the target cannot be reached otherwise, cut handles and drop
+    /// closed tetrahedra (the mesh stays manifold; its genus and components change).
     #[arg(long)]
     topology: bool,
     /// Also measure the sampled surface distance between input and output.

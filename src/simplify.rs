@@ -80,12 +80,16 @@ pub struct SimplifyOptions {
     pub border_weight: f32,
     /// The same for seam edges (attribute, material and group borders). Default 1.
     pub seam_weight: f32,
-    /// When the target cannot be reached otherwise, simplify again allowing changes of topology
-    /// that keep the mesh manifold wherever a collapse is blocked by topology alone: a handle or
-    /// neck whose cross-section is a triangle of edges that is not a face is cut there and both
-    /// sides capped, and a closed tetrahedron is dropped. Without it a mesh of many handles and
-    /// components (a noisy scan) stops at a few faces per handle and component. Ignored with
-    /// groups (a cap would join or split groups). Default false.
+    /// When the face target cannot be reached otherwise (not when only `max_error` bounds the
+    /// simplification, with `target_faces` 0), simplify again allowing changes of topology that
+    /// keep the mesh manifold wherever the link condition blocks a collapse: a handle or neck
+    /// whose cross-section is a triangle of edges that is not a face is cut there and both sides
+    /// capped, and a closed tetrahedron is dropped, each only if it moves the surface by less
+    /// than `max_error`. The copies of cut vertices come after the others in the output; they
+    /// start where their originals are, and where no later collapse moves them, a reader that
+    /// welds vertices by position sees the two caps as one doubled face. Without it a mesh of many handles and components (a noisy scan)
+    /// stops at a few faces per handle and component. Ignored with groups (a cap would join or
+    /// split groups). Default false.
     pub topology: bool,
 }
 
@@ -110,7 +114,7 @@ pub struct Simplified {
     /// face normals and areas recomputed.
     pub mesh: Mesh,
     /// Input face of each output face: output faces are the surviving input faces, in order,
-    /// then the caps of topology changes, each with the input face it took its attributes from.
+    /// then the caps of topology changes, each with the input face it took its material from.
     pub source_faces: Vec<u32>,
     /// Group label of each output face, copied from the input labels; empty without groups.
     pub face_groups: Vec<u32>,
@@ -142,7 +146,8 @@ pub fn simplify(mesh: &Mesh, groups: Option<&[u32]>, opts: &SimplifyOptions) -> 
     if mesh.triangles.len() > opts.target_faces {
         s.init(opts, false);
         s.run(opts);
-        if s.faces_left > opts.target_faces && opts.topology && groups.is_none() {
+        let face_target = opts.target_faces > 0 || opts.max_error.is_none();
+        if opts.topology && face_target && s.faces_left > opts.target_faces && groups.is_none() {
             s = State::new(mesh, groups);
             s.init(opts, true);
             s.run(opts);
@@ -1030,7 +1035,7 @@ impl State {
                 if self.faces_left <= opts.target_faces {
                     return;
                 }
-                if entry_key(e) > goal_key && 6 * (before - self.faces_left) > goal {
+                if entry_key(e) > goal_key && 6 * before.saturating_sub(self.faces_left) > goal {
                     pushed.push(Reverse(e));
                     break;
                 }
@@ -1042,7 +1047,9 @@ impl State {
                 if !self.plan(u, v, edge, &mut plan) {
                     continue;
                 }
-                let found = if plan.c[..plan.n].iter().any(|c| c.error_sq <= limit) && self.topology_ok(u, v, &plan.e, &mut link) {
+                let within = plan.c[..plan.n].iter().any(|c| c.error_sq <= limit);
+                let topology_ok = within && self.topology_ok(u, v, &plan.e, &mut link);
+                let found = if topology_ok {
                     self.gather(u, &plan.e, &mut around_u);
                     self.gather(v, &plan.e, &mut around_v);
                     plan.c[..plan.n].iter().find(|c| c.error_sq <= limit && self.shapes_ok(u, c, &around_u, &around_v))
@@ -1063,7 +1070,7 @@ impl State {
                             }
                         }
                     }
-                    None if self.topology && plan.c[0].error_sq <= limit && self.unblock(u, v, &plan.e, &mut unblocked) => {
+                    None if self.topology && within && !topology_ok && self.unblock(u, v, &plan.e, limit, &mut unblocked) => {
                         changed.resize(self.verts.len(), false);
                         touched.resize(self.verts.len(), 0);
                         for &w in &unblocked {
@@ -1200,15 +1207,17 @@ impl State {
         n_input == DVec3::ZERO || n_input.dot(n_new) >= self.cos_turn * len_new
     }
 
-    /// Make a topology change that unblocks the collapse of edge (u, v), if there is one: drop
-    /// the closed tetrahedron the edge is on, or cut the mesh along a triangle of edges through
-    /// it that is not a face. `out` gets the vertices whose edges must be ranked again.
-    fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, out: &mut Vec<u32>) -> bool {
+    /// Make a topology change that unblocks the collapse of edge (u, v), which the link condition
+    /// blocks, if there is one that moves the surface by at most `limit` (squared): drop the
+    /// closed tetrahedron the edge is on, or cut the mesh along a triangle of edges through it
+    /// that is not a face. The collapse itself is tried again afterwards, and may still fail its
+    /// shape checks. `out` gets the vertices whose edges must be ranked again.
+    fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64, out: &mut Vec<u32>) -> bool {
         out.clear();
         if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 {
             return false;
         }
-        if self.drop_tetrahedron(u, v, e) {
+        if self.drop_tetrahedron(u, v, e, limit) {
             return true;
         }
         // A third common neighbour y of u and v: (u, v, y) is a cycle of edges but no face.
@@ -1217,11 +1226,11 @@ impl State {
         let third = self.faces_of(v).iter().flat_map(|&f| self.tri(f)).find(|&y| {
             y != u && y != v && y != e.x[0] && y != e.x[1] && around_u.binary_search(&y).is_ok()
         });
-        third.is_some_and(|y| self.cut([u, v, y], out))
+        third.is_some_and(|y| self.spread_sq(&[u, v, y]) <= limit && self.cut([u, v, y], out))
     }
 
     /// Remove a closed tetrahedron, a component that no collapse can shrink, if (u, v) is on one.
-    fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces) -> bool {
+    fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64) -> bool {
         let corners = [u, v, e.x[0], e.x[1]];
         if corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked) {
             return false;
@@ -1230,7 +1239,7 @@ impl State {
         faces.sort_unstable();
         faces.dedup();
         let spread_sq = self.spread_sq(&corners);
-        if faces.len() != 4 || faces.iter().any(|&f| self.tri(f).iter().any(|y| !corners.contains(y))) {
+        if faces.len() != 4 || faces.iter().any(|&f| self.tri(f).iter().any(|y| !corners.contains(y))) || spread_sq > limit {
             return false;
         }
         self.error_sq = self.error_sq.max(spread_sq);
@@ -1273,6 +1282,20 @@ impl State {
                 return false;
             }
             sides.push((left, right));
+        }
+        // Not where a side is the three faces of one vertex (a spike, which a collapse removes
+        // under the shape checks), nor with a degenerate cap.
+        for side in [0, 1] {
+            let mut faces: Vec<u32> = sides.iter().flat_map(|s| if side == 0 { &s.0 } else { &s.1 }).copied().collect();
+            faces.sort_unstable();
+            faces.dedup();
+            if faces.len() <= 3 {
+                return false;
+            }
+        }
+        let p = cycle.map(|w| self.pos(w));
+        if (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0 {
+            return false;
         }
         self.error_sq = self.error_sq.max(self.spread_sq(&cycle));
         let copies: [u32; 3] = std::array::from_fn(|i| self.verts.len() as u32 + i as u32);
@@ -1972,6 +1995,10 @@ mod tests {
         // A target the rules reach without changing topology is reached the same way with the option.
         let easy = opts(m.face_count() / 2);
         assert_eq!(simplify(&m, None, &easy), simplify(&m, None, &SimplifyOptions { topology: true, ..easy.clone() }));
+        // An error limit holds for topology changes too: the tori's tubes are 0.1 across.
+        let limited = simplify(&m, None, &SimplifyOptions { topology: true, max_error: Some(0.01), ..opts(12) });
+        check(&m, &limited);
+        assert!(limited.error <= 0.01, "{}", limited.error);
         // Groups forbid it.
         let groups = patches(&m, 3);
         let grouped = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });

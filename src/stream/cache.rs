@@ -81,7 +81,7 @@ impl Cache {
                 }
                 continue;
             }
-            // Make room before reading, so the peak stays within the budget too.
+            // Make room before reading, so that the new node does not come on top of a full budget.
             if let Some(b) = self.budget {
                 let rec = reader.nodes().get(a as usize).copied();
                 let expected = rec.map_or(0, |n| record_bytes(&n, reader.header().attributes));
