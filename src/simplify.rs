@@ -182,7 +182,11 @@ struct Quadric {
 impl Quadric {
     /// weight · (distance to the plane through `p` with unit normal `n`)².
     fn plane(n: DVec3, p: DVec3, weight: f64) -> Quadric {
-        let d = -n.dot(p);
+        Quadric::with_offset(n, -n.dot(p), weight)
+    }
+
+    /// `plane` given the plane's offset `d = -n·p`.
+    fn with_offset(n: DVec3, d: f64, weight: f64) -> Quadric {
         let wn = n * weight;
         Quadric {
             a: [wn.x * n.x, wn.x * n.y, wn.x * n.z, wn.y * n.y, wn.y * n.z, wn.z * n.z],
@@ -404,7 +408,8 @@ impl State {
         let faces = mesh.triangles.iter().enumerate().map(|(f, &v)| Face { v, group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }).collect();
         let wedges = (0..3 * nf as u32).step_by(3).map(|c| [c, c + 1, c + 2]).collect();
         State {
-            quadrics: vec![Quadric::default(); mesh.positions.len()],
+            // Filled by `init`.
+            quadrics: Vec::new(),
             err_sq: vec![0.0; mesh.positions.len()],
             wedges,
             version: vec![0; mesh.positions.len()],
@@ -462,93 +467,165 @@ impl State {
     /// Wedge ids, face planes, border and seam planes, locks and kinds. Locks unused vertices,
     /// vertices on non-manifold edges and bow-tie vertices (faces around them not one fan).
     /// `topology`: make topology changes where they unblock a collapse.
+    ///
+    /// Per-vertex work runs in parallel; each vertex gathers its face planes in face order and the
+    /// few border and seam planes are added afterwards in vertex order, so every quadric is summed
+    /// in the same order as a sequential scatter would.
     fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
         self.topology = topology && !self.grouped;
         self.min_quality = f64::from(opts.min_face_quality);
-        let mut reps: Vec<usize> = Vec::new();
-        for v in 0..self.verts.len() as u32 {
-            reps.clear();
-            for i in 0..self.verts[v as usize].len as usize {
-                let c = self.corner(self.face_of(v, i), v);
-                match reps.iter().find(|&&r| self.same_attributes(r, c)) {
-                    Some(&r) => self.wedges[c / 3][c % 3] = self.wedge(r),
-                    None => reps.push(c),
+        // A corner's wedge is the first corner of its vertex (in face list order) with the same
+        // attributes, as `same_attributes` is an equivalence.
+        let mut wedges = std::mem::take(&mut self.wedges);
+        let this = &*self;
+        let uniform = this.normals.is_empty()
+            && this.uvs.is_empty()
+            && this.colors.is_empty()
+            && this.face_materials.iter().all(|&m| m == this.face_materials[0])
+            && this.faces.iter().all(|f| f.group == this.faces[0].group);
+        wedges.par_iter_mut().with_min_len(1024).enumerate().for_each(|(f, w)| {
+            if uniform {
+                // Without corner attributes, one material and one group, all corners are alike.
+                *w = [0; 3];
+                return;
+            }
+            *w = std::array::from_fn(|i| {
+                let (v, c) = (this.faces[f].v[i], 3 * f + i);
+                if this.corner(f as u32, v) != c {
+                    // A repeated vertex of a degenerate face: only its first corner is its.
+                    return c as u32;
+                }
+                let first = this.faces_of(v).iter().map(|&g| this.corner(g, v)).find(|&r| this.same_attributes(r, c));
+                first.unwrap_or(c) as u32
+            });
+        });
+        self.wedges = wedges;
+        // Per face: its unit normal, plane offset and twice its area (0 when degenerate).
+        let verts = &self.verts;
+        let planes: Vec<(DVec3, f64, f64)> = self
+            .faces
+            .par_iter_mut()
+            .with_min_len(1024)
+            .map(|face| {
+                let [a, b, c] = face.v.map(|v| verts[v as usize].pos.as_dvec3());
+                let cross = (b - a).cross(c - a);
+                let len = cross.length();
+                if len == 0.0 {
+                    return (DVec3::ZERO, 0.0, 0.0);
+                }
+                let n = cross / len;
+                face.normal = n.as_vec3();
+                (n, -n.dot(a), len)
+            })
+            .collect();
+        let lists = &self.face_lists;
+        self.quadrics = verts
+            .par_iter()
+            .with_min_len(1024)
+            .map(|x| {
+                let mut q = Quadric::default();
+                for &f in &lists[x.start as usize..(x.start + x.len) as usize] {
+                    let (n, d, len) = planes[f as usize];
+                    if len != 0.0 {
+                        q.add(&Quadric { area: 0.5 * len, ..Quadric::with_offset(n, d, 0.5 * len) });
+                    }
+                }
+                q
+            })
+            .collect();
+        // Per chunk of vertices: each one's lock and kind, then its border and seam planes
+        // `(v, other, face, weight)` and the other ends it locks (`face` = DEAD), in order.
+        type Classified = (Vec<(bool, Kind)>, Vec<(u32, u32, u32, f32)>);
+        let this = &*self;
+        let classified: Vec<Classified> = (0..this.verts.len() as u32)
+            .into_par_iter()
+            .chunks(1024)
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(around, parent): &mut (Vec<u64>, Vec<u32>), chunk| {
+                    let (mut out, mut events) = (Vec::with_capacity(chunk.len()), Vec::new());
+                    for v in chunk {
+                        out.push(this.classify(v, opts, around, parent, &mut events));
+                    }
+                    (out, events)
+                },
+            )
+            .collect();
+        let mut v = 0;
+        for (out, events) in classified {
+            for (locked, kind) in out {
+                let x = &mut self.verts[v];
+                x.locked |= locked;
+                x.kind = kind;
+                v += 1;
+            }
+            for (a, b, f, weight) in events {
+                if f == DEAD {
+                    self.verts[b as usize].locked = true;
+                } else {
+                    self.add_edge_plane(f as usize, a, b, weight);
                 }
             }
         }
-        for f in 0..self.faces.len() {
-            let t = self.faces[f].v;
-            let [a, b, c] = t.map(|v| self.pos(v));
-            let cross = (b - a).cross(c - a);
-            let len = cross.length();
-            if len == 0.0 {
-                continue;
-            }
-            self.faces[f].normal = (cross / len).as_vec3();
-            let q = Quadric { area: 0.5 * len, ..Quadric::plane(cross / len, a, 0.5 * len) };
-            for v in t {
-                self.quadrics[v as usize].add(&q);
-            }
+    }
+
+    /// `init` for one vertex: whether it is locked and its kind; pushes to `events` its border
+    /// and seam planes towards higher ids `(v, other, face, weight)` and the ends of its
+    /// non-manifold edges to lock `(v, other, DEAD, 0)`. `around` and `parent` are scratch.
+    fn classify(&self, v: u32, opts: &SimplifyOptions, around: &mut Vec<u64>, parent: &mut Vec<u32>, events: &mut Vec<(u32, u32, u32, f32)>) -> (bool, Kind) {
+        let deg = self.verts[v as usize].len as usize;
+        if deg == 0 {
+            return (true, Kind::Unknown);
         }
-        let mut around = Vec::new();
-        let mut parent: Vec<u32> = Vec::new();
-        for v in 0..self.verts.len() as u32 {
-            let deg = self.verts[v as usize].len as usize;
-            if deg == 0 {
-                self.verts[v as usize].locked = true;
-                continue;
-            }
-            self.edges_around(v, &mut around);
-            parent.clear();
-            parent.extend(0..deg as u32);
-            let mut fans = deg;
-            let mut features = 0;
-            for run in around.chunk_by(|a, b| a >> 32 == b >> 32) {
-                let other = (run[0] >> 32) as u32;
-                match *run {
-                    [e] => {
+        self.edges_around(v, around);
+        parent.clear();
+        parent.extend(0..deg as u32);
+        let mut fans = deg;
+        let mut features = 0;
+        let mut locked = false;
+        for run in around.chunk_by(|a, b| a >> 32 == b >> 32) {
+            let other = (run[0] >> 32) as u32;
+            match *run {
+                [e] => {
+                    features += 1;
+                    if other > v {
+                        let (_, c, _) = self.around_corners(v, e);
+                        events.push((v, other, (c / 3) as u32, opts.border_weight));
+                    }
+                }
+                [e0, e1] => {
+                    let ((mut a, c0, d0), (mut b, c1, d1)) = (self.around_corners(v, e0), self.around_corners(v, e1));
+                    while parent[a] as usize != a {
+                        a = parent[a] as usize;
+                    }
+                    while parent[b] as usize != b {
+                        b = parent[b] as usize;
+                    }
+                    if a != b {
+                        parent[a.max(b)] = a.min(b) as u32;
+                        fans -= 1;
+                    }
+                    if !self.same_corner(c0, c1) || !self.same_corner(d0, d1) {
                         features += 1;
                         if other > v {
-                            let (_, c, _) = self.around_corners(v, e);
-                            self.add_edge_plane(c / 3, v, other, opts.border_weight);
+                            events.push((v, other, (c0 / 3) as u32, 0.5 * opts.seam_weight));
+                            events.push((v, other, (c1 / 3) as u32, 0.5 * opts.seam_weight));
                         }
-                    }
-                    [e0, e1] => {
-                        let ((mut a, c0, d0), (mut b, c1, d1)) = (self.around_corners(v, e0), self.around_corners(v, e1));
-                        while parent[a] as usize != a {
-                            a = parent[a] as usize;
-                        }
-                        while parent[b] as usize != b {
-                            b = parent[b] as usize;
-                        }
-                        if a != b {
-                            parent[a.max(b)] = a.min(b) as u32;
-                            fans -= 1;
-                        }
-                        if !self.same_corner(c0, c1) || !self.same_corner(d0, d1) {
-                            features += 1;
-                            if other > v {
-                                self.add_edge_plane(c0 / 3, v, other, 0.5 * opts.seam_weight);
-                                self.add_edge_plane(c1 / 3, v, other, 0.5 * opts.seam_weight);
-                            }
-                        }
-                    }
-                    _ => {
-                        self.verts[v as usize].locked = true;
-                        self.verts[other as usize].locked = true;
                     }
                 }
+                _ => {
+                    locked = true;
+                    events.push((v, other, DEAD, 0.0));
+                }
             }
-            let x = &mut self.verts[v as usize];
-            x.locked |= fans != 1;
-            x.kind = match features {
-                0 => Kind::Free,
-                2 => Kind::Line,
-                _ => Kind::Corner,
-            };
         }
-        self.scratch_edges = around;
+        let kind = match features {
+            0 => Kind::Free,
+            2 => Kind::Line,
+            _ => Kind::Corner,
+        };
+        (locked || fans != 1, kind)
     }
 
     /// Adds to both ends of edge (a, b) the plane through the edge perpendicular to face `f`,
@@ -1539,8 +1616,9 @@ impl State {
         let mut remap = vec![u32::MAX; self.verts.len()];
         let mut positions = Vec::new();
         let mut vertex_error = Vec::new();
-        for (v, (x, q)) in self.verts.iter().zip(&self.quadrics).enumerate() {
+        for (v, x) in self.verts.iter().enumerate() {
             if used[v] {
+                let q = self.quadrics.get(v).copied().unwrap_or_default();
                 remap[v] = positions.len() as u32;
                 positions.push(x.pos);
                 let own = if q.w > 0.0 { q.eval(x.pos.as_dvec3()) / q.w } else { 0.0 };
