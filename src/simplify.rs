@@ -85,7 +85,7 @@ pub struct SimplifyOptions {
     /// keep the mesh manifold wherever the link condition blocks a collapse: a handle or neck
     /// whose cross-section is a triangle of edges that is not a face is cut there and both sides
     /// capped, and a closed tetrahedron is dropped, each only if it moves the surface by less
-    /// than `max_error`. The copies of cut vertices come after the others in the output; they
+    /// than `max_error`; collapses may also remove a component's last faces. The copies of cut vertices come after the others in the output; they
     /// start where their originals are, and where no later collapse moves them, a reader that
     /// welds vertices by position sees the two caps as one doubled face. Without it a mesh of many handles and components (a noisy scan)
     /// stops at a few faces per handle and component. Ignored with groups (a cap would join or
@@ -1224,6 +1224,10 @@ impl State {
             }
         }
         // Group survival for collapses that remove faces of two groups (or one border face).
+        // Without groups it keeps components from vanishing, which topology changes allow.
+        if self.topology {
+            return true;
+        }
         for i in 0..e.n {
             let (f, other) = (e.f[i], if e.n == 2 { e.f[1 - i] } else { NO_FACE });
             let g = self.faces[f as usize].group;
