@@ -46,8 +46,7 @@ fn vertex_corners(mesh: &Mesh, v: u32, faces: &[u32], cos_crease: f32) -> Vec<(u
     }
     for i in 0..faces.len() {
         let (fi, oi) = (faces[i], others(faces[i]));
-        for j in i + 1..faces.len() {
-            let fj = faces[j];
+        for (j, &fj) in faces.iter().enumerate().skip(i + 1) {
             let oj = others(fj);
             let share_edge = oi.iter().any(|w| oj.contains(w));
             let smooth = mesh.face_normals[fi as usize].dot(mesh.face_normals[fj as usize]) >= cos_crease;

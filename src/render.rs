@@ -498,7 +498,8 @@ impl Strips {
             rest = tail;
         }
         let stride = self.slots.len();
-        let mut lanes: Vec<Vec<(&Part, &mut [(i32, i32)])>> = (0..stride).map(|_| Vec::new()).collect();
+        type Lane<'p, 'b> = Vec<(&'p Part<'p>, &'b mut [(i32, i32)])>;
+        let mut lanes: Vec<Lane> = (0..stride).map(|_| Vec::new()).collect();
         for (k, (part, out)) in parts.iter().zip(per_part).enumerate() {
             lanes[k % stride].push((part, out));
         }

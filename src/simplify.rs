@@ -221,7 +221,8 @@ impl Quadric {
         let (c00, c01, c02) = (yy * zz - yz * yz, xz * yz - xy * zz, xy * yz - xz * yy);
         let det = xx * c00 + xy * c01 + xz * c02;
         let trace = xx + yy + zz;
-        if !(trace > 0.0) || det <= 1e-9 * trace * trace * trace {
+        // Also when the trace is NaN.
+        if trace.is_nan() || trace <= 0.0 || det <= 1e-9 * trace * trace * trace {
             return None;
         }
         let (c11, c12, c22) = (xx * zz - xz * xz, xy * xz - xx * yz, xx * yy - xy * xy);
@@ -1064,7 +1065,7 @@ impl State {
             let goal_key = 1.5 * entry_key(*self.entries.select_nth_unstable(nth).1);
             // Sort only the entries the pass will likely reach; the rest joins if it gets there.
             let mut split = nth + 1;
-            for j in split..self.entries.len() {
+            for j in nth + 1..self.entries.len() {
                 if entry_key(self.entries[j]) <= goal_key {
                     self.entries.swap(split, j);
                     split += 1;

@@ -450,10 +450,8 @@ fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan, grid: &Grid, quant: &[Qu
         });
     }
     let mut codes = vec![Codes::default(); plan.nodes.len()];
-    for l in 0..h.levels.len() {
-        let hl = &h.levels[l];
+    for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate() {
         let mesh = &lv.levels[l].mesh;
-        let q = &quant[l];
         for (g, info) in hl.groups.iter().enumerate() {
             let n = plan.node_of[l][g] as usize;
             if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
