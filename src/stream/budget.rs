@@ -48,8 +48,8 @@ impl FrameTime {
         self.threshold = self.threshold.clamp(MIN_PIXELS, MAX_PIXELS);
     }
 
-    /// Prediction: `new_faces` of the `faces` about to be displayed belong to nodes that just came
-    /// into view. When the time predicted for `faces` overruns the band, coarsen at once by the
+    /// Prediction: `new_faces` of the `faces` about to be displayed belong to nodes not displayed
+    /// last frame. When the time predicted for `faces` overruns the band, coarsen at once by the
     /// factor that brings it back (faces scale with 1/threshold², so by the square root).
     pub fn predict(&mut self, faces: u64, new_faces: u64) {
         let Some(k) = self.ms_per_face else { return };

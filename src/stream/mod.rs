@@ -19,7 +19,7 @@ mod tests;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh};
-use crate::format::{NodeGeometry, NodeRecord, Reader, NO_PARENT};
+use crate::format::{NodeGeometry, NodeRecord, Reader};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
 use refine::{Limits, Mark, Refiner};
@@ -151,26 +151,33 @@ impl<R: Read + Seek> Streamer<R> {
             c.measured(ms, self.faces);
         }
         let threshold = self.controller.map_or(self.budgets.pixel_error, |c| c.threshold());
-        let limits = Limits {
+        let mut limits = Limits {
             pixel_error: threshold,
             max_faces: self.budgets.faces,
             max_bytes: self.budgets.bytes,
             priority: self.budgets.priority,
         };
         let attrs = self.reader.header().attributes;
-        let cut = self.refiner.select(&self.reader, camera, &limits, &|n| record_bytes(n, attrs));
+        let bytes = |n: &NodeRecord| record_bytes(n, attrs);
+        // Seed 000 §6: what comes into view is drawn coarse at first (the roots culled last frame
+        // are not refined), and a front that adds faces is checked against the target before it
+        // is drawn, from the last frame's cost per face: when it would overrun, it is selected
+        // again with the predicted threshold.
+        let predictive = self.budgets.predict && self.controller.is_some();
+        let held: &[u32] = if predictive { &self.culled } else { &[] };
+        let mut cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+        if let Some(c) = self.controller.as_mut().filter(|_| predictive) {
+            let nodes = self.reader.nodes();
+            let (added, _) = diff(&self.front, &cut.shown);
+            let new_faces = added.iter().map(|&a| nodes[a as usize].faces as u64).sum();
+            c.predict(cut.faces, new_faces);
+            if c.threshold() != limits.pixel_error {
+                limits.pixel_error = c.threshold();
+                cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+            }
+        }
         let (added, removed) = diff(&self.front, &cut.shown);
         self.cache.update(&added, &removed, &mut self.reader)?;
-
-        if let Some(c) = self.controller.as_mut().filter(|_| self.budgets.predict) {
-            let nodes = self.reader.nodes();
-            let new_faces = added
-                .iter()
-                .filter(|&&a| was_culled(&self.culled, nodes, a))
-                .map(|&a| nodes[a as usize].faces as u64)
-                .sum();
-            c.predict(cut.faces, new_faces);
-        }
 
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {
@@ -183,7 +190,7 @@ impl<R: Read + Seek> Streamer<R> {
             levels,
             bytes_read: self.reader.bytes_read(),
             resident_bytes: self.cache.resident_bytes(),
-            pixel_error: threshold,
+            pixel_error: limits.pixel_error,
             refine_ms: start.elapsed().as_secs_f64() * 1e3,
         };
         self.front.clone_from(&cut.shown);
@@ -244,20 +251,6 @@ fn diff(old: &[u32], new: &[u32]) -> (Vec<u32>, Vec<u32>) {
                 j += 1;
             }
             (None, None) => return (added, removed),
-        }
-    }
-}
-
-/// Whether node `a` or one of its ancestors was a culled root last frame: `a` came into view.
-fn was_culled(culled: &[u32], nodes: &[NodeRecord], a: u32) -> bool {
-    let mut j = a;
-    loop {
-        if culled.binary_search(&j).is_ok() {
-            return true;
-        }
-        match nodes[j as usize].parent {
-            NO_PARENT => return false,
-            p => j = p,
         }
     }
 }

@@ -72,12 +72,14 @@ impl Refiner {
     /// Select the cut for `camera`: start from the top level; level by level, refine shown nodes
     /// whose projected error is not under the threshold, in `limits.priority` order, when no
     /// same-level neighbour is displayed coarser and the budgets allow all the visible children.
-    /// `bytes(i)` is the resident size of node `i`'s geometry.
+    /// Nodes in `held` (ascending) are not refined. `bytes(i)` is the resident size of node `i`'s
+    /// geometry.
     pub fn select<R: Read + Seek>(
         &mut self,
         reader: &Reader<R>,
         camera: &Camera,
         limits: &Limits,
+        held: &[u32],
         bytes: &dyn Fn(&NodeRecord) -> u64,
     ) -> Cut {
         let nodes = reader.nodes();
@@ -106,7 +108,8 @@ impl Refiner {
                 .filter_map(|&i| {
                     let n = &nodes[i as usize];
                     let pixels = camera.projected_error(n.error, n.center, n.radius);
-                    (n.child_count > 0 && pixels >= limits.pixel_error).then(|| match limits.priority {
+                    let refinable = n.child_count > 0 && pixels >= limits.pixel_error && held.binary_search(&i).is_err();
+                    refinable.then(|| match limits.priority {
                         Priority::Error => (pixels, i),
                         Priority::Silhouette => (priority(n, camera), i),
                         Priority::Breadth => (0.0, i),

@@ -4,6 +4,7 @@ use super::refine::sees;
 use super::session::orbit;
 use super::*;
 use crate::camera::Projection;
+use crate::format::NO_PARENT;
 use crate::cone::{facing_perspective, Facing};
 use crate::hierarchy::HierarchyParams;
 use crate::pipeline::{convert, ConvertOptions, Silent};
@@ -261,8 +262,10 @@ fn refinement_order_changes_fronts_under_a_face_budget_only() {
 }
 
 #[test]
-fn without_prediction_a_model_coming_into_view_takes_no_large_step() {
-    let run = |predict: bool| -> f32 {
+fn a_model_coming_into_view_is_drawn_coarse_first_then_refined_as_predicted() {
+    // Far, then looking away (nothing shown), then near, then near again; every frame is
+    // reported to take the target time.
+    let run = |predict: bool| -> (Vec<FrameReport>, Streamer<File>) {
         let r = open();
         let (c, rad) = sphere(&r);
         let budgets = Budgets { target_ms: Some(10.0), predict, ..Budgets::default() };
@@ -271,15 +274,25 @@ fn without_prediction_a_model_coming_into_view_takes_no_large_step() {
         let near = orbit(c, rad, 15, 20, 256, 256);
         let mut away = near;
         away.target = 2.0 * near.eye - c;
-        let a = s.update(&far, None).unwrap();
-        let b = s.update(&away, Some(10.0)).unwrap();
-        assert_eq!(b.stats.faces, 0, "looking away shows nothing");
-        let n = s.update(&near, Some(10.0)).unwrap();
-        assert!(n.stats.faces as f32 > 1.5 * a.stats.faces as f32, "{} vs {}", n.stats.faces, a.stats.faces);
-        assert_eq!(n.stats.pixel_error, a.stats.pixel_error);
-        s.update(&near, Some(10.0)).unwrap().stats.pixel_error
+        let reports = vec![
+            s.update(&far, None).unwrap(),
+            s.update(&away, Some(10.0)).unwrap(),
+            s.update(&near, Some(10.0)).unwrap(),
+            s.update(&near, Some(10.0)).unwrap(),
+        ];
+        (reports, s)
     };
-    let (with, without) = (run(true), run(false));
-    assert_eq!(without, 1.0, "in the dead band the reactive controller keeps the threshold");
-    assert!(with >= 1.0 * budget::STEP, "the predictive step coarsens at once: {with}");
+    let (reactive, _) = run(false);
+    assert_eq!(reactive[1].stats.faces, 0, "looking away shows nothing");
+    assert!(reactive[2].stats.faces as f32 > 1.5 * reactive[0].stats.faces as f32, "{} vs {}", reactive[2].stats.faces, reactive[0].stats.faces);
+    assert_eq!(reactive[3].stats.pixel_error, 1.0, "in the dead band the reactive controller keeps the threshold");
+
+    let (predictive, s) = run(true);
+    let top = s.reader().levels().len() as u32 - 1;
+    let entering = &predictive[2];
+    assert!(!entering.front.is_empty());
+    assert!(entering.front.iter().all(|&i| s.reader().nodes()[i as usize].level == top), "what comes into view is not refined at once");
+    let next = &predictive[3];
+    assert!(next.stats.pixel_error >= budget::STEP, "the predicted step coarsens before drawing: {}", next.stats.pixel_error);
+    assert!(next.stats.faces > entering.stats.faces && next.stats.faces < reactive[3].stats.faces, "{} faces", next.stats.faces);
 }
