@@ -67,7 +67,8 @@ struct StreamArgs {
     /// f(g)) or plain breadth-first.
     #[arg(long, value_enum, default_value_t = StreamPriority::Error)]
     priority: StreamPriority,
-    /// With --target-ms, only react to measured frame times: no predictive step for newly visible nodes.
+    /// With --target-ms, only react to measured frame times: no coarse first frame for what comes
+    /// into view and no check of a front against the target before it is drawn.
     #[arg(long)]
     no_predict: bool,
     #[arg(long, default_value_t = 640)]

@@ -41,8 +41,9 @@ pub struct Budgets {
     pub target_ms: Option<f32>,
     /// Refinement order under the face and memory budgets.
     pub priority: Priority,
-    /// Whether the frame-time controller also coarsens ahead when nodes come into view (else it
-    /// only reacts to measured times), for comparison.
+    /// Whether the frame-time controller also acts ahead (else it only reacts to measured times,
+    /// for comparison): what comes into view is drawn coarse at first, and a front that adds
+    /// faces is checked against the target before it is drawn.
     pub predict: bool,
 }
 
