@@ -166,7 +166,9 @@ enum Kind {
 }
 
 /// A symmetric quadric pᵀAp + 2bᵀp + c with its accumulated weights.
+/// 96 bytes aligned to 32, so that a vertex's quadric spans two cache lines, never three.
 #[derive(Clone, Copy, Debug, Default)]
+#[repr(align(32))]
 struct Quadric {
     /// xx, xy, xz, yy, yz, zz.
     a: [f64; 6],
@@ -177,6 +179,9 @@ struct Quadric {
     /// Sum of the face areas only: Q(p) / area ranks collapses, so that heavily weighted border
     /// and seam planes make those collapses come late.
     area: f64,
+    /// Not a sum (`add` leaves it): in a vertex's quadric, the largest squared error estimate of
+    /// the collapses merged into it, kept here because every read of it also reads the quadric.
+    err_sq: f64,
 }
 
 impl Quadric {
@@ -194,6 +199,7 @@ impl Quadric {
             c: weight * d * d,
             w: weight,
             area: 0.0,
+            err_sq: 0.0,
         }
     }
 
@@ -356,8 +362,6 @@ fn prefetch<T>(x: &T) {
 struct State {
     verts: Vec<Vertex>,
     quadrics: Vec<Quadric>,
-    /// Per vertex, the largest squared error estimate of the collapses merged into it.
-    err_sq: Vec<f64>,
     faces: Vec<Face>,
     /// Per corner: the first corner of the vertex with the same attributes, material and group
     /// (kept consistent as corners move), so corners of one vertex compare by one integer.
@@ -411,7 +415,6 @@ impl State {
         State {
             // Filled by `init`.
             quadrics: Vec::new(),
-            err_sq: vec![0.0; mesh.positions.len()],
             wedges,
             version: vec![0; mesh.positions.len()],
             verts,
@@ -805,7 +808,7 @@ impl State {
         q.add(&self.quadrics[v as usize]);
         let (pu, pv) = (self.pos(u), self.pos(v));
         let (qu, qv) = (&self.quadrics[u as usize], &self.quadrics[v as usize]);
-        let (eu, ev) = (self.err_sq[u as usize], self.err_sq[v as usize]);
+        let (eu, ev) = (qu.err_sq, qv.err_sq);
         let mut add = |remove: u32, keep: u32, pos: DVec3, lerp: Option<f64>| {
             let (cu, cv) = (qu.eval(pos), qv.eval(pos));
             let cost = (cu / qu.area.max(f64::MIN_POSITIVE)).max(cv / qv.area.max(f64::MIN_POSITIVE));
@@ -857,7 +860,6 @@ impl State {
         let [u, v, _] = entry_edge(e);
         for w in [u, v] {
             self.prefetch_vertex(w);
-            prefetch(&self.err_sq[w as usize]);
         }
     }
 
@@ -1391,7 +1393,6 @@ impl State {
             let x = self.verts[v as usize];
             self.verts.push(Vertex { len: 0, kind: Kind::Unknown, ..x });
             self.quadrics.push(self.quadrics[v as usize]);
-            self.err_sq.push(self.err_sq[v as usize]);
             self.version.push(0);
             for &f in &sides[i].1 {
                 for w in &mut self.faces[f as usize].v {
@@ -1585,7 +1586,7 @@ impl State {
         self.version[k as usize] += 1;
         self.version[r as usize] += 1;
         self.error_sq = self.error_sq.max(c.error_sq);
-        self.err_sq[k as usize] = c.error_sq;
+        self.quadrics[k as usize].err_sq = c.error_sq;
 
         self.scratch_r = rf;
         self.scratch_k = kf;
@@ -1633,7 +1634,7 @@ impl State {
                 remap[v] = positions.len() as u32;
                 positions.push(x.pos);
                 let own = if q.w > 0.0 { q.eval(x.pos.as_dvec3()) / q.w } else { 0.0 };
-                vertex_error.push(own.max(self.err_sq[v]).sqrt() as f32);
+                vertex_error.push(own.max(q.err_sq).sqrt() as f32);
             }
         }
         fn corners<T: Copy>(a: &[T], alive: &[usize]) -> Vec<T> {
