@@ -24,6 +24,11 @@ use std::path::Path;
 pub const BACKGROUND: [u8; 4] = [28, 30, 36, 255];
 /// Share of the color lit regardless of the light direction.
 const AMBIENT: f32 = 0.18;
+
+/// Brightness of a surface with normal `n` (any length) lit head-on from `light` (unit).
+fn lit(n: Vec3, light: Vec3) -> f32 {
+    AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(light).max(0.0)
+}
 /// Sub-pixel bits of the fixed-point vertex grid.
 const SUBPIXEL_BITS: u32 = 8;
 const SUBPIXEL: f32 = (1 << SUBPIXEL_BITS) as f32;
@@ -137,10 +142,9 @@ impl Image {
         }
         let view_projection = camera.view_projection();
         let light = -camera.forward();
-        let lit = |n: Vec3| AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(light).max(0.0);
         let vertex_shades: Vec<Vec<f32>> = parts
             .par_iter()
-            .map(|p| if p.normals.len() == p.positions.len() { p.normals.iter().map(|&n| lit(n)).collect() } else { Vec::new() })
+            .map(|p| if p.normals.len() == p.positions.len() { p.normals.iter().map(|&n| lit(n, light)).collect() } else { Vec::new() })
             .collect();
         let (width, height) = (self.width, self.height);
         let work: Vec<(usize, usize)> = parts
@@ -166,7 +170,7 @@ impl Image {
                         continue;
                     }
                     let shade = if vertex_shade.is_empty() {
-                        [lit((p[1] - p[0]).cross(p[2] - p[0])); 3]
+                        [lit((p[1] - p[0]).cross(p[2] - p[0]), light); 3]
                     } else {
                         tri.map(|i| vertex_shade[i as usize])
                     };
@@ -264,7 +268,7 @@ struct StripFrame<'a> {
 
 impl StripFrame<'_> {
     fn lit(&self, n: Vec3) -> f32 {
-        AMBIENT + (1.0 - AMBIENT) * n.normalize_or_zero().dot(self.light).max(0.0)
+        lit(n, self.light)
     }
 
     /// A position in clip space and its screen row: the floor of its screen y, clamped to a few

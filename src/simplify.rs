@@ -865,13 +865,17 @@ impl State {
         }
     }
 
+    /// The ends of a queued edge, if the entry is current (neither end changed since it was
+    /// queued).
+    fn current_ends(&self, e: u128) -> Option<[u32; 2]> {
+        let [u, v, versions] = entry_edge(e);
+        (self.versions(u, v) == versions).then_some([u, v])
+    }
+
     /// Start fetching the face lists of a current queued edge's ends (records fetched earlier).
     fn prefetch_lists(&self, e: u128) {
-        let [u, v, versions] = entry_edge(e);
-        if self.versions(u, v) == versions {
-            for w in [u, v] {
-                self.prefetch_list(w);
-            }
+        for w in self.current_ends(e).into_iter().flatten() {
+            self.prefetch_list(w);
         }
     }
 
@@ -883,34 +887,28 @@ impl State {
 
     /// Start fetching the faces of a current queued edge's ends (lists fetched earlier).
     fn prefetch_faces(&self, e: u128) {
-        let [u, v, versions] = entry_edge(e);
-        if self.versions(u, v) == versions {
-            for w in [u, v] {
-                self.prefetch_faces_of(w);
-            }
+        for w in self.current_ends(e).into_iter().flatten() {
+            self.prefetch_faces_of(w);
         }
     }
 
     /// Start fetching what checking and collapsing a current queued edge needs of the faces
     /// around it (faces fetched earlier): their vertices' records and their corners.
     fn prefetch_around(&self, e: u128) {
-        let [u, v, versions] = entry_edge(e);
-        if self.versions(u, v) == versions {
-            for w in [u, v] {
-                for &f in self.faces_of(w) {
-                    let f = f as usize;
-                    for y in self.faces[f].v {
-                        if let Some(x) = self.verts.get(y as usize) {
-                            prefetch(x);
-                        }
+        for w in self.current_ends(e).into_iter().flatten() {
+            for &f in self.faces_of(w) {
+                let f = f as usize;
+                for y in self.faces[f].v {
+                    if let Some(x) = self.verts.get(y as usize) {
+                        prefetch(x);
                     }
-                    prefetch(&self.wedges[f]);
-                    if let Some(n) = self.normals.get(3 * f) {
-                        prefetch(n);
-                    }
-                    if let Some(uv) = self.uvs.get(3 * f) {
-                        prefetch(uv);
-                    }
+                }
+                prefetch(&self.wedges[f]);
+                if let Some(n) = self.normals.get(3 * f) {
+                    prefetch(n);
+                }
+                if let Some(uv) = self.uvs.get(3 * f) {
+                    prefetch(uv);
                 }
             }
         }
@@ -919,8 +917,7 @@ impl State {
     /// Start fetching the face lists of the vertices opposite a current queued edge, which its
     /// collapse edits (their records fetched earlier).
     fn prefetch_opposite(&self, e: u128) {
-        let [u, v, versions] = entry_edge(e);
-        if self.versions(u, v) == versions {
+        if let Some([u, v]) = self.current_ends(e) {
             for &f in self.faces_of(u) {
                 let t = self.tri(f);
                 if t.contains(&v) {
@@ -1131,10 +1128,7 @@ impl State {
                     pushed.push(Reverse(e));
                     break;
                 }
-                let [u, v, versions] = entry_edge(e);
-                if self.versions(u, v) != versions {
-                    continue;
-                }
+                let Some([u, v]) = self.current_ends(e) else { continue };
                 let Some(edge) = self.edge_faces(u, v) else { continue };
                 if !self.plan(u, v, edge, &mut plan) {
                     continue;
@@ -1150,7 +1144,7 @@ impl State {
                 };
                 match found {
                     // Cheaper candidates were illegal: rank the edge by the legal one.
-                    Some(&c) if c.cost as f32 > entry_key(e) => pushed.push(Reverse(entry(c.cost, [u, v, versions]))),
+                    Some(&c) if c.cost as f32 > entry_key(e) => pushed.push(Reverse(entry(c.cost, entry_edge(e)))),
                     Some(&c) => {
                         self.collapse(&plan.e, c);
                         if !std::mem::replace(&mut changed[c.keep as usize], true) {
@@ -1193,10 +1187,7 @@ impl State {
                     blocked.push(e);
                 }
             }
-            let current = |&e: &u128| {
-                let [u, v, versions] = entry_edge(e);
-                self.versions(u, v) == versions
-            };
+            let current = |&e: &u128| self.current_ends(e).is_some();
             entries.retain(current);
             blocked.retain(current);
             self.entries = entries;
