@@ -167,17 +167,17 @@ impl<R: Read + Seek> Streamer<R> {
         let predictive = self.budgets.predict && self.controller.is_some();
         let held: &[u32] = if predictive { &self.culled } else { &[] };
         let mut cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+        let (mut added, mut removed) = diff(&self.front, &cut.shown);
         if let Some(c) = self.controller.as_mut().filter(|_| predictive) {
             let nodes = self.reader.nodes();
-            let (added, _) = diff(&self.front, &cut.shown);
             let new_faces = added.iter().map(|&a| nodes[a as usize].faces as u64).sum();
             c.predict(cut.faces, new_faces);
             if c.threshold() != limits.pixel_error {
                 limits.pixel_error = c.threshold();
                 cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+                (added, removed) = diff(&self.front, &cut.shown);
             }
         }
-        let (added, removed) = diff(&self.front, &cut.shown);
         self.cache.update(&added, &removed, &mut self.reader)?;
 
         let mut levels = vec![0u32; self.reader.levels().len()];
