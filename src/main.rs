@@ -348,12 +348,17 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let cli = Cli::parse();
-    // On Ctrl-C, remove temporary output files before exiting.
+    // On SIGINT, SIGTERM or SIGHUP, remove temporary output files before exiting.
     let _ = ctrlc::set_handler(|| {
         strata::atomic::remove_pending();
+        eprintln!("interrupted: no output written");
         std::process::exit(130);
     });
-    match run(cli) {
+    let result = run(cli);
+    for p in strata::atomic::take_removed_stale() {
+        eprintln!("note: removed {}, left by an interrupted strata run", p.display());
+    }
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -614,6 +619,7 @@ fn verify(a: VerifyArgs) -> Result<()> {
 
 fn extract(a: ExtractArgs) -> Result<()> {
     let mut rd = format::Reader::open_path(&a.file)?;
+    strata::atomic::check_output(&a.output)?;
     let mesh = format::to_mesh(&mut rd, a.level)?;
     strata::export::write(&a.output, &mesh)?;
     println!("wrote level {} ({} faces, {} vertices) to {}", a.level, mesh.face_count(), mesh.vertex_count(), a.output.display());
@@ -624,11 +630,15 @@ fn stream(a: StreamArgs) -> Result<()> {
     use strata::stream::{session, Budgets, Priority, Streamer};
     let opened = Instant::now();
     let reader = format::Reader::open_path(&a.file)?;
+    if let Some(out) = &a.export_cut {
+        strata::atomic::check_output(out)?;
+    }
     let h = reader.header();
     let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
     let (width, height) = (a.width.max(1), a.height.max(1));
     let cameras = match &a.path {
         Some(p) => {
+            strata::atomic::protect(p);
             let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             session::parse_path(&text, p, center, radius, width, height)?
         }
@@ -779,6 +789,8 @@ fn render_camera(a: &RenderArgs, min: glam::Vec3, max: glam::Vec3) -> Result<str
 fn render(a: RenderArgs) -> Result<()> {
     use strata::render::{palette, Image};
     anyhow::ensure!(a.width > 0 && a.height > 0, "--width and --height must be positive");
+    strata::atomic::protect(&a.input);
+    strata::atomic::check_output(&a.output)?;
     let plain = [200, 200, 200, 255];
     let mut image = Image::new(a.width, a.height);
     let (mut drawn, mut faces, mut draw_ms) = (0, 0, 0.0);
@@ -912,6 +924,7 @@ fn convert(a: ConvertArgs) -> Result<()> {
 
 fn simplify(a: SimplifyArgs) -> Result<()> {
     let imp = load(&a.input)?;
+    strata::atomic::check_output(&a.output)?;
     let m = &imp.mesh;
     let diagonal = m.diagonal();
     let mut opts = strata::simplify::SimplifyOptions::default();

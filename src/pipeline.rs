@@ -75,6 +75,7 @@ pub struct Converted {
 }
 
 /// Convert the mesh file `input` into the chunk file `output`, which appears only when complete.
+/// An output that is a directory or the input itself is refused before any work.
 pub fn convert(
     input: &Path,
     format: Option<Format>,
@@ -89,6 +90,8 @@ pub fn convert(
         clock = Instant::now();
     };
 
+    crate::atomic::protect(input);
+    crate::atomic::check_output(output)?;
     progress.stage("import", 0);
     let mut imported = import(input, format)?;
     match opts.normals {

@@ -67,6 +67,7 @@ pub struct Reader<R> {
 impl Reader<File> {
     /// Open the file at `path`.
     pub fn open_path(path: &Path) -> Result<Reader<File>> {
+        crate::atomic::protect(path);
         let f = File::open(path).map_err(|e| Error::io(path, e))?;
         Reader::open_named(f, path)
     }

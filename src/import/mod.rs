@@ -50,6 +50,7 @@ pub struct Imported {
 /// Read a mesh file, choosing the format by extension unless `format` is given.
 pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
     let start = Instant::now();
+    crate::atomic::protect(path);
     let format = match format.or_else(|| Format::from_path(path)) {
         Some(f) => f,
         None => {
