@@ -149,6 +149,88 @@ pub fn committed() -> Vec<Fixture> {
     ]
 }
 
+/// An isosurface the way a CT scan's is made, by marching tetrahedra over an `n`³ lattice of the
+/// unit cube, of a blobby field whose samples are whole multiples of 1/64 (as a scanner's integer
+/// densities are) and an iso-value just off one of them (2⁻²² above 0). Wherever a sample equals that
+/// multiple, the surface passes within ~10⁻⁷ of the lattice point and the vertices on its edges are
+/// distinct positions closer together than a millionth of the model: the mesh that a position
+/// grid of 20 bits cannot keep apart. Closed and manifold; no normals.
+pub fn isosurface(n: u32, seed: u64) -> Mesh {
+    let n = n.max(2) as usize;
+    let h = 1.0 / (n - 1) as f64;
+    let at = |i: usize, j: usize, k: usize| DVec3::new(i as f64, j as f64, k as f64) * h;
+    let border = |i: usize| i == 0 || i == n - 1;
+    let mut field = Vec::with_capacity(n * n * n);
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let p = at(i, j, k);
+                let d = p - DVec3::splat(0.5);
+                let v = if border(i) || border(j) || border(k) {
+                    -1.0
+                } else {
+                    1.0 - d.length_squared() / 0.16 + 0.6 * fbm(3.0 * p, 3, seed)
+                };
+                field.push((v * 64.0).floor() / 64.0);
+            }
+        }
+    }
+    const ISO: f64 = 1.0 / (1u64 << 22) as f64;
+    let index = |i: usize, j: usize, k: usize| (k * n + j) * n + i;
+    let mut vertex_of: HashMap<(usize, usize), u32> = HashMap::new();
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    // Kuhn's six tetrahedra of a cube, each a path from corner 0 to corner 7 along the axes.
+    const PATHS: [[usize; 3]; 6] = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
+    for k in 0..n - 1 {
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                for path in PATHS {
+                    let mut c = [i, j, k];
+                    let mut tet = [index(c[0], c[1], c[2]); 4];
+                    for (s, &axis) in path.iter().enumerate() {
+                        c[axis] += 1;
+                        tet[s + 1] = index(c[0], c[1], c[2]);
+                    }
+                    let inside: Vec<usize> = tet.iter().copied().filter(|&v| field[v] > ISO).collect();
+                    let outside: Vec<usize> = tet.iter().copied().filter(|&v| field[v] <= ISO).collect();
+                    if inside.is_empty() || outside.is_empty() {
+                        continue;
+                    }
+                    let mut cross = |a: usize, b: usize| -> u32 {
+                        *vertex_of.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                            let lattice = |v: usize| at(v % n, v / n % n, v / (n * n));
+                            let t = (ISO - field[a]) / (field[b] - field[a]);
+                            positions.push((lattice(a) + (lattice(b) - lattice(a)) * t).as_vec3());
+                            positions.len() as u32 - 1
+                        })
+                    };
+                    let polygon: Vec<u32> = match (inside.len(), outside.len()) {
+                        (1, _) => outside.iter().map(|&o| cross(inside[0], o)).collect(),
+                        (_, 1) => inside.iter().map(|&v| cross(v, outside[0])).collect(),
+                        _ => vec![
+                            cross(inside[0], outside[0]),
+                            cross(inside[0], outside[1]),
+                            cross(inside[1], outside[1]),
+                            cross(inside[1], outside[0]),
+                        ],
+                    };
+                    let mean = |vs: &[usize]| vs.iter().fold(DVec3::ZERO, |s, &v| s + at(v % n, v / n % n, v / (n * n))) / vs.len() as f64;
+                    let out_dir = mean(&outside) - mean(&inside);
+                    for w in 1..polygon.len() - 1 {
+                        let mut t = [polygon[0], polygon[w], polygon[w + 1]];
+                        if triangle_cross(&positions, &t).dot(out_dir) < 0.0 {
+                            t.swap(1, 2);
+                        }
+                        triangles.push(t);
+                    }
+                }
+            }
+        }
+    }
+    finish(Mesh { positions, triangles, ..Mesh::default() })
+}
+
 /// Clean a freshly built mesh (adds the default material and face geometry).
 fn finish(mesh: Mesh) -> Mesh {
     mesh.clean().expect("procedural positions are finite").0

@@ -19,6 +19,7 @@ use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
 use crate::mesh::{triangle_cross, Material, Mesh};
 use glam::Vec3;
+use rustc_hash::FxHashMap;
 use std::collections::HashMap;
 use std::io::{Seek, SeekFrom, Write};
 use std::path::Path;
@@ -105,7 +106,9 @@ fn write_named<W: Write + Seek>(
     let materials = material_table(&lv.levels[0].mesh);
     let plan = plan(h, lv);
     let grid = model_grid(lv);
-    let quant: Vec<Quantized> = lv.levels.iter().map(|l| Quantized::new(&grid, &l.mesh)).collect();
+    let mut quant = Vec::with_capacity(lv.levels.len());
+    quant.push(Quantized::distinct(&grid, &lv.levels[0].mesh).map_err(bad)?);
+    quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(&grid, &l.mesh)));
     let (mut records, codes) = bounds(h, lv, &plan, &grid, &quant).map_err(bad)?;
     let (neighbor_counts, neighbors) = neighbor_lists(h, &plan);
     for (n, (r, &c)) in records.iter_mut().zip(&neighbor_counts).enumerate() {
@@ -388,13 +391,91 @@ fn model_grid(lv: &LevelMeshes) -> Grid {
 struct Quantized {
     points: Vec<[u32; 3]>,
     positions: Vec<Vec3>,
+    /// Vertices moved off their nearest grid point to stay distinct, and how far each now lies from
+    /// its input position (model units); empty for most meshes.
+    moved: FxHashMap<u32, f32>,
 }
 
+/// Largest cube radius, in grid steps, searched for a free grid point for a vertex whose nearest
+/// one is taken.
+const MAX_NUDGE_STEPS: i64 = 8;
+
 impl Quantized {
+    /// Every position on its nearest grid point.
     fn new(grid: &Grid, mesh: &Mesh) -> Quantized {
         let points: Vec<[u32; 3]> = mesh.positions.iter().map(|&p| grid.encode(p)).collect();
         let positions = points.iter().map(|&g| grid.decode(g)).collect();
-        Quantized { points, positions }
+        Quantized { points, positions, moved: FxHashMap::default() }
+    }
+
+    /// Level 0 (spec §5.1): distinct input positions decode to distinct positions, so that the input's
+    /// faces stay distinct. A vertex whose nearest grid point decodes to a position an earlier
+    /// vertex (in vertex order) already holds goes to the free grid point nearest its input position
+    /// in the smallest cube around its nearest grid point that has one.
+    fn distinct(grid: &Grid, mesh: &Mesh) -> std::result::Result<Quantized, String> {
+        let mut q = Quantized::new(grid, mesh);
+        let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
+        let mut holder: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(q.points.len(), Default::default());
+        for v in 0..q.points.len() {
+            let first = *holder.entry(key(q.positions[v])).or_insert(v as u32);
+            if first == v as u32 || mesh.positions[first as usize] == mesh.positions[v] {
+                continue;
+            }
+            let input = mesh.positions[v].as_dvec3();
+            let mut best: Option<(f64, [u32; 3], Vec3)> = None;
+            for r in 1..=MAX_NUDGE_STEPS {
+                for d in (-r..=r).flat_map(|x| (-r..=r).flat_map(move |y| (-r..=r).map(move |z| [x, y, z]))) {
+                    if d.iter().all(|c| c.abs() < r) {
+                        continue;
+                    }
+                    let g: [i64; 3] = std::array::from_fn(|a| q.points[v][a] as i64 + d[a]);
+                    if g.iter().any(|&c| c < 0 || c > grid.last() as i64) {
+                        continue;
+                    }
+                    let g = g.map(|c| c as u32);
+                    let p = grid.decode(g);
+                    let distance = p.as_dvec3().distance(input);
+                    if !holder.contains_key(&key(p)) && best.is_none_or(|b| distance < b.0) {
+                        best = Some((distance, g, p));
+                    }
+                }
+                if best.is_some() {
+                    break;
+                }
+            }
+            let Some((distance, g, p)) = best else {
+                return Err(format!("level 0 vertex {v}: no free grid point within {MAX_NUDGE_STEPS} steps keeps it apart from vertex {first}"));
+            };
+            holder.insert(key(p), v as u32);
+            q.points[v] = g;
+            q.positions[v] = p;
+            q.moved.insert(v as u32, round_up(distance));
+        }
+        Ok(q)
+    }
+
+    /// The quantization bound of `faces` of `mesh`: [`Grid::error`], or the distance of a moved
+    /// vertex from its input position where larger.
+    fn error(&self, grid: &Grid, mesh: &Mesh, faces: &[u32]) -> f32 {
+        let mut e = grid.error();
+        if !self.moved.is_empty() {
+            for &f in faces {
+                for v in mesh.triangles[f as usize] {
+                    e = e.max(self.moved.get(&v).copied().unwrap_or(0.0));
+                }
+            }
+        }
+        e
+    }
+}
+
+/// `x` as the smallest f32 not below it.
+fn round_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x {
+        f.next_up()
+    } else {
+        f
     }
 }
 
@@ -484,7 +565,7 @@ fn bounds(h: &Hierarchy, lv: &LevelMeshes, plan: &Plan, grid: &Grid, quant: &[Qu
                     needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
                 }
             }
-            let mut error = lv.levels[l].group_error[g] + grid.error();
+            let mut error = lv.levels[l].group_error[g] + q.error(grid, mesh, faces);
             for c in first..first + count {
                 let child = records[c as usize];
                 needed = needed.max(dc.distance(child.center.as_dvec3()) + child.radius as f64);
@@ -768,4 +849,31 @@ fn skel_chunk(levels: &[LevelRecord], records: &[NodeRecord], codes: &[Codes], n
     let mut out = Vec::with_capacity(payload.len() + 24);
     chunk::put(&mut out, id::SKEL, 0, &payload);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn level_zero_positions_stay_distinct_within_their_stated_bound() {
+        let mesh = crate::fixtures::isosurface(24, 3);
+        let (lo, hi) = mesh.bounds().unwrap();
+        let grid = Grid::fit(lo, hi, GRID_BITS);
+        let plain = Quantized::new(&grid, &mesh);
+        let q = Quantized::distinct(&grid, &mesh).unwrap();
+        let keys = |q: &Quantized| q.positions.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<std::collections::HashSet<_>>().len();
+        assert!(keys(&plain) < mesh.vertex_count(), "the fixture crowds vertices");
+        assert_eq!(keys(&q), mesh.vertex_count());
+        assert!(!q.moved.is_empty());
+        for (v, (&p, &input)) in q.positions.iter().zip(&mesh.positions).enumerate() {
+            let bound = q.moved.get(&(v as u32)).map_or(grid.error(), |&d| d.max(grid.error()));
+            assert!(p.as_dvec3().distance(input.as_dvec3()) <= bound as f64, "vertex {v}");
+            if !q.moved.contains_key(&(v as u32)) {
+                assert_eq!(q.points[v], plain.points[v]);
+            }
+        }
+        let all: Vec<u32> = (0..mesh.face_count() as u32).collect();
+        assert!(q.error(&grid, &mesh, &all) > grid.error());
+    }
 }
