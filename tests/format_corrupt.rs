@@ -154,14 +154,15 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
         ("node 0 child count", node + 16, max16.to_vec(), vec![node, skel], "children"),
         ("node 0 neighbour count", node + 16 + 2, max16.to_vec(), vec![node, skel], "neighbours"),
         ("node 0 box min", node + 16 + 12, max64.to_vec(), vec![node, skel], "grid"),
-        ("node 0 faces", node + 16 + 40, max32.to_vec(), vec![node, skel], "INDX"),
-        ("node 0 vertices", node + 16 + 44, max32.to_vec(), vec![node, skel], "vertices need"),
+        ("node 0 faces", node + 16 + 40, max32.to_vec(), vec![node, skel], "LEVL says"),
+        ("node 0 vertices", node + 16 + 44, max32.to_vec(), vec![node, skel], "LEVL says"),
         ("node 0 size", node + 16 + 48, max32.to_vec(), vec![node, skel], "geometry"),
     ];
     for (what, pos, value, seal, expect) in cases {
         let msg = damaged(&good, pos, &value, &seal);
         assert!(msg.contains(expect), "{what}: {msg}");
-        assert!(msg.contains("byte offset"), "{what}: the error names no byte offset: {msg}");
+        let located = msg.contains("byte offset") || msg.contains("level ");
+        assert!(located, "{what}: the error names no byte offset or level: {msg}");
     }
 
     // A sub-chunk of node 0's geometry claiming a huge size: GEOM and the node table resealed.
@@ -176,10 +177,10 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
     assert!(msg.contains("VPOS") && msg.contains("parent has"), "{msg}");
 }
 
-/// A node box that is on the grid but too small opens fine (the reader keeps no boxes) and is
-/// caught by `verify`, which reads the boxes from the node table.
+/// A node box that is on the grid but too small to hold its children's is refused by the reader
+/// at open and listed by `verify`.
 #[test]
-fn a_shrunken_node_box_is_found_by_verify() {
+fn a_shrunken_node_box_is_refused_by_the_reader_and_verify() {
     let good = small_file();
     let at = offsets(&good);
     let (skel, node) = (at("SKEL"), at("NODE"));
@@ -188,9 +189,81 @@ fn a_shrunken_node_box_is_found_by_verify() {
     bytes[node + 16 + 20..node + 16 + 28].copy_from_slice(&min);
     reseal(&mut bytes, node);
     reseal(&mut bytes, skel);
-    let mut rd = Reader::open(Cursor::new(&bytes)).expect("the box is not checked at open");
-    let boxes = rd.node_boxes().expect("boxes");
-    assert_eq!(boxes[0].0, boxes[0].1);
+    let e = Reader::open(Cursor::new(&bytes)).err().expect("the reader checks boxes at open").to_string();
+    assert!(e.contains("node 0") && e.contains("box"), "{e}");
     let v = format::verify(Cursor::new(&bytes), Path::new("shrunk"));
     assert!(v.problems.iter().any(|e| e.to_string().contains("node 0") && e.to_string().contains("box")), "{:?}", v.problems);
+}
+
+/// Recompute every CRC of a file whose payload bytes (not frames) were changed: sub-chunks, then
+/// `GEOM` chunks and the node table's copies of their CRCs, then `NODE` and `SKEL`.
+fn reseal_all(bytes: &mut [u8], good: &Reader<Cursor<&Vec<u8>>>) {
+    let frame_size = |b: &[u8], at: usize| u64::from_le_bytes(b[at + 8..at + 16].try_into().expect("8 bytes")) as usize;
+    let subs = |b: &mut [u8], parent: usize| {
+        let (start, end) = (parent + 16, parent + 16 + frame_size(b, parent));
+        let mut at = start;
+        while at < end {
+            reseal(b, at);
+            let after = at + 20 + frame_size(b, at);
+            at = after + (8 - after % 8) % 8;
+        }
+    };
+    let node_at = good.skeleton_chunks().iter().find(|c| c.id == "NODE").expect("NODE").offset as usize;
+    let skel_at = good.skeleton_chunks().iter().find(|c| c.id == "SKEL").expect("SKEL").offset as usize;
+    for (i, n) in good.nodes().iter().enumerate() {
+        let at = n.offset as usize;
+        subs(bytes, at);
+        reseal(bytes, at);
+        let size = frame_size(bytes, at);
+        let crc: [u8; 4] = bytes[at + 16 + size..at + 20 + size].try_into().expect("4 bytes");
+        let field = node_at + 16 + 56 * i + 52;
+        bytes[field..field + 4].copy_from_slice(&crc);
+    }
+    reseal(bytes, node_at);
+    reseal(bytes, skel_at);
+}
+
+/// Whether a problem is one only the whole file can show (spec §6, `format::rules`).
+fn whole_file_only(problem: &str) -> bool {
+    ["appear more than once", "clusters, HEAD says"].iter().any(|p| problem.contains(p))
+}
+
+/// With every checksum recomputed, any change to a node record or to a node's geometry that
+/// `verify` refuses is refused by the reader as it opens the file or decodes the node, and the
+/// reader refuses nothing that `verify` accepts.
+#[test]
+fn readers_refuse_what_verify_refuses_node_by_node() {
+    let good = small_file();
+    let rd = Reader::open(Cursor::new(&good)).expect("open");
+    let node_at = rd.skeleton_chunks().iter().find(|c| c.id == "NODE").expect("NODE").offset as usize;
+    let mut targets: Vec<usize> = (node_at + 16..node_at + 16 + 56 * rd.nodes().len()).collect();
+    for n in rd.nodes() {
+        let (start, end) = (n.offset as usize + 16, n.offset as usize + n.size as usize - 4);
+        let mut at = start;
+        while at < end {
+            let size = u64::from_le_bytes(good[at + 8..at + 16].try_into().unwrap()) as usize;
+            targets.extend(at + 16..at + 16 + size);
+            let after = at + 20 + size;
+            at = after + (8 - after % 8) % 8;
+        }
+    }
+    let (mut refused, mut accepted) = (0, 0);
+    for &at in &targets {
+        for mask in [0x01u8, 0x80, 0xFF] {
+            let mut bytes = good.clone();
+            bytes[at] ^= mask;
+            reseal_all(&mut bytes, &rd);
+            let v = format::verify(Cursor::new(&bytes), Path::new("mutated"));
+            let node_rules: Vec<String> = v.problems.iter().map(|e| e.to_string()).filter(|p| !whole_file_only(p)).collect();
+            let strict = Reader::open(Cursor::new(&bytes)).and_then(|mut r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
+            match (&strict, node_rules.is_empty()) {
+                (Ok(()), false) => panic!("byte {at} ^ {mask:#x}: verify found {node_rules:?} but the reader accepted the file"),
+                (Err(e), true) => panic!("byte {at} ^ {mask:#x}: the reader refused ({e}) what verify accepts ({:?})", v.problems),
+                (Err(_), false) => refused += 1,
+                (Ok(()), true) => accepted += 1,
+            }
+        }
+    }
+    println!("{refused} refused, {accepted} accepted");
+    assert!(refused > 1000 && accepted > 100, "{refused} refused, {accepted} accepted of {} changes", 3 * targets.len());
 }

@@ -18,6 +18,7 @@ pub mod chunk;
 pub mod inspect;
 pub mod octa;
 pub mod read;
+pub mod rules;
 pub mod verify;
 pub mod write;
 

@@ -5,6 +5,7 @@
 //! and every problem is an [`Error`] naming the chunk and the byte offset.
 
 use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
+use super::rules::{self, Sink};
 use super::{
     angle_decode, id, octa, radius_decode, unpack, Attributes, Cluster, Grid, Header, LevelRecord, MaterialRange, NodeGeometry,
     NodeRecord, CLUSTER_RECORD_BYTES, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAGIC, MAJOR, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR,
@@ -60,8 +61,10 @@ pub struct Reader<R> {
     skeleton_end: u64,
     /// The last node chunk read, kept so that reading a node allocates only its geometry.
     scratch: Vec<u8>,
-    /// Where the node table's records start.
-    node_table_at: u64,
+    /// Each node's box as packed grid points (min, max): 16 bytes a node, decoded on demand.
+    boxes: Vec<[u64; 2]>,
+    /// Whether the rules of spec §6 are checked at open and as each node is decoded.
+    strict: bool,
 }
 
 impl Reader<File> {
@@ -79,8 +82,22 @@ impl<R: Read + Seek> Reader<R> {
         Reader::open_named(r, Path::new("<input>"))
     }
 
-    /// Open a file from any seekable reader; errors name it `path`.
-    pub fn open_named(mut r: R, path: &Path) -> Result<Reader<R>> {
+    /// Open a file from any seekable reader; errors name it `path`. Besides every size, offset and
+    /// checksum, the skeleton's rules (spec §6) are checked here and each node's as it is read, so
+    /// that a file [`verify`](super::verify()) refuses is refused by every reader too.
+    pub fn open_named(r: R, path: &Path) -> Result<Reader<R>> {
+        let rd = Reader::open_unchecked(r, path)?;
+        let mut sink = Sink::new(1);
+        rules::skeleton(&rd.path, &rd.header, &rd.levels, &rd.nodes, &rd.neighbors, &rd.node_boxes(), &mut sink);
+        match sink.first() {
+            Some(e) => Err(e),
+            None => Ok(Reader { strict: true, ..rd }),
+        }
+    }
+
+    /// Open checking sizes, offsets and checksums only; nodes are decoded without their rules.
+    /// For [`verify`](super::verify()), which checks the rules itself and lists every problem.
+    pub(crate) fn open_unchecked(mut r: R, path: &Path) -> Result<Reader<R>> {
         let len = r.seek(SeekFrom::End(0)).map_err(|e| Error::io(path, e))?;
         let mut rd = Reader {
             r,
@@ -95,7 +112,8 @@ impl<R: Read + Seek> Reader<R> {
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
             scratch: Vec::new(),
-            node_table_at: 0,
+            boxes: Vec::new(),
+            strict: false,
         };
         rd.read_prologue()?;
         let mut pos = PROLOGUE_BYTES;
@@ -168,6 +186,11 @@ impl<R: Read + Seek> Reader<R> {
         })
     }
 
+    /// Every node's neighbour list, end to end in node order ([`NodeRecord::neighbor_first`]).
+    pub fn all_neighbors(&self) -> &[u32] {
+        &self.neighbors
+    }
+
     pub fn materials(&self) -> &[Material] {
         &self.materials
     }
@@ -201,7 +224,15 @@ impl<R: Read + Seek> Reader<R> {
         let mut buf = std::mem::take(&mut self.scratch);
         let out = self.node_subs(i, &mut buf).and_then(|(rec, _, payload, subs)| self.decode(i, &rec, &buf[payload], &subs));
         self.scratch = buf;
-        out
+        let g = out?;
+        if self.strict {
+            let mut sink = Sink::new(1);
+            rules::node(&self.path, i, &self.nodes[i as usize], self.node_box(i), &g, &mut sink);
+            if let Some(e) = sink.first() {
+                return Err(e);
+            }
+        }
+        Ok(g)
     }
 
     /// The sub-chunks of node `i`'s `GEOM` chunk (read and checked).
@@ -228,13 +259,17 @@ impl<R: Read + Seek> Reader<R> {
         Ok(out)
     }
 
-    /// Every node's bounding box (min, max), read again from the node table: the records in
-    /// memory leave it out, since only verification needs it (24 bytes per node).
-    pub fn node_boxes(&mut self) -> Result<Vec<(Vec3, Vec3)>> {
-        let table = self.read_at(self.node_table_at, self.nodes.len() as u64 * NODE_RECORD_BYTES)?;
+    /// Node `i`'s bounding box (min, max). The node records leave it out, since only the checks of
+    /// a node's geometry need it; it is kept packed, 16 bytes a node.
+    pub fn node_box(&self, i: u32) -> (Vec3, Vec3) {
         let grid = self.header.grid;
-        let corner = |b: &[u8]| unpack(LE::read_u64(b)).map_or(Vec3::NAN, |g| grid.decode(g));
-        Ok(table.chunks_exact(NODE_RECORD_BYTES as usize).map(|r| (corner(&r[12..20]), corner(&r[20..28]))).collect())
+        let corner = |v: u64| unpack(v).map_or(Vec3::NAN, |g| grid.decode(g));
+        self.boxes.get(i as usize).map_or((Vec3::NAN, Vec3::NAN), |b| (corner(b[0]), corner(b[1])))
+    }
+
+    /// Every node's bounding box, in node order.
+    pub fn node_boxes(&self) -> Vec<(Vec3, Vec3)> {
+        (0..self.nodes.len() as u32).map(|i| self.node_box(i)).collect()
     }
 
     /// Read `len` bytes at `offset`, which the caller has checked lie in the file.
@@ -462,7 +497,7 @@ impl<R: Read + Seek> Reader<R> {
             return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
         }
         let grid = h.grid;
-        let node_table_at = f.offset();
+        let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(h.nodes as usize);
         let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
         let mut neighbor_first = 0u64;
         let mut offset = self.skeleton_end;
@@ -479,7 +514,8 @@ impl<R: Read + Seek> Reader<R> {
                 let (child_count, neighbor_count) = (f.u16()? as u32, f.u16()? as u32);
                 let axis = octa::decode([f.u16()? as i16, f.u16()? as i16]);
                 let (half, radius_code) = (f.u16()?, f.u16()?);
-                let (lo, hi, center) = (unpack(f.u64()?), unpack(f.u64()?), unpack(f.u64()?));
+                let (lo_bits, hi_bits) = (f.u64()?, f.u64()?);
+                let (lo, hi, center) = (unpack(lo_bits), unpack(hi_bits), unpack(f.u64()?));
                 let (error, faces, vertices, size, crc) = (f.f32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?);
                 let bad = |msg: String| f.error_at(at, format!("node {i}: {msg}"));
                 let first_child = if child_count > 0 { next_child as u32 } else { 0 };
@@ -501,6 +537,7 @@ impl<R: Read + Seek> Reader<R> {
                 if !in_file {
                     return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", self.len)));
                 }
+                boxes.push([lo_bits, hi_bits]);
                 nodes.push(NodeRecord {
                     level: l as u32,
                     parent: NO_PARENT,
@@ -567,7 +604,7 @@ impl<R: Read + Seek> Reader<R> {
         self.levels = levels;
         self.nodes = nodes;
         self.neighbors = neighbors;
-        self.node_table_at = node_table_at;
+        self.boxes = boxes;
         self.materials = materials;
         Ok(())
     }

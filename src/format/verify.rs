@@ -1,12 +1,12 @@
-//! Check a whole strata file: every chunk's frame, CRC and padding, every node's geometry, and the
-//! structural rules of the spec (tree shape, breadth-first numbering, neighbour symmetry, bounds and
-//! cones that contain what they claim, level 0 covering every input face exactly once).
+//! Check a whole strata file: every chunk's frame, CRC and padding, the rules of the skeleton and of
+//! every node ([`rules`], which every reader checks too), and what only the whole file can tell:
+//! chunks laid out as the node table says, the cluster count, and level 0 covering every input
+//! face exactly once.
 
 use super::chunk::{self, HEADER_BYTES, TRAILER_BYTES};
-use super::{id, Reader, MINOR, NO_PARENT};
+use super::rules::{self, Sink};
+use super::{id, Reader, MINOR};
 use crate::error::{Error, Result};
-use crate::mesh::triangle_cross;
-use glam::Vec3;
 use std::collections::HashSet;
 use std::fs::File;
 use std::hash::{DefaultHasher, Hash, Hasher};
@@ -15,9 +15,6 @@ use std::path::Path;
 
 /// Problems recorded before verification stops listing them.
 pub const MAX_PROBLEMS: usize = 100;
-
-/// Angle tolerance, in radians, of cone containment checks (rounding of stored f32 values).
-const ANGLE_TOLERANCE: f64 = 1e-5;
 
 /// The outcome of [`verify`].
 #[derive(Debug, Default)]
@@ -53,7 +50,7 @@ pub fn verify_path(path: &Path) -> Verification {
 /// Verify a file read from `r`; errors name it `name`. Never fails: problems are listed.
 pub fn verify<R: Read + Seek>(r: R, name: &Path) -> Verification {
     let mut v = Verification::default();
-    let mut rd = match Reader::open_named(r, name) {
+    let mut rd = match Reader::open_unchecked(r, name) {
         Ok(rd) => rd,
         Err(e) => {
             v.push(e);
@@ -61,15 +58,10 @@ pub fn verify<R: Read + Seek>(r: R, name: &Path) -> Verification {
         }
     };
     walk(&mut rd, &mut v);
-    let boxes = match rd.node_boxes() {
-        Ok(b) => b,
-        Err(e) => {
-            v.push(e);
-            return v;
-        }
-    };
-    structure(&rd, &boxes, &mut v);
-    geometry(&mut rd, &boxes, &mut v);
+    let mut sink = Sink::new(MAX_PROBLEMS);
+    rules::skeleton(rd.path(), rd.header(), rd.levels(), rd.nodes(), rd.all_neighbors(), &rd.node_boxes(), &mut sink);
+    sink.problems.into_iter().for_each(|e| v.push(e));
+    geometry(&mut rd, &mut v);
     v
 }
 
@@ -148,123 +140,15 @@ fn crc_of<R: Read + Seek>(rd: &mut Reader<R>, id: &str, offset: u64, size: u64) 
     Ok(())
 }
 
-fn angle(a: Vec3, b: Vec3) -> f64 {
-    let (a, b) = (a.as_dvec3(), b.as_dvec3());
-    a.cross(b).length().atan2(a.dot(b))
-}
-
-/// Whether a cone of half-angle `half` reaches `needed` radians from its axis (a cone of π holds
-/// every direction).
-fn cone_covers(half: f32, needed: f64) -> bool {
-    needed <= half as f64 + ANGLE_TOLERANCE || half as f64 >= std::f64::consts::PI - ANGLE_TOLERANCE
-}
-
-/// The node table's rules: tree shape, breadth-first numbering, neighbours, bounds, cones, errors.
-fn structure<R: Read + Seek>(rd: &Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut Verification) {
-    let path = rd.path();
-    let nodes = rd.nodes();
-    let nl = rd.levels().len() as u32;
-    let problem = |i: usize, msg: String| Error::at_element(path, format!("node {i}"), msg);
-    let mut last_offset = 0u64;
-    for l in (0..nl).rev() {
-        let range = rd.level_nodes(l);
-        let below = if l > 0 { rd.level_nodes(l - 1) } else { 0..0 };
-        let above = rd.level_nodes(l + 1);
-        let mut next_child = below.start;
-        for i in range.clone() {
-            let n = &nodes[i as usize];
-            let i = i as usize;
-            if n.offset <= last_offset {
-                v.push(problem(i, format!("geometry offset {} does not follow the previous node's", n.offset)));
-            }
-            last_offset = n.offset;
-            if l + 1 == nl {
-                if n.parent != NO_PARENT {
-                    v.push(problem(i, format!("top-level node has parent {}", n.parent)));
-                }
-            } else if !above.contains(&n.parent) || !rd.children(n.parent).contains(&(i as u32)) {
-                v.push(problem(i, format!("parent {} is not a node of level {} listing it as a child", n.parent, l + 1)));
-            }
-            if n.child_count == 0 {
-                if n.first_child != 0 {
-                    v.push(problem(i, format!("no children but first child {}", n.first_child)));
-                }
-            } else if l == 0 {
-                v.push(problem(i, format!("level-0 node has {} children", n.child_count)));
-            } else if n.first_child != next_child {
-                v.push(problem(i, format!("children start at {}, breadth-first order needs {next_child}", n.first_child)));
-            }
-            next_child = next_child.max(n.first_child) + n.child_count;
-            let (min, max) = boxes[i];
-            let finite = n.cone.axis.is_finite() && n.center.is_finite() && min.is_finite() && max.is_finite();
-            let sane = finite
-                && (n.cone.axis.length() - 1.0).abs() < 1e-3
-                && (0.0..=std::f32::consts::PI).contains(&n.cone.half_angle)
-                && n.radius >= 0.0
-                && min.cmple(max).all()
-                && n.error.is_finite();
-            if !sane {
-                v.push(problem(i, "cone, bounds or error out of range".into()));
-                continue;
-            }
-            for c in rd.children(i as u32) {
-                let ch = &nodes[c as usize];
-                if !cone_covers(n.cone.half_angle, angle(n.cone.axis, ch.cone.axis) + ch.cone.half_angle as f64) {
-                    v.push(problem(i, format!("cone does not contain child {c}'s")));
-                }
-                let (cmin, cmax) = boxes[c as usize];
-                if !(min.cmple(cmin).all() && cmax.cmple(max).all()) {
-                    v.push(problem(i, format!("box does not contain child {c}'s")));
-                }
-                if n.center.distance(ch.center) + ch.radius > n.radius * (1.0 + 1e-5) + 1e-30 {
-                    v.push(problem(i, format!("sphere does not contain child {c}'s")));
-                }
-                if ch.error > n.error {
-                    v.push(problem(i, format!("error {} is smaller than child {c}'s {}", n.error, ch.error)));
-                }
-            }
-            let nb = rd.neighbors(i as u32);
-            if nb.windows(2).any(|w| w[0] >= w[1]) {
-                v.push(problem(i, "neighbours are not strictly ascending".into()));
-            }
-            for &j in nb {
-                if j as usize == i || !range.contains(&j) || !rd.neighbors(j).contains(&(i as u32)) {
-                    v.push(problem(i, format!("neighbour {j} is not a different node of level {l} listing it back")));
-                }
-            }
-        }
-        if l > 0 && next_child != below.end {
-            v.push(Error::at_element(path, format!("level {l}"), format!("children cover nodes {}..{next_child}, not {}..{}", below.start, below.start, below.end)));
-        }
-    }
-    let h = rd.header();
-    let top = rd.level_nodes(nl - 1);
-    for i in top {
-        let (min, max) = boxes[i as usize];
-        if !(h.min.cmple(min).all() && max.cmple(h.max).all()) {
-            v.push(problem(i as usize, "box lies outside the HEAD bounds".into()));
-        }
-    }
-}
-
-/// Read every node's geometry: CRCs and ranges (by the reader), then bounds, cones, counts per
-/// level, and level 0 covering every input face exactly once.
-fn geometry<R: Read + Seek>(rd: &mut Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut Verification) {
+/// Read every node's geometry: CRCs, ranges and tiling (by the reader), the node's rules
+/// ([`rules::node`]), the cluster count, and level 0 covering every input face exactly once.
+fn geometry<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
     let path = rd.path().to_path_buf();
-    let nl = rd.levels().len();
-    let mut faces = vec![0u64; nl];
-    let mut vertices = vec![0u64; nl];
-    let mut bytes = vec![0u64; nl];
     let mut clusters = 0u64;
     let mut seen: HashSet<u128> = HashSet::new();
     let mut duplicates = 0u64;
     for i in 0..rd.nodes().len() as u32 {
         let n = rd.nodes()[i as usize];
-        let l = n.level as usize;
-        let end = n.offset + n.size as u64;
-        bytes[l] += n.size as u64 + chunk::padding(end);
-        faces[l] += n.faces as u64;
-        vertices[l] += n.vertices as u64;
         let g = match rd.read_node(i) {
             Ok(g) => g,
             Err(e) => {
@@ -273,35 +157,11 @@ fn geometry<R: Read + Seek>(rd: &mut Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut 
             }
         };
         v.nodes += 1;
-        let problem = |msg: String| Error::at_element(&path, format!("node {i}"), msg);
         clusters += g.clusters.len() as u64;
-        let (min, max) = boxes[i as usize];
-        if let Some(k) = g.positions.iter().position(|p| !(min.cmple(*p).all() && p.cmple(max).all())) {
-            v.push(problem(format!("vertex {k} lies outside the node's box")));
-        }
-        if let Some(k) = g.positions.iter().position(|p| n.center.distance(*p) > n.radius * (1.0 + 1e-5) + 1e-30) {
-            v.push(problem(format!("vertex {k} lies outside the node's sphere")));
-        }
-        for (f, t) in g.indices.chunks_exact(3).enumerate() {
-            let c = triangle_cross(&g.positions, &[t[0], t[1], t[2]]);
-            if c.length_squared() > 0.0 && !cone_covers(n.cone.half_angle, angle(n.cone.axis, c.normalize().as_vec3())) {
-                v.push(problem(format!("face {f}'s normal lies outside the node's cone")));
-                break;
-            }
-        }
-        for cl in &g.clusters {
-            let range = cl.first_face as usize * 3..(cl.first_face + cl.face_count) as usize * 3;
-            for t in g.indices[range].chunks_exact(3) {
-                let c = triangle_cross(&g.positions, &[t[0], t[1], t[2]]);
-                let outside_cone = c.length_squared() > 0.0 && !cone_covers(cl.cone.half_angle, angle(cl.cone.axis, c.normalize().as_vec3()));
-                let outside_sphere = t.iter().any(|&x| cl.center.distance(g.positions[x as usize]) > cl.radius * (1.0 + 1e-5) + 1e-30);
-                if outside_cone || outside_sphere {
-                    v.push(problem(format!("a face of the cluster at face {} lies outside its cone or sphere", cl.first_face)));
-                    break;
-                }
-            }
-        }
-        if l == 0 {
+        let mut sink = Sink::new(MAX_PROBLEMS);
+        rules::node(&path, i, &n, rd.node_box(i), &g, &mut sink);
+        sink.problems.into_iter().for_each(|e| v.push(e));
+        if n.level == 0 {
             for t in g.indices.chunks_exact(3) {
                 let mut key: Vec<[u32; 3]> = t.iter().map(|&x| g.positions[x as usize].to_array().map(f32::to_bits)).collect();
                 key.sort_unstable();
@@ -314,21 +174,8 @@ fn geometry<R: Read + Seek>(rd: &mut Reader<R>, boxes: &[(Vec3, Vec3)], v: &mut 
     if duplicates > 0 {
         v.push(Error::at_element(&path, "level 0", format!("{duplicates} faces appear more than once")));
     }
-    let h = rd.header().clone();
-    for (l, rec) in rd.levels().iter().enumerate() {
-        if (rec.faces, rec.vertices, rec.bytes) != (faces[l], vertices[l], bytes[l]) {
-            v.push(Error::at_element(
-                &path,
-                format!("level {l}"),
-                format!("LEVL says {} faces, {} vertices, {} bytes; the nodes hold {}, {}, {}", rec.faces, rec.vertices, rec.bytes, faces[l], vertices[l], bytes[l]),
-            ));
-        }
-    }
-    if faces[0] != h.input_faces {
-        v.push(Error::at_element(&path, "level 0", format!("nodes hold {} faces, HEAD says the input has {}", faces[0], h.input_faces)));
-    }
-    if clusters != h.clusters as u64 {
-        v.push(Error::at_element(&path, "level 0", format!("nodes hold {clusters} clusters, HEAD says {}", h.clusters)));
+    if clusters != rd.header().clusters as u64 {
+        v.push(Error::at_element(&path, "level 0", format!("nodes hold {clusters} clusters, HEAD says {}", rd.header().clusters)));
     }
 }
 
