@@ -132,7 +132,7 @@ fn memory(mesh: &Path, file: &Path) -> String {
 
 /// Shape retention over 8 views around the model, per face budget and refinement order.
 fn retention_table(file: &Path) -> strata::error::Result<()> {
-    let mut rd = Reader::open_path(file)?;
+    let rd = Reader::open_path(file)?;
     let h = rd.header().clone();
     let (center, radius) = ((h.min + h.max) * 0.5, (h.max - h.min).length() * 0.5);
     let full: Vec<_> = rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?;

@@ -6,16 +6,9 @@
 //! tests then keep a further [`FACING_MARGIN`] on the safe side, so a group is called Back or Front
 //! only when every face it bounds is.
 
+pub use crate::format::Cone;
 use glam::{DVec3, Vec3};
 use std::f64::consts::{FRAC_PI_2, PI};
-
-/// A cone of directions: every direction within `half_angle` radians of the unit `axis`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Cone {
-    pub axis: Vec3,
-    /// In [0, π]; π (as f32, a hair above π) means every direction.
-    pub half_angle: f32,
-}
 
 /// Angle (radians) the facing tests keep between their decision and the 90° boundary, covering the
 /// f32 rounding of normals, positions and eyes that a caller feeds them.

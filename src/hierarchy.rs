@@ -16,50 +16,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Marks "no parent": the group is a top group, a child of the virtual root.
-pub const NO_PARENT: u32 = u32::MAX;
+pub use crate::format::NO_PARENT;
 
-/// Parameters of the hierarchy. Angles are cone half-angles in radians; sizes count faces of the
-/// input mesh.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct HierarchyParams {
-    /// Size cap of a culling cluster.
-    pub cluster_faces: u32,
-    /// Cone threshold of a culling cluster.
-    pub cluster_angle: f32,
-    /// Size cap of a level-0 group (a streamed leaf node): a few hundred faces make a worthwhile
-    /// chunk and draw call.
-    pub leaf_faces: u32,
-    /// Cone threshold of a level-0 group.
-    pub leaf_angle: f32,
-    /// How much the threshold relaxes from one level to the next.
-    pub angle_step: f32,
-    /// How much the size cap grows from one level to the next.
-    pub growth: u32,
-    /// Weights of the evaluation function (cone tightness, compactness, size balance); the method's
-    /// source found the cone term decisive.
-    pub kc: f32,
-    pub ks: f32,
-    pub kn: f32,
-    /// Stop adding levels once at most this many groups remain.
-    pub top_groups: usize,
-}
-
-impl Default for HierarchyParams {
-    fn default() -> Self {
-        HierarchyParams {
-            cluster_faces: 32,
-            cluster_angle: 35f32.to_radians(),
-            leaf_faces: 512,
-            leaf_angle: 120f32.to_radians(),
-            angle_step: 30f32.to_radians(),
-            growth: 4,
-            kc: 1.0,
-            ks: 0.1,
-            kn: 0.05,
-            top_groups: 8,
-        }
-    }
-}
+pub use crate::format::HierarchyParams;
 
 /// What the hierarchy records of each group.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -5,7 +5,9 @@
 //! import ([`import`]) → clean ([`mesh`]) → group by normal cone ([`cone`], [`group`], [`hierarchy`])
 //! → simplify per level ([`simplify`]) → write the chunk file ([`format`]) → stream ([`stream`]).
 
+pub mod assemble;
 pub mod atomic;
+pub mod bounds;
 pub mod camera;
 pub mod cone;
 pub mod culling;
@@ -21,9 +23,11 @@ pub mod levels;
 pub mod mesh;
 pub mod normals;
 pub mod pipeline;
+pub mod quantize;
 pub mod render;
 pub mod simplify;
 pub mod stream;
+pub mod write;
 
 pub use error::{Error, Location, Result};
 pub use import::{import, Format, Imported};

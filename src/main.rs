@@ -381,6 +381,12 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Open a chunk file, which no output of this command may then replace.
+fn open_chunk_file(path: &std::path::Path) -> strata::error::Result<format::Reader<std::fs::File>> {
+    strata::atomic::protect(path);
+    format::Reader::open_path(path)
+}
+
 fn load(input: &MeshInput) -> Result<strata::Imported> {
     let imported = import(&input.mesh, input.format)?;
     for w in &imported.warnings {
@@ -555,9 +561,9 @@ fn group_color(g: u32) -> [u8; 4] {
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {
-    let mut rd = format::Reader::open_path(&a.file)?;
+    let rd = open_chunk_file(&a.file)?;
     let select = format::inspect::Selection { depth: a.depth, level: a.level, node: a.node };
-    let v = format::inspect::inspect(&mut rd, select)?;
+    let v = format::inspect::inspect(&rd, select)?;
     if a.json {
         println!("{}", serde_json::to_string(&v)?);
         return Ok(());
@@ -618,9 +624,9 @@ fn verify(a: VerifyArgs) -> Result<()> {
 }
 
 fn extract(a: ExtractArgs) -> Result<()> {
-    let mut rd = format::Reader::open_path(&a.file)?;
+    let rd = open_chunk_file(&a.file)?;
     strata::atomic::check_output(&a.output)?;
-    let mesh = format::to_mesh(&mut rd, a.level)?;
+    let mesh = strata::assemble::to_mesh(&rd, a.level)?;
     strata::export::write(&a.output, &mesh)?;
     println!("wrote level {} ({} faces, {} vertices) to {}", a.level, mesh.face_count(), mesh.vertex_count(), a.output.display());
     Ok(())
@@ -629,7 +635,7 @@ fn extract(a: ExtractArgs) -> Result<()> {
 fn stream(a: StreamArgs) -> Result<()> {
     use strata::stream::{session, Budgets, Priority, Streamer};
     let opened = Instant::now();
-    let reader = format::Reader::open_path(&a.file)?;
+    let reader = open_chunk_file(&a.file)?;
     if let Some(out) = &a.export_cut {
         strata::atomic::check_output(out)?;
     }
@@ -664,7 +670,7 @@ fn stream(a: StreamArgs) -> Result<()> {
         predict: !a.no_predict,
     };
     let full: Vec<format::NodeGeometry> = if a.compare_full {
-        let mut rd = format::Reader::open_path(&a.file)?;
+        let rd = open_chunk_file(&a.file)?;
         rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?
     } else {
         Vec::new()
@@ -796,7 +802,7 @@ fn render(a: RenderArgs) -> Result<()> {
     let (mut drawn, mut faces, mut draw_ms) = (0, 0, 0.0);
     let is_strata = a.input.extension().is_some_and(|e| e.eq_ignore_ascii_case("strata"));
     if is_strata {
-        let mut rd = format::Reader::open_path(&a.input)?;
+        let rd = open_chunk_file(&a.input)?;
         let levels = rd.header().levels;
         anyhow::ensure!(a.level < levels, "--level {}: {} has levels 0..{}", a.level, a.input.display(), levels.saturating_sub(1));
         let camera = render_camera(&a, rd.header().min, rd.header().max)?;

@@ -10,21 +10,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 /// Marks "no face" in adjacency arrays.
 pub const NO_FACE: u32 = u32::MAX;
 
-/// A material as imported: enough to draw it and to keep material borders apart.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Material {
-    pub name: String,
-    /// Linear RGBA base color.
-    pub base_color: [f32; 4],
-    /// Path or URI of the base color texture, as written in the source file.
-    pub texture: Option<String>,
-}
-
-impl Default for Material {
-    fn default() -> Self {
-        Material { name: "default".into(), base_color: [0.8, 0.8, 0.8, 1.0], texture: None }
-    }
-}
+pub use crate::format::Material;
 
 /// A triangle mesh. Corner arrays (`normals`, `uvs`, `colors`) are either empty (attribute absent)
 /// or hold exactly `3 * triangles.len()` entries, corner `3 * f + k` belonging to `triangles[f][k]`.

@@ -2,7 +2,8 @@
 //! level → write.
 
 use crate::error::Result;
-use crate::format::{self, WriteOptions, WriteSummary};
+use crate::format::WriteSummary;
+use crate::write::{self, WriteOptions};
 use crate::hierarchy::{self, HierarchyParams};
 use crate::import::{import, Format};
 use crate::levels::{self, LevelParams};
@@ -122,7 +123,7 @@ pub fn convert(
         level_ratio: opts.levels.ratio,
         ..WriteOptions::default()
     };
-    let summary = format::write(output, &h, &lv, &write_opts)?;
+    let summary = write::write(output, &h, &lv, &write_opts)?;
     lap(&mut times.write_ms);
 
     Ok(Converted { summary, times, warnings: imported.warnings })

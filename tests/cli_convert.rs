@@ -109,7 +109,7 @@ fn a_mesh_without_normals_gets_smooth_ones_with_sharp_creases_unless_told_otherw
         let o = strata(&args);
         assert!(o.status.success(), "convert failed: {}", String::from_utf8_lossy(&o.stderr));
     }
-    let mut rd = strata::format::Reader::open_path(&auto).unwrap();
+    let rd = strata::format::Reader::open_path(&auto).unwrap();
     assert!(rd.header().attributes.normals);
     let (mut smooth, mut sharp) = (0, 0);
     for i in rd.level_nodes(0) {
@@ -151,7 +151,7 @@ fn crowded_isosurface_vertices_stay_distinct() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = strata(&["verify", out.to_str().unwrap()]);
     assert!(o.status.success(), "verify: {}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    let mut rd = strata::format::Reader::open_path(&out).unwrap();
+    let rd = strata::format::Reader::open_path(&out).unwrap();
     let mut distinct = std::collections::HashSet::new();
     let mut faces = 0;
     for i in rd.level_nodes(0) {

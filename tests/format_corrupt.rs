@@ -51,17 +51,17 @@ fn small_file() -> Vec<u8> {
 
 /// Exercise every reading path; results are ignored, panics are not.
 fn read_everything(bytes: &[u8]) {
-    if let Ok(mut rd) = Reader::open(Cursor::new(bytes)) {
+    if let Ok(rd) = Reader::open(Cursor::new(bytes)) {
         for i in 0..rd.nodes().len() as u32 {
             let _ = rd.read_node(i);
             let _ = rd.node_chunks(i);
         }
         for l in 0..rd.levels().len() as u32 {
-            let _ = format::to_mesh(&mut rd, l);
+            let _ = strata::assemble::to_mesh(&rd, l);
         }
         let _ = rd.chunks();
         let select = inspect::Selection { depth: Some(9), level: Some(0), node: Some(0) };
-        let _ = inspect::inspect(&mut rd, select);
+        let _ = inspect::inspect(&rd, select);
     }
 }
 
@@ -116,7 +116,7 @@ fn damaged(good: &[u8], at: usize, value: &[u8], seal: &[usize]) -> String {
         reseal(&mut bytes, s);
     }
     let before = LARGEST.load(Ordering::Relaxed);
-    let result = Reader::open(Cursor::new(&bytes)).and_then(|mut rd| {
+    let result = Reader::open(Cursor::new(&bytes)).and_then(|rd| {
         for i in 0..rd.nodes().len() as u32 {
             rd.read_node(i)?;
         }
@@ -255,7 +255,7 @@ fn readers_refuse_what_verify_refuses_node_by_node() {
             reseal_all(&mut bytes, &rd);
             let v = format::verify(Cursor::new(&bytes), Path::new("mutated"));
             let node_rules: Vec<String> = v.problems.iter().map(|e| e.to_string()).filter(|p| !whole_file_only(p)).collect();
-            let strict = Reader::open(Cursor::new(&bytes)).and_then(|mut r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
+            let strict = Reader::open(Cursor::new(&bytes)).and_then(|r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
             match (&strict, node_rules.is_empty()) {
                 (Ok(()), false) => panic!("byte {at} ^ {mask:#x}: verify found {node_rules:?} but the reader accepted the file"),
                 (Err(e), true) => panic!("byte {at} ^ {mask:#x}: the reader refused ({e}) what verify accepts ({:?})", v.problems),

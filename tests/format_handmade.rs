@@ -10,7 +10,8 @@ use byteorder::{LittleEndian as LE, WriteBytesExt};
 use glam::Vec3;
 use std::io::Cursor;
 use strata::cone::Cone;
-use strata::format::{self, Reader, WriteOptions, MAJOR, MINOR};
+use strata::format::{self, Reader, MAJOR, MINOR};
+use strata::write::WriteOptions;
 use strata::hierarchy::{GroupInfo, Hierarchy, HierarchyParams, Level, Lists, NO_PARENT};
 use strata::levels::{LevelMesh, LevelMeshes};
 use strata::mesh::{Material, Mesh};
@@ -365,14 +366,14 @@ fn handmade_file_matches_spec_and_writer() {
     let mesh = quad();
     let lv = LevelMeshes { levels: vec![LevelMesh { mesh, face_group: vec![0, 0], group_error: vec![0.0] }] };
     let mut cur = Cursor::new(Vec::new());
-    format::write_to(&mut cur, &hierarchy(), &lv, &options()).expect("write");
+    strata::write::write_to(&mut cur, &hierarchy(), &lv, &options()).expect("write");
     assert_eq!(cur.into_inner(), d.bytes, "the writer follows the spec");
     assert!(SPEC.contains(&format!("version {}", format::VERSION)), "the spec names the version the code writes");
     assert_eq!(format::VERSION, format!("{MAJOR}.{MINOR}"));
 }
 
 fn check_reads(bytes: &[u8]) {
-    let mut rd = Reader::open(Cursor::new(bytes)).expect("open");
+    let rd = Reader::open(Cursor::new(bytes)).expect("open");
     let h = rd.header().clone();
     assert_eq!((h.levels, h.nodes, h.materials, h.input_faces, h.clusters), (1, 1, 1, 2, 1));
     assert_eq!(h.tool, "strata test");
@@ -387,7 +388,7 @@ fn check_reads(bytes: &[u8]) {
     assert_eq!(g.material_ranges, vec![format::MaterialRange { material: 0, first_index: 0, index_count: 6 }]);
     assert_eq!(g.clusters.len(), 1);
     assert_eq!((g.clusters[0].first_face, g.clusters[0].face_count), (0, 2));
-    let m = format::to_mesh(&mut rd, 0).expect("level 0");
+    let m = strata::assemble::to_mesh(&rd, 0).expect("level 0");
     assert_eq!(m.triangles, quad().triangles);
     let v = format::verify(Cursor::new(bytes), std::path::Path::new("handmade"));
     assert!(v.is_sound(), "{:?}", v.problems);
@@ -405,7 +406,7 @@ fn unknown_chunks_are_skipped() {
     let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     let ids: Vec<&str> = rd.skeleton_chunks().iter().map(|c| c.id.as_str()).collect();
     assert_eq!(ids, ["HEAD", "XTRA", "SKEL", "LEVL", "xsub", "NODE", "NBRS", "MATL"]);
-    let mut rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
+    let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     let top: Vec<String> = rd.chunks().expect("chunks").iter().map(|c| c.id.clone()).collect();
     assert_eq!(top, ["HEAD", "XTRA", "SKEL", "GEOM", "XEND"]);
 }

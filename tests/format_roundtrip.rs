@@ -7,7 +7,8 @@ use common::{build, face_key, grid, icosphere, small_params, written};
 use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
-use strata::format::{self, octa, Reader, WriteOptions};
+use strata::format::{self, octa, Reader};
+use strata::write::WriteOptions;
 use strata::mesh::Mesh;
 
 /// Per face (keyed by its corner positions): material and corner attributes in key order.
@@ -68,7 +69,7 @@ fn round_trip(mesh: &Mesh, name: &str) {
     let params = small_params();
     let (bytes, summary) = written(mesh, &params);
     assert_eq!(summary.file_bytes, bytes.len() as u64);
-    let mut rd = Reader::open(Cursor::new(&bytes)).expect("open");
+    let rd = Reader::open(Cursor::new(&bytes)).expect("open");
     let padding = summary.skeleton_bytes - rd.bytes_read();
     assert!(padding < 16, "open reads the prologue, HEAD and SKEL only (all but their padding)");
     assert!(rd.header().levels >= 2, "{name}: test wants several levels");
@@ -90,7 +91,7 @@ fn round_trip(mesh: &Mesh, name: &str) {
         assert!(g.indices.iter().all(|&x| (x as usize) < g.positions.len()));
     }
     for l in 0..rd.header().levels {
-        let m = format::to_mesh(&mut rd, l).expect("level assembles");
+        let m = strata::assemble::to_mesh(&rd, l).expect("level assembles");
         assert_same_mesh(&m, &stored);
     }
     let v = format::verify(Cursor::new(&bytes), Path::new(name));
@@ -149,7 +150,7 @@ fn write_to_a_path_is_atomic() {
     let path = dir.join("ico.strata");
     let mesh = icosphere(2);
     let (h, mut lv) = build(&mesh, &small_params());
-    let summary = format::write(&path, &h, &lv, &WriteOptions::default()).expect("write");
+    let summary = strata::write::write(&path, &h, &lv, &WriteOptions::default()).expect("write");
     assert_eq!(std::fs::metadata(&path).expect("written").len(), summary.file_bytes);
     let rd = Reader::open_path(&path).expect("open");
     assert!(rd.header().tool.starts_with("strata "));
@@ -157,7 +158,7 @@ fn write_to_a_path_is_atomic() {
     assert!(v.is_sound(), "{:?}", v.problems);
 
     lv.levels[0].face_group.pop();
-    let err = format::write(&dir.join("bad.strata"), &h, &lv, &WriteOptions::default()).expect_err("inconsistent input");
+    let err = strata::write::write(&dir.join("bad.strata"), &h, &lv, &WriteOptions::default()).expect_err("inconsistent input");
     assert!(err.to_string().contains("level 0"), "{err}");
     let names: Vec<_> = std::fs::read_dir(&dir).expect("dir").map(|e| e.expect("entry").file_name()).collect();
     assert_eq!(names, vec![std::ffi::OsString::from("ico.strata")], "a failed write leaves nothing");

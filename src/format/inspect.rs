@@ -2,10 +2,9 @@
 //! node rows (a level, one node, or the tree from the top down to a depth). Built from the
 //! skeleton alone, except for one node's sub-chunks when a single node is asked for.
 
-use super::read::ChunkInfo;
-use super::{Reader, NO_PARENT};
+use super::skeleton::ChunkInfo;
+use super::{ByteSource, Reader, NO_PARENT};
 use crate::error::{Error, Result};
-use std::io::{Read, Seek};
 
 /// Which nodes to list.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -32,7 +31,7 @@ pub struct HeaderView {
     pub input_vertices: u64,
     pub input_faces: u64,
     pub clusters: u32,
-    pub params: crate::hierarchy::HierarchyParams,
+    pub params: super::HierarchyParams,
     /// The position grid: origin, step and bits per axis.
     pub grid: super::Grid,
     pub level_ratio: f32,
@@ -89,7 +88,7 @@ pub struct Inspection {
 }
 
 /// Describe an open file; nodes as `select` asks.
-pub fn inspect<R: Read + Seek>(rd: &mut Reader<R>, select: Selection) -> Result<Inspection> {
+pub fn inspect<S: ByteSource>(rd: &Reader<S>, select: Selection) -> Result<Inspection> {
     let h = rd.header().clone();
     let header = HeaderView {
         file_size: h.file_size,
@@ -154,7 +153,7 @@ pub fn inspect<R: Read + Seek>(rd: &mut Reader<R>, select: Selection) -> Result<
     Ok(Inspection { version: format!("{}.{}", h.major, h.minor), header, chunks: rd.skeleton_chunks().to_vec(), levels, nodes })
 }
 
-fn view<R: Read + Seek>(rd: &Reader<R>, i: u32, depth: u32) -> NodeView {
+fn view<S: ByteSource>(rd: &Reader<S>, i: u32, depth: u32) -> NodeView {
     let n = rd.nodes()[i as usize];
     NodeView {
         node: i,
@@ -172,4 +171,82 @@ fn view<R: Read + Seek>(rd: &Reader<R>, i: u32, depth: u32) -> NodeView {
         bytes: n.size,
         chunks: Vec::new(),
     }
+}
+
+/// Everything a file holds, decoded, as one JSON value: the header, levels, materials, and every
+/// node's record, neighbours, box and geometry. The form of the golden vectors in
+/// `format-spec/vectors/` that every reader of the format checks itself against. Floats are the
+/// decoded f32 values, exactly (as f64 numbers).
+pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
+    use serde_json::json;
+    let f = |x: f32| json!(x as f64);
+    let v3 = |v: glam::Vec3| json!([v.x as f64, v.y as f64, v.z as f64]);
+    let h = rd.header();
+    let p = &h.params;
+    let cone = |c: &super::Cone| json!({ "axis": v3(c.axis), "half_angle": f(c.half_angle) });
+    let mut nodes = Vec::with_capacity(rd.nodes().len());
+    for (i, n) in rd.nodes().iter().enumerate() {
+        let g = rd.read_node(i as u32)?;
+        let (min, max) = rd.node_box(i as u32);
+        nodes.push(json!({
+            "level": n.level,
+            "parent": (n.parent != NO_PARENT).then_some(n.parent),
+            "first_child": n.first_child,
+            "child_count": n.child_count,
+            "neighbors": rd.neighbors(i as u32),
+            "cone": cone(&n.cone),
+            "center": v3(n.center),
+            "radius": f(n.radius),
+            "box": { "min": v3(min), "max": v3(max) },
+            "error": f(n.error),
+            "faces": n.faces,
+            "vertices": n.vertices,
+            "offset": n.offset,
+            "size": n.size,
+            "crc": n.crc,
+            "geometry": {
+                "positions": g.positions.iter().map(|&p| v3(p)).collect::<Vec<_>>(),
+                "normals": g.normals.iter().map(|&p| v3(p)).collect::<Vec<_>>(),
+                "uvs": g.uvs.iter().map(|uv| json!([uv.x as f64, uv.y as f64])).collect::<Vec<_>>(),
+                "colors": g.colors,
+                "indices": g.indices,
+                "material_ranges": g.material_ranges.iter().map(|r| json!([r.material, r.first_index, r.index_count])).collect::<Vec<_>>(),
+                "clusters": g.clusters.iter().map(|c| json!({
+                    "cone": cone(&c.cone), "center": v3(c.center), "radius": f(c.radius),
+                    "first_face": c.first_face, "face_count": c.face_count,
+                })).collect::<Vec<_>>(),
+            },
+        }));
+    }
+    Ok(json!({
+        "version": format!("{}.{}", h.major, h.minor),
+        "header": {
+            "file_size": h.file_size,
+            "metres_per_unit": h.metres_per_unit,
+            "min": v3(h.min),
+            "max": v3(h.max),
+            "attributes": h.attributes,
+            "levels": h.levels,
+            "nodes": h.nodes,
+            "materials": h.materials,
+            "input_vertices": h.input_vertices,
+            "input_faces": h.input_faces,
+            "clusters": h.clusters,
+            "params": {
+                "cluster_faces": p.cluster_faces, "cluster_angle": f(p.cluster_angle), "leaf_faces": p.leaf_faces,
+                "leaf_angle": f(p.leaf_angle), "angle_step": f(p.angle_step), "growth": p.growth,
+                "kc": f(p.kc), "ks": f(p.ks), "kn": f(p.kn), "top_groups": p.top_groups,
+            },
+            "grid": { "origin": h.grid.origin, "step": h.grid.step, "bits": h.grid.bits },
+            "level_ratio": f(h.level_ratio),
+            "tool": h.tool,
+        },
+        "levels": rd.levels().iter().map(|l| json!({
+            "first_node": l.first_node, "nodes": l.nodes, "faces": l.faces, "vertices": l.vertices, "bytes": l.bytes,
+        })).collect::<Vec<_>>(),
+        "materials": rd.materials().iter().map(|m| json!({
+            "name": m.name, "base_color": m.base_color.map(|x| x as f64), "texture": m.texture,
+        })).collect::<Vec<_>>(),
+        "nodes": nodes,
+    }))
 }

@@ -5,12 +5,11 @@
 
 use super::chunk::{self, HEADER_BYTES, TRAILER_BYTES};
 use super::rules::{self, Sink};
-use super::{id, Reader, MINOR};
+use super::{id, ByteSource, Reader, MINOR};
 use crate::error::{Error, Result};
 use std::collections::HashSet;
 use std::fs::File;
 use std::hash::{DefaultHasher, Hash, Hasher};
-use std::io::{Read, Seek};
 use std::path::Path;
 
 /// Problems recorded before verification stops listing them.
@@ -48,26 +47,26 @@ pub fn verify_path(path: &Path) -> Verification {
 }
 
 /// Verify a file read from `r`; errors name it `name`. Never fails: problems are listed.
-pub fn verify<R: Read + Seek>(r: R, name: &Path) -> Verification {
+pub fn verify<S: ByteSource>(r: S, name: &Path) -> Verification {
     let mut v = Verification::default();
-    let mut rd = match Reader::open_unchecked(r, name) {
+    let rd = match Reader::open_unchecked(r, name) {
         Ok(rd) => rd,
         Err(e) => {
             v.push(e);
             return v;
         }
     };
-    walk(&mut rd, &mut v);
+    walk(&rd, &mut v);
     let mut sink = Sink::new(MAX_PROBLEMS);
-    rules::skeleton(rd.path(), rd.header(), rd.levels(), rd.nodes(), rd.all_neighbors(), &rd.node_boxes(), &mut sink);
+    rules::skeleton(rd.path(), rd.header(), rd.levels(), rd.nodes(), &rd.skeleton().neighbors, &rd.node_boxes(), &mut sink);
     sink.problems.into_iter().for_each(|e| v.push(e));
-    geometry(&mut rd, &mut v);
+    geometry(&rd, &mut v);
     v
 }
 
 /// Walk the top-level chunks: frames, padding, unknown chunks' CRCs, and the `GEOM` chunks being
 /// exactly the node table's, in node order.
-fn walk<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
+fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     let path = rd.path().to_path_buf();
     let chunks = match rd.chunks() {
         Ok(c) => c,
@@ -123,7 +122,7 @@ fn walk<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
 }
 
 /// Check the CRC of an unknown chunk's payload, reading it in pieces.
-fn crc_of<R: Read + Seek>(rd: &mut Reader<R>, id: &str, offset: u64, size: u64) -> Result<()> {
+fn crc_of<S: ByteSource>(rd: &Reader<S>, id: &str, offset: u64, size: u64) -> Result<()> {
     let mut hasher = crc32fast::Hasher::new();
     let mut done = 0u64;
     while done < size {
@@ -142,7 +141,7 @@ fn crc_of<R: Read + Seek>(rd: &mut Reader<R>, id: &str, offset: u64, size: u64) 
 
 /// Read every node's geometry: CRCs, ranges and tiling (by the reader), the node's rules
 /// ([`rules::node`]), the cluster count, and level 0 covering every input face exactly once.
-fn geometry<R: Read + Seek>(rd: &mut Reader<R>, v: &mut Verification) {
+fn geometry<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     let path = rd.path().to_path_buf();
     let mut clusters = 0u64;
     let mut seen: HashSet<u128> = HashSet::new();

@@ -2,9 +2,8 @@
 //! while memory allows, evicted least recently used first.
 
 use crate::error::Result;
-use crate::format::{Attributes, NodeGeometry, NodeRecord, Reader};
+use crate::format::{Attributes, ByteSource, NodeGeometry, NodeRecord, Reader};
 use std::collections::{BTreeSet, HashMap};
-use std::io::{Read, Seek};
 
 /// Resident bytes of a node's geometry as the record announces it: its vertex attributes and
 /// indices (what [`geometry_bytes`] measures once it is decoded; the reader checks they agree).
@@ -62,7 +61,7 @@ impl Cache {
 
     /// Make the displayed set `front` (after dropping `removed` from display, ahead of `added`):
     /// removed nodes become evictable, added ones are taken from the cache or read.
-    pub fn update<R: Read + Seek>(&mut self, added: &[u32], removed: &[u32], reader: &mut Reader<R>) -> Result<()> {
+    pub fn update<S: ByteSource>(&mut self, added: &[u32], removed: &[u32], reader: &Reader<S>) -> Result<()> {
         self.clock += 1;
         for r in removed {
             if let Some(e) = self.entries.get_mut(r).filter(|e| e.displayed) {

@@ -19,13 +19,12 @@ mod tests;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh};
-use crate::format::{NodeGeometry, NodeRecord, Reader};
+use crate::format::{ByteSource, NodeGeometry, NodeRecord, Reader};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
 use refine::{Limits, Mark, Refiner};
 pub use refine::Priority;
 use serde::Serialize;
-use std::io::{Read, Seek};
 use std::time::Instant;
 
 /// What bounds the front; each budget is optional and they combine.
@@ -88,8 +87,8 @@ pub struct FrameReport {
 }
 
 /// A viewing session over one chunk file.
-pub struct Streamer<R> {
-    reader: Reader<R>,
+pub struct Streamer<S> {
+    reader: Reader<S>,
     budgets: Budgets,
     refiner: Refiner,
     cache: Cache,
@@ -100,9 +99,9 @@ pub struct Streamer<R> {
     frame: u64,
 }
 
-impl<R: Read + Seek> Streamer<R> {
+impl<S: ByteSource> Streamer<S> {
     /// Start a session. Budgets must admit the whole top level, which the first frame shows.
-    pub fn new(reader: Reader<R>, budgets: Budgets) -> Result<Streamer<R>> {
+    pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
         let top_nodes = &reader.nodes()[reader.level_nodes(top).start as usize..reader.level_nodes(top).end as usize];
@@ -130,7 +129,7 @@ impl<R: Read + Seek> Streamer<R> {
         })
     }
 
-    pub fn reader(&self) -> &Reader<R> {
+    pub fn reader(&self) -> &Reader<S> {
         &self.reader
     }
 
@@ -166,7 +165,7 @@ impl<R: Read + Seek> Streamer<R> {
         // again with the predicted threshold.
         let predictive = self.budgets.predict && self.controller.is_some();
         let held: &[u32] = if predictive { &self.culled } else { &[] };
-        let mut cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+        let mut cut = self.refiner.select(self.reader.skeleton(), camera, &limits, held, &bytes);
         let (mut added, mut removed) = diff(&self.front, &cut.shown);
         if let Some(c) = self.controller.as_mut().filter(|_| predictive) {
             let nodes = self.reader.nodes();
@@ -174,11 +173,11 @@ impl<R: Read + Seek> Streamer<R> {
             c.predict(cut.faces, new_faces);
             if c.threshold() != limits.pixel_error {
                 limits.pixel_error = c.threshold();
-                cut = self.refiner.select(&self.reader, camera, &limits, held, &bytes);
+                cut = self.refiner.select(self.reader.skeleton(), camera, &limits, held, &bytes);
                 (added, removed) = diff(&self.front, &cut.shown);
             }
         }
-        self.cache.update(&added, &removed, &mut self.reader)?;
+        self.cache.update(&added, &removed, &self.reader)?;
 
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {

@@ -3,10 +3,10 @@
 
 use crate::camera::{Camera, Projection};
 use crate::cone::{facing_orthographic, facing_perspective, Facing};
-use crate::format::{NodeRecord, Reader, NO_PARENT};
+use crate::format::skeleton::Skeleton;
+use crate::format::{NodeRecord, NO_PARENT};
 use std::cmp::Ordering;
 use std::f32::consts::PI;
-use std::io::{Read, Seek};
 
 /// What bounds a front: refinement stops where a node's projected error is under `pixel_error`,
 /// and never makes the displayed faces or resident bytes exceed their budgets.
@@ -74,15 +74,15 @@ impl Refiner {
     /// same-level neighbour is displayed coarser and the budgets allow all the visible children.
     /// Nodes in `held` (ascending) are not refined. `bytes(i)` is the resident size of node `i`'s
     /// geometry.
-    pub fn select<R: Read + Seek>(
+    pub fn select(
         &mut self,
-        reader: &Reader<R>,
+        skeleton: &Skeleton,
         camera: &Camera,
         limits: &Limits,
         held: &[u32],
         bytes: &dyn Fn(&NodeRecord) -> u64,
     ) -> Cut {
-        let nodes = reader.nodes();
+        let nodes = &skeleton.nodes;
         if self.marks.len() != nodes.len() {
             self.marks = vec![Mark::Off; nodes.len()];
             self.touched.clear();
@@ -93,9 +93,9 @@ impl Refiner {
         self.touched.clear();
 
         let mut cut = Cut::default();
-        let top = reader.levels().len().saturating_sub(1) as u32;
+        let top = skeleton.top();
         let mut level_shown = Vec::new();
-        for i in reader.level_nodes(top) {
+        for i in skeleton.level_nodes(top) {
             if self.classify(i, &nodes[i as usize], camera) {
                 cut.faces += nodes[i as usize].faces as u64;
                 cut.bytes += bytes(&nodes[i as usize]);
@@ -119,11 +119,11 @@ impl Refiner {
             candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             let mut next = Vec::new();
             for (_, i) in candidates {
-                if reader.neighbors(i).iter().any(|&m| self.shown_coarser(nodes, m)) {
+                if skeleton.neighbors(i).iter().any(|&m| self.shown_coarser(nodes, m)) {
                     continue;
                 }
                 let n = &nodes[i as usize];
-                let children = reader.children(i);
+                let children = skeleton.children(i);
                 let visible: Vec<bool> = children.clone().map(|c| sees(&nodes[c as usize], camera)).collect();
                 let (mut faces, mut size) = (cut.faces - n.faces as u64, cut.bytes - bytes(n));
                 for (c, _) in children.clone().zip(&visible).filter(|(_, &v)| v) {

@@ -109,8 +109,8 @@ pub fn build(mesh: &Mesh, params: &HierarchyParams) -> (Hierarchy, LevelMeshes) 
 pub fn written(mesh: &Mesh, params: &HierarchyParams) -> (Vec<u8>, strata::format::WriteSummary) {
     let (h, lv) = build(mesh, params);
     let mut cur = std::io::Cursor::new(Vec::new());
-    let opts = strata::format::WriteOptions { params: *params, tool: "strata test".into(), ..Default::default() };
-    let summary = strata::format::write_to(&mut cur, &h, &lv, &opts).expect("write");
+    let opts = strata::write::WriteOptions { params: *params, tool: "strata test".into(), ..Default::default() };
+    let summary = strata::write::write_to(&mut cur, &h, &lv, &opts).expect("write");
     (cur.into_inner(), summary)
 }
 

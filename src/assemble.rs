@@ -1,15 +1,14 @@
 //! One level of a strata file as one [`Mesh`], for `strata extract` and for tests: every node of the
 //! level is read and its node-local vertices are welded back by exact position.
 
-use super::Reader;
+use crate::format::{ByteSource, Reader};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use std::collections::HashMap;
-use std::io::{Read, Seek};
 
 /// All nodes of `level` assembled into one mesh: positions welded by exact bits, attributes on
 /// corners, face materials from the material ranges, the file's material table.
-pub fn to_mesh<R: Read + Seek>(reader: &mut Reader<R>, level: u32) -> Result<Mesh> {
+pub fn to_mesh<S: ByteSource>(reader: &Reader<S>, level: u32) -> Result<Mesh> {
     let levels = reader.levels().len() as u32;
     if level >= levels {
         return Err(Error::invalid(reader.path(), None, format!("level {level} does not exist (the file has levels 0..{})", levels.saturating_sub(1))));

@@ -1,0 +1,124 @@
+//! Bounds that hold what they claim (spec §6, §11): the stored box, sphere, cone and error of every
+//! node and culling cluster, computed on the quantized positions and rounded outward, so that
+//! culling a node or a cluster by them never hides a face it holds or a descendant holds.
+//!
+//! Bottom-up: each node starts from its group's bounds and cone in the hierarchy, grows to cover
+//! its own (simplified, quantized) faces and its children's stored bounds, and its error is the
+//! level's error plus the quantization bound, raised to its children's.
+
+use crate::format::codes::{angle, store_cone, store_radius};
+use crate::format::geom::v2::ClusterCodes;
+use crate::format::skeleton::NodeCodes;
+use crate::format::{Cone, Grid};
+use crate::hierarchy::{Hierarchy, Lists};
+use crate::levels::LevelMeshes;
+use crate::mesh::{triangle_cross, Mesh};
+use crate::quantize::Quantized;
+use glam::Vec3;
+
+/// A node's stored bounds, and the values they decode to (for its parent to cover).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeBounds {
+    pub codes: NodeCodes,
+    pub cone: Cone,
+    pub center: Vec3,
+    pub radius: f32,
+    pub error: f32,
+}
+
+/// The bounds of every group of every level, `[level][group]`. `faces[l]` lists each group's
+/// faces of level mesh `l`; `quant[l]` its quantized positions.
+pub fn nodes(h: &Hierarchy, lv: &LevelMeshes, faces: &[Lists], grid: &Grid, quant: &[Quantized]) -> Result<Vec<Vec<NodeBounds>>, String> {
+    let mut out: Vec<Vec<NodeBounds>> = Vec::with_capacity(h.levels.len());
+    for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate() {
+        let mesh = &lv.levels[l].mesh;
+        let children = (l > 0).then(|| Lists::from_labels(&h.levels[l - 1].parent, hl.groups.len()));
+        let mut level = Vec::with_capacity(hl.groups.len());
+        for (g, info) in hl.groups.iter().enumerate() {
+            if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
+                return Err(format!("level {l} group {g}: bounds are not finite"));
+            }
+            let below: Vec<&NodeBounds> = children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &out[l - 1][k as usize]).collect());
+            let own = faces[l].get(g);
+            let (mut lo, mut hi) = (grid.bound(info.min, false), grid.bound(info.max, true));
+            let mut grow = |p: [u32; 3]| {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            };
+            for &f in own {
+                for &v in &mesh.triangles[f as usize] {
+                    grow(q.points[v as usize]);
+                }
+            }
+            for c in &below {
+                grow(c.codes.min);
+                grow(c.codes.max);
+            }
+
+            let center = grid.encode(info.center);
+            let dc = grid.decode(center).as_dvec3();
+            let mut needed = info.radius as f64 + dc.distance(info.center.as_dvec3());
+            for &f in own {
+                for &v in &mesh.triangles[f as usize] {
+                    needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
+                }
+            }
+            let mut error = lv.levels[l].group_error[g] + q.error(grid, mesh, own);
+            for c in &below {
+                needed = needed.max(dc.distance(c.center.as_dvec3()) + c.radius as f64);
+                error = error.max(c.error);
+            }
+            let (radius_code, radius) = store_radius(grid, needed);
+
+            let normals: Vec<Vec3> = own
+                .iter()
+                .map(|&f| triangle_cross(&q.positions, &mesh.triangles[f as usize]))
+                .filter(|c| c.length_squared() > 0.0)
+                .map(|c| c.normalize().as_vec3())
+                .collect();
+            let axis = info.cone.axis.normalize_or(Vec3::Z);
+            let (axis_code, half_angle, cone) = store_cone(axis, |d| {
+                let mut need = info.cone.half_angle as f64 + angle(axis, d);
+                for &nrm in &normals {
+                    need = need.max(angle(d, nrm));
+                }
+                for c in &below {
+                    need = need.max(angle(d, c.cone.axis) + c.cone.half_angle as f64);
+                }
+                need
+            });
+            let codes = NodeCodes { min: lo, max: hi, center, axis: axis_code, half_angle, radius: radius_code };
+            level.push(NodeBounds { codes, cone, center: grid.decode(center), radius, error });
+        }
+        out.push(level);
+    }
+    Ok(out)
+}
+
+/// The stored record of a culling cluster of faces `run` of `mesh` (a node's base grid point
+/// `base`, its largest offset `span`, the node's cluster `shift`), starting from the hierarchy's
+/// sphere and cone for it, widened to cover the quantized faces.
+pub fn cluster(mesh: &Mesh, q: &Quantized, grid: &Grid, run: &[u32], seed: (Vec3, f32, Cone), base: [u32; 3], span: u32, shift: u32) -> ClusterCodes {
+    let (center, radius, cone) = seed;
+    let target = grid.encode(center);
+    let c: [u32; 3] = std::array::from_fn(|k| (target[k].saturating_sub(base[k]).min(span) >> shift).min(u16::MAX as u32));
+    let dc = grid.decode(std::array::from_fn(|k| base[k] + (c[k] << shift))).as_dvec3();
+    let mut needed = radius as f64 + dc.distance(center.as_dvec3());
+    let mut normals = Vec::new();
+    for &f in run {
+        let t = &mesh.triangles[f as usize];
+        for &v in t {
+            needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
+        }
+        let n = triangle_cross(&q.positions, t);
+        if n.length_squared() > 0.0 {
+            normals.push(n.normalize().as_vec3());
+        }
+    }
+    let (radius, _) = store_radius(grid, needed);
+    let axis = cone.axis.normalize_or(Vec3::Z);
+    let (axis_code, half_angle, _) = store_cone(axis, |d| normals.iter().fold(cone.half_angle as f64 + angle(axis, d), |m, &n| m.max(angle(d, n))));
+    ClusterCodes { axis: axis_code, half_angle, faces: 0, center: c.map(|x| x as u16), radius }
+}

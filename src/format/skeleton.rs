@@ -1,0 +1,454 @@
+//! The skeleton of a file, `HEAD` and `SKEL` (spec §5, §7): decoded from their payloads into a
+//! [`Skeleton`], everything a viewer needs before reading any geometry, and encoded back.
+
+use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
+use super::{
+    angle_decode, id, octa, pack, radius_decode, unpack, Attributes, Cone, Grid, Header, HierarchyParams, LevelRecord, Material,
+    NodeRecord, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR, NODE_RECORD_BYTES, NO_PARENT,
+};
+use crate::error::{Error, Result};
+use byteorder::{ByteOrder, LittleEndian as LE};
+use glam::Vec3;
+use std::ops::Range;
+use std::path::Path;
+
+/// A chunk's place in the file, for listings.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct ChunkInfo {
+    pub id: String,
+    /// File offset of the chunk's ID.
+    pub offset: u64,
+    pub flags: u32,
+    /// Payload bytes.
+    pub size: u64,
+    /// 0 for top-level chunks, 1 for their sub-chunks.
+    pub depth: u32,
+}
+
+impl ChunkInfo {
+    pub fn new(frame: &Frame, offset: u64, depth: u32) -> ChunkInfo {
+        ChunkInfo { id: chunk::id_str(&frame.id), offset, flags: frame.flags, size: frame.size, depth }
+    }
+}
+
+/// The header and skeleton of a file: levels, the node table, neighbours and materials. Front
+/// selection needs nothing else.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Skeleton {
+    pub header: Header,
+    /// Per level, finest first: node range, faces, vertices and bytes.
+    pub levels: Vec<LevelRecord>,
+    /// The node table, in file order (top level first).
+    pub nodes: Vec<NodeRecord>,
+    /// Every node's neighbour list, end to end in node order ([`NodeRecord::neighbor_first`]).
+    pub neighbors: Vec<u32>,
+    pub materials: Vec<Material>,
+    /// Each node's box as packed grid points (min, max): 16 bytes a node, decoded on demand.
+    pub boxes: Vec<[u64; 2]>,
+}
+
+impl Skeleton {
+    /// Nodes of level `level` (empty past the top).
+    pub fn level_nodes(&self, level: u32) -> Range<u32> {
+        self.levels.get(level as usize).map_or(0..0, |l| l.first_node..l.first_node + l.nodes)
+    }
+
+    /// The top level, the one shown first.
+    pub fn top(&self) -> u32 {
+        self.levels.len().saturating_sub(1) as u32
+    }
+
+    /// Children of node `i` (nodes of the level below).
+    pub fn children(&self, i: u32) -> Range<u32> {
+        self.nodes.get(i as usize).map_or(0..0, |n| n.first_child..n.first_child + n.child_count)
+    }
+
+    /// Same-level neighbours of node `i`.
+    pub fn neighbors(&self, i: u32) -> &[u32] {
+        self.nodes.get(i as usize).map_or(&[], |n| &self.neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize])
+    }
+
+    /// Node `i`'s bounding box (min, max).
+    pub fn node_box(&self, i: u32) -> (Vec3, Vec3) {
+        let grid = self.header.grid;
+        let corner = |v: u64| unpack(v).map_or(Vec3::NAN, |g| grid.decode(g));
+        self.boxes.get(i as usize).map_or((Vec3::NAN, Vec3::NAN), |b| (corner(b[0]), corner(b[1])))
+    }
+}
+
+/// What decoding the skeleton needs to know of the file around it.
+pub struct Context<'a> {
+    /// The name errors give the file.
+    pub path: &'a Path,
+    /// Version from the prologue.
+    pub major: u16,
+    pub minor: u16,
+    /// Length of the whole file.
+    pub file_size: u64,
+    /// Where node 0's `GEOM` chunk starts: right after `SKEL` and its padding.
+    pub geometry_start: u64,
+}
+
+impl Context<'_> {
+    fn err(&self, at: u64, id: &[u8; 4], chunk_offset: u64, msg: impl std::fmt::Display) -> Error {
+        Error::at_byte(self.path, at, format!("{}: {msg}", chunk::name(id, chunk_offset)))
+    }
+}
+
+/// The node codes the `NODE` table stores besides counts: box corners and sphere center on the
+/// grid, cone axis and half-angle, radius (spec §7.2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NodeCodes {
+    pub min: [u32; 3],
+    pub max: [u32; 3],
+    pub center: [u32; 3],
+    pub axis: [i16; 2],
+    pub half_angle: u16,
+    pub radius: u16,
+}
+
+/// Decode the `HEAD` payload of the chunk at `pos`.
+pub fn decode_head(ctx: &Context, payload: &[u8], pos: u64) -> Result<Header> {
+    let mut f = Fields::new(ctx.path, &id::HEAD, pos, payload, pos + HEADER_BYTES);
+    if (payload.len() as u64) < HEAD_FIXED_BYTES {
+        return Err(f.error(format!("{} bytes, fewer than the {HEAD_FIXED_BYTES} of its fixed fields", payload.len())));
+    }
+    let newer = ctx.minor > MINOR;
+    let file_size = f.u64()?;
+    let at = f.offset();
+    let metres_per_unit = f.f64()?;
+    if !(metres_per_unit.is_finite() && metres_per_unit >= 0.0) {
+        return Err(f.error_at(at, format!("metres per unit {metres_per_unit}")));
+    }
+    let at = f.offset();
+    let (min, max) = (f.vec3()?, f.vec3()?);
+    if !(min.is_finite() && max.is_finite()) {
+        return Err(f.error_at(at, "bounds are not finite"));
+    }
+    let at = f.offset();
+    let bits = f.u32()?;
+    if bits & !7 != 0 && !newer {
+        return Err(f.error_at(at, format!("unknown attribute bits {bits:#x}")));
+    }
+    let at = f.offset();
+    let (levels, nodes, materials) = (f.u32()?, f.u32()?, f.u32()?);
+    if levels == 0 || nodes < levels || nodes == NO_PARENT {
+        return Err(f.error_at(at, format!("{levels} levels and {nodes} nodes")));
+    }
+    let (input_vertices, input_faces, clusters) = (f.u64()?, f.u64()?, f.u32()?);
+    let params = HierarchyParams {
+        cluster_faces: f.u32()?,
+        cluster_angle: f.f32()?,
+        leaf_faces: f.u32()?,
+        leaf_angle: f.f32()?,
+        angle_step: f.f32()?,
+        growth: f.u32()?,
+        kc: f.f32()?,
+        ks: f.f32()?,
+        kn: f.f32()?,
+        top_groups: f.u32()? as usize,
+    };
+    let level_ratio = f.f32()?;
+    let at = f.offset();
+    let grid = Grid { origin: [f.f64()?, f.f64()?, f.f64()?], step: f.f64()?, bits: f.u32()? };
+    let sane = grid.origin.iter().all(|x| x.is_finite())
+        && grid.step.is_finite()
+        && grid.step > 0.0
+        && (1..=MAX_GRID_BITS).contains(&grid.bits)
+        && grid.decode([0; 3]).is_finite()
+        && grid.decode([grid.last(); 3]).is_finite();
+    if !sane {
+        return Err(f.error_at(at, format!("grid origin {:?}, step {}, {} bits", grid.origin, grid.step, grid.bits)));
+    }
+    let at = f.offset();
+    let tool_len = f.u32()?;
+    if tool_len as u64 > MAX_TOOL_BYTES {
+        return Err(f.error_at(at, format!("tool string of {tool_len} bytes exceeds {MAX_TOOL_BYTES}")));
+    }
+    let tool = f.string(tool_len)?;
+    if f.remaining() > 0 && !newer {
+        return Err(f.error(format!("{} bytes after the tool string", f.remaining())));
+    }
+    Ok(Header {
+        major: ctx.major,
+        minor: ctx.minor,
+        file_size,
+        metres_per_unit,
+        min,
+        max,
+        attributes: Attributes::from_bits(bits),
+        levels,
+        nodes,
+        materials,
+        input_vertices,
+        input_faces,
+        clusters,
+        params,
+        grid,
+        level_ratio,
+        tool,
+    })
+}
+
+/// Decode the `SKEL` payload of the chunk at `pos`, checking every table against `header` and the
+/// file (spec §10, steps 4 and 5); also the sub-chunks found, for listings.
+pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> Result<(Skeleton, Vec<ChunkInfo>)> {
+    let base = pos + HEADER_BYTES;
+    let subs = chunk::subs(ctx.path, &id::SKEL, pos, payload, base)?;
+    let infos = subs.iter().map(|s| ChunkInfo::new(&s.frame, s.offset, 1)).collect();
+    let find = |want: [u8; 4]| -> Result<&Sub> {
+        let mut found = subs.iter().filter(|s| s.frame.id == want);
+        let first = found.next().ok_or_else(|| ctx.err(pos, &id::SKEL, pos, format!("has no {} chunk", chunk::id_str(&want))))?;
+        if let Some(dup) = found.next() {
+            return Err(ctx.err(dup.offset, &id::SKEL, pos, format!("has a second {} chunk", chunk::id_str(&want))));
+        }
+        Ok(first)
+    };
+    let (levl, node, nbrs, matl) = (find(id::LEVL)?, find(id::NODE)?, find(id::NBRS)?, find(id::MATL)?);
+    let fields = |s: &Sub| Fields::new(ctx.path, &s.frame.id, s.offset, &payload[s.start..s.end], s.payload_offset());
+    let h = header;
+
+    // LEVL
+    let mut f = fields(levl);
+    let want = h.levels as u64 * LEVEL_RECORD_BYTES;
+    if levl.frame.size != want {
+        return Err(f.error(format!("holds {} bytes; {} levels need {want}", levl.frame.size, h.levels)));
+    }
+    let mut levels = Vec::with_capacity(h.levels as usize);
+    for _ in 0..h.levels {
+        levels.push(LevelRecord { first_node: f.u32()?, nodes: f.u32()?, faces: f.u64()?, vertices: f.u64()?, bytes: f.u64()? });
+    }
+    let mut expect = 0u64;
+    for (l, rec) in levels.iter().enumerate().rev() {
+        if rec.first_node as u64 != expect || rec.nodes == 0 {
+            let at = levl.payload_offset() + l as u64 * LEVEL_RECORD_BYTES;
+            return Err(f.error_at(at, format!("level {l} has nodes {}..+{}; expected a non-empty range from {expect}", rec.first_node, rec.nodes)));
+        }
+        expect += rec.nodes as u64;
+    }
+    if expect != h.nodes as u64 {
+        return Err(f.error(format!("levels hold {expect} nodes, HEAD says {}", h.nodes)));
+    }
+
+    // NBRS
+    let nf = fields(nbrs);
+    let width = nbrs.frame.flags as u64;
+    if width != 2 && width != 4 {
+        return Err(nf.error_at(nbrs.offset + 4, format!("entry width {width}; must be 2 or 4")));
+    }
+    if nbrs.frame.size % width != 0 {
+        return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
+    }
+    let mut neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
+
+    // NODE
+    let mut f = fields(node);
+    let want = h.nodes as u64 * NODE_RECORD_BYTES;
+    if node.frame.size != want {
+        return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
+    }
+    let grid = h.grid;
+    let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(h.nodes as usize);
+    let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
+    let mut neighbor_first = 0u64;
+    let mut offset = ctx.geometry_start;
+    // Children of the levels above are consecutive: node i's are those after its predecessors'.
+    let mut next_child = 0u64;
+    for (l, lev) in levels.iter().enumerate().rev() {
+        let end = lev.first_node as u64 + lev.nodes as u64;
+        if l + 1 < levels.len() && next_child != end {
+            return Err(f.error(format!("the children of level {} cover nodes up to {next_child}, level {l} ends at {end}", l + 1)));
+        }
+        next_child = end;
+        for i in lev.first_node..lev.first_node + lev.nodes {
+            let at = f.offset();
+            let (child_count, neighbor_count) = (f.u16()? as u32, f.u16()? as u32);
+            let axis = octa::decode([f.u16()? as i16, f.u16()? as i16]);
+            let (half, radius_code) = (f.u16()?, f.u16()?);
+            let (lo_bits, hi_bits) = (f.u64()?, f.u64()?);
+            let (lo, hi, center) = (unpack(lo_bits), unpack(hi_bits), unpack(f.u64()?));
+            let (error, faces, vertices, size, crc) = (f.f32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?);
+            let bad = |msg: String| f.error_at(at, format!("node {i}: {msg}"));
+            let first_child = if child_count > 0 { next_child as u32 } else { 0 };
+            if l == 0 && child_count > 0 {
+                return Err(bad(format!("a level-0 node with {child_count} children")));
+            }
+            next_child += child_count as u64;
+            if l > 0 && next_child > (lev.first_node + lev.nodes) as u64 + levels[l - 1].nodes as u64 {
+                return Err(bad(format!("children {first_child}..+{child_count} run past level {}", l - 1)));
+            }
+            if neighbor_first + neighbor_count as u64 > neighbors.len() as u64 {
+                return Err(bad(format!("neighbours run past the {} of NBRS", neighbors.len())));
+            }
+            let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
+            let (Some(_), Some(_), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
+                return Err(bad(format!("box or sphere center off the {}-bit grid", grid.bits)));
+            };
+            let in_file = size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
+            if !in_file {
+                return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
+            }
+            boxes.push([lo_bits, hi_bits]);
+            nodes.push(NodeRecord {
+                level: l as u32,
+                parent: NO_PARENT,
+                first_child,
+                child_count,
+                neighbor_first: neighbor_first as u32,
+                neighbor_count,
+                cone: Cone { axis, half_angle: angle_decode(half) },
+                center: grid.decode(center),
+                radius: grid.length(radius_decode(radius_code)),
+                error,
+                faces,
+                vertices,
+                offset,
+                size,
+                crc,
+            });
+            neighbor_first += neighbor_count as u64;
+            let end = offset + size as u64;
+            offset = end + chunk::padding(end);
+        }
+    }
+    for i in 0..nodes.len() {
+        let n = nodes[i];
+        for c in n.first_child..n.first_child + n.child_count {
+            nodes[c as usize].parent = i as u32;
+        }
+    }
+    if offset > ctx.file_size {
+        return Err(fields(node).error(format!("geometry chunks end at {offset}, past the end of the {}-byte file", ctx.file_size)));
+    }
+    if neighbor_first != neighbors.len() as u64 {
+        return Err(nf.error(format!("holds {} neighbours, the nodes use {neighbor_first}", neighbors.len())));
+    }
+    for (i, n) in nodes.iter().enumerate() {
+        let lev = &levels[n.level as usize];
+        for k in n.neighbor_first..n.neighbor_first + n.neighbor_count {
+            let x = &mut neighbors[k as usize];
+            if *x >= lev.nodes {
+                let at = nbrs.payload_offset() + width * k as u64;
+                return Err(nf.error_at(at, format!("node {i}: neighbour {} of the {} nodes of level {}", *x, lev.nodes, n.level)));
+            }
+            *x += lev.first_node;
+        }
+    }
+
+    // MATL
+    let mut f = fields(matl);
+    let mut materials = Vec::new();
+    for m in 0..h.materials {
+        let at = f.offset();
+        let len = f.u32()?;
+        let name = f.string(len).map_err(|_| f.error_at(at, format!("material {m}: name of {len} bytes runs past the chunk or is not UTF-8")))?;
+        let base_color = [f.f32()?, f.f32()?, f.f32()?, f.f32()?];
+        let at = f.offset();
+        let len = f.u32()?;
+        let tex = f.string(len).map_err(|_| f.error_at(at, format!("material {m}: texture of {len} bytes runs past the chunk or is not UTF-8")))?;
+        materials.push(Material { name, base_color, texture: (!tex.is_empty()).then_some(tex) });
+    }
+    if f.remaining() > 0 && h.minor.cmp(&MINOR).is_le() {
+        return Err(f.error(format!("{} bytes after {} materials", f.remaining(), h.materials)));
+    }
+
+    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes }, infos))
+}
+
+
+/// The `HEAD` chunk.
+pub fn encode_head(h: &Header) -> Vec<u8> {
+    let mut p = Vec::with_capacity(160);
+    p.extend_from_slice(&h.file_size.to_le_bytes());
+    p.extend_from_slice(&h.metres_per_unit.to_le_bytes());
+    for x in h.min.to_array().into_iter().chain(h.max.to_array()) {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    for x in [h.attributes.bits(), h.levels, h.nodes, h.materials] {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&h.input_vertices.to_le_bytes());
+    p.extend_from_slice(&h.input_faces.to_le_bytes());
+    p.extend_from_slice(&h.clusters.to_le_bytes());
+    let q = &h.params;
+    p.extend_from_slice(&q.cluster_faces.to_le_bytes());
+    p.extend_from_slice(&q.cluster_angle.to_le_bytes());
+    p.extend_from_slice(&q.leaf_faces.to_le_bytes());
+    p.extend_from_slice(&q.leaf_angle.to_le_bytes());
+    p.extend_from_slice(&q.angle_step.to_le_bytes());
+    p.extend_from_slice(&q.growth.to_le_bytes());
+    for x in [q.kc, q.ks, q.kn] {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&(q.top_groups.min(u32::MAX as usize) as u32).to_le_bytes());
+    p.extend_from_slice(&h.level_ratio.to_le_bytes());
+    for x in h.grid.origin.into_iter().chain([h.grid.step]) {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.extend_from_slice(&h.grid.bits.to_le_bytes());
+    p.extend_from_slice(&(h.tool.len() as u32).to_le_bytes());
+    p.extend_from_slice(h.tool.as_bytes());
+    let mut out = Vec::with_capacity(p.len() + 32);
+    chunk::put(&mut out, id::HEAD, 0, &p);
+    out
+}
+
+/// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`.
+pub fn encode_skel(levels: &[LevelRecord], records: &[NodeRecord], codes: &[NodeCodes], neighbors: &[u32], materials: &[Material]) -> Vec<u8> {
+    let mut payload = Vec::new();
+    let mut p = Vec::with_capacity(levels.len() * 32);
+    for l in levels {
+        p.extend_from_slice(&l.first_node.to_le_bytes());
+        p.extend_from_slice(&l.nodes.to_le_bytes());
+        p.extend_from_slice(&l.faces.to_le_bytes());
+        p.extend_from_slice(&l.vertices.to_le_bytes());
+        p.extend_from_slice(&l.bytes.to_le_bytes());
+    }
+    chunk::put(&mut payload, id::LEVL, 0, &p);
+
+    p.clear();
+    for (r, c) in records.iter().zip(codes) {
+        p.extend_from_slice(&(r.child_count as u16).to_le_bytes());
+        p.extend_from_slice(&(r.neighbor_count as u16).to_le_bytes());
+        p.extend(c.axis.iter().flat_map(|x| x.to_le_bytes()));
+        p.extend_from_slice(&c.half_angle.to_le_bytes());
+        p.extend_from_slice(&c.radius.to_le_bytes());
+        for g in [c.min, c.max, c.center] {
+            p.extend_from_slice(&pack(g).to_le_bytes());
+        }
+        p.extend_from_slice(&r.error.to_le_bytes());
+        for x in [r.faces, r.vertices, r.size, r.crc] {
+            p.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    chunk::put(&mut payload, id::NODE, 0, &p);
+
+    p.clear();
+    let width = if levels.iter().all(|l| l.nodes <= 1 << 16) { 2 } else { 4 };
+    let mut next = neighbors.iter();
+    for r in records {
+        let first = levels[r.level as usize].first_node;
+        for &x in next.by_ref().take(r.neighbor_count as usize) {
+            p.extend_from_slice(&(x - first).to_le_bytes()[..width as usize]);
+        }
+    }
+    chunk::put(&mut payload, id::NBRS, width, &p);
+
+    p.clear();
+    for m in materials {
+        p.extend_from_slice(&(m.name.len() as u32).to_le_bytes());
+        p.extend_from_slice(m.name.as_bytes());
+        for x in m.base_color {
+            p.extend_from_slice(&x.to_le_bytes());
+        }
+        let tex = m.texture.as_deref().unwrap_or("");
+        p.extend_from_slice(&(tex.len() as u32).to_le_bytes());
+        p.extend_from_slice(tex.as_bytes());
+    }
+    chunk::put(&mut payload, id::MATL, 0, &p);
+
+    let mut out = Vec::with_capacity(payload.len() + 24);
+    chunk::put(&mut out, id::SKEL, 0, &payload);
+    out
+}
+

@@ -1,0 +1,142 @@
+//! Positions on the file's grid (spec §5.1): the grid that spans the model, every position on its
+//! nearest grid point, and at level 0 distinct input positions kept distinct.
+
+use crate::format::{Grid, GRID_BITS};
+use crate::levels::LevelMeshes;
+use crate::mesh::Mesh;
+use glam::Vec3;
+use rustc_hash::FxHashMap;
+
+/// The grid of the file: the bounds of every level's positions, [`GRID_BITS`] bits.
+pub fn model_grid(lv: &LevelMeshes) -> Grid {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for l in &lv.levels {
+        for p in &l.mesh.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+    }
+    if lo.cmpgt(hi).any() {
+        (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
+    }
+    Grid::fit(lo, hi, GRID_BITS)
+}
+
+/// A level mesh's positions on the grid: grid points and the positions they decode to.
+pub struct Quantized {
+    pub points: Vec<[u32; 3]>,
+    pub positions: Vec<Vec3>,
+    /// Vertices moved off their nearest grid point to stay distinct, and how far each now lies from
+    /// its input position (model units); empty for most meshes.
+    pub moved: FxHashMap<u32, f32>,
+}
+
+/// Largest cube radius, in grid steps, searched for a free grid point for a vertex whose nearest
+/// one is taken.
+const MAX_NUDGE_STEPS: i64 = 8;
+
+impl Quantized {
+    /// Every position on its nearest grid point.
+    pub fn new(grid: &Grid, mesh: &Mesh) -> Quantized {
+        let points: Vec<[u32; 3]> = mesh.positions.iter().map(|&p| grid.encode(p)).collect();
+        let positions = points.iter().map(|&g| grid.decode(g)).collect();
+        Quantized { points, positions, moved: FxHashMap::default() }
+    }
+
+    /// Level 0 (spec §5.1): distinct input positions decode to distinct positions, so that the input's
+    /// faces stay distinct. A vertex whose nearest grid point decodes to a position an earlier
+    /// vertex (in vertex order) already holds goes to the free grid point nearest its input position
+    /// in the smallest cube around its nearest grid point that has one.
+    pub fn distinct(grid: &Grid, mesh: &Mesh) -> std::result::Result<Quantized, String> {
+        let mut q = Quantized::new(grid, mesh);
+        let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
+        let mut holder: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(q.points.len(), Default::default());
+        for v in 0..q.points.len() {
+            let first = *holder.entry(key(q.positions[v])).or_insert(v as u32);
+            if first == v as u32 || mesh.positions[first as usize] == mesh.positions[v] {
+                continue;
+            }
+            let input = mesh.positions[v].as_dvec3();
+            let mut best: Option<(f64, [u32; 3], Vec3)> = None;
+            for r in 1..=MAX_NUDGE_STEPS {
+                for d in (-r..=r).flat_map(|x| (-r..=r).flat_map(move |y| (-r..=r).map(move |z| [x, y, z]))) {
+                    if d.iter().all(|c| c.abs() < r) {
+                        continue;
+                    }
+                    let g: [i64; 3] = std::array::from_fn(|a| q.points[v][a] as i64 + d[a]);
+                    if g.iter().any(|&c| c < 0 || c > grid.last() as i64) {
+                        continue;
+                    }
+                    let g = g.map(|c| c as u32);
+                    let p = grid.decode(g);
+                    let distance = p.as_dvec3().distance(input);
+                    if !holder.contains_key(&key(p)) && best.is_none_or(|b| distance < b.0) {
+                        best = Some((distance, g, p));
+                    }
+                }
+                if best.is_some() {
+                    break;
+                }
+            }
+            let Some((distance, g, p)) = best else {
+                return Err(format!("level 0 vertex {v}: no free grid point within {MAX_NUDGE_STEPS} steps keeps it apart from vertex {first}"));
+            };
+            holder.insert(key(p), v as u32);
+            q.points[v] = g;
+            q.positions[v] = p;
+            q.moved.insert(v as u32, round_up(distance));
+        }
+        Ok(q)
+    }
+
+    /// The quantization bound of `faces` of `mesh`: [`Grid::error`], or the distance of a moved
+    /// vertex from its input position where larger.
+    pub fn error(&self, grid: &Grid, mesh: &Mesh, faces: &[u32]) -> f32 {
+        let mut e = grid.error();
+        if !self.moved.is_empty() {
+            for &f in faces {
+                for v in mesh.triangles[f as usize] {
+                    e = e.max(self.moved.get(&v).copied().unwrap_or(0.0));
+                }
+            }
+        }
+        e
+    }
+}
+
+/// `x` as the smallest f32 not below it.
+fn round_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x {
+        f.next_up()
+    } else {
+        f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn level_zero_positions_stay_distinct_within_their_stated_bound() {
+        let mesh = crate::fixtures::isosurface(24, 3);
+        let (lo, hi) = mesh.bounds().unwrap();
+        let grid = Grid::fit(lo, hi, GRID_BITS);
+        let plain = Quantized::new(&grid, &mesh);
+        let q = Quantized::distinct(&grid, &mesh).unwrap();
+        let keys = |q: &Quantized| q.positions.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<std::collections::HashSet<_>>().len();
+        assert!(keys(&plain) < mesh.vertex_count(), "the fixture crowds vertices");
+        assert_eq!(keys(&q), mesh.vertex_count());
+        assert!(!q.moved.is_empty());
+        for (v, (&p, &input)) in q.positions.iter().zip(&mesh.positions).enumerate() {
+            let bound = q.moved.get(&(v as u32)).map_or(grid.error(), |&d| d.max(grid.error()));
+            assert!(p.as_dvec3().distance(input.as_dvec3()) <= bound as f64, "vertex {v}");
+            if !q.moved.contains_key(&(v as u32)) {
+                assert_eq!(q.points[v], plain.points[v]);
+            }
+        }
+        let all: Vec<u32> = (0..mesh.face_count() as u32).collect();
+        assert!(q.error(&grid, &mesh, &all) > grid.error());
+    }
+}

@@ -1,0 +1,269 @@
+//! Write a group hierarchy and its level meshes as a strata file (format-spec/strata-v2.md): each
+//! group of each level becomes a node whose geometry is the level mesh's faces in that group, its
+//! positions on the file's grid ([`crate::quantize`]) and its bounds rounded outward
+//! ([`crate::bounds`]); nodes go, finest level first, to the format's [`Writer`], which assembles
+//! the file coarsest level first.
+
+use crate::atomic::AtomicFile;
+use crate::bounds;
+use crate::error::{Error, Result};
+use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
+use crate::format::{octa, Attributes, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, MAX_TOOL_BYTES, NO_PARENT};
+use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
+use crate::levels::LevelMeshes;
+use crate::mesh::{Material, Mesh};
+use crate::quantize::{model_grid, Quantized};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::Path;
+
+/// What the writer records besides the hierarchy and the meshes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WriteOptions {
+    /// Metres per model unit, 0 when unknown (glTF is in metres; OBJ and PLY do not say).
+    pub metres_per_unit: f64,
+    /// Parameters the hierarchy was built with.
+    pub params: HierarchyParams,
+    /// Target ratio of faces between a level and the one below.
+    pub level_ratio: f32,
+    /// Name and version of the writing program, at most 1024 bytes.
+    pub tool: String,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions {
+            metres_per_unit: 0.0,
+            params: HierarchyParams::default(),
+            level_ratio: 0.5,
+            tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+}
+
+/// Write the file for hierarchy `h` and level meshes `lv` to `path`, all or nothing (a temporary
+/// file renamed on success; encoded nodes wait in unlinked temporary files beside it). Inconsistent
+/// inputs are an error naming the level and group.
+pub fn write(path: &Path, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> Result<WriteSummary> {
+    let mut file = AtomicFile::create(path)?;
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let summary = write_named(file.writer(), path, h, lv, opts, Some(dir))?;
+    file.commit()?;
+    Ok(summary)
+}
+
+/// [`write`] into any writer, from its current position; encoded nodes wait in memory.
+pub fn write_to<W: Write>(w: &mut W, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> Result<WriteSummary> {
+    write_named(w, Path::new("<output>"), h, lv, opts, None)
+}
+
+fn write_named<W: Write>(w: W, path: &Path, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions, spill: Option<&Path>) -> Result<WriteSummary> {
+    let bad = |msg: String| Error::invalid(path, None, msg);
+    let attributes = check_inputs(h, lv, opts).map_err(bad)?;
+    let grid = model_grid(lv);
+    let mut quant = Vec::with_capacity(lv.levels.len());
+    quant.push(Quantized::distinct(&grid, &lv.levels[0].mesh).map_err(bad)?);
+    quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(&grid, &l.mesh)));
+    let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
+    let bounds = bounds::nodes(h, lv, &faces, &grid, &quant).map_err(bad)?;
+    let writer_opts = WriterOptions {
+        metres_per_unit: opts.metres_per_unit,
+        params: opts.params,
+        level_ratio: opts.level_ratio,
+        tool: opts.tool.clone(),
+        grid,
+        attributes,
+        materials: material_table(&lv.levels[0].mesh),
+        input_vertices: lv.levels[0].mesh.vertex_count() as u64,
+        levels: h.levels.len() as u32,
+    };
+    let mut writer = Writer::new(w, path, writer_opts, spill)?;
+    let top = h.levels.len() - 1;
+    for (l, hl) in h.levels.iter().enumerate() {
+        let mesh = &lv.levels[l].mesh;
+        for g in 0..hl.groups.len() {
+            let clusters = (l == 0).then_some(&h.clusters);
+            let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes).map_err(bad)?;
+            let b = &bounds[l][g];
+            writer.add(NodeIn {
+                level: l as u32,
+                key: g as u32,
+                parent: if l == top { NO_PARENT } else { hl.parent[g] },
+                neighbors: hl.neighbors.get(g).to_vec(),
+                codes: b.codes,
+                error: b.error,
+                geometry,
+            })?;
+        }
+    }
+    writer.finish()
+}
+
+/// The material table: level 0's, or one default material if it has none.
+fn material_table(mesh: &Mesh) -> Vec<Material> {
+    if mesh.materials.is_empty() {
+        vec![Material::default()]
+    } else {
+        mesh.materials.clone()
+    }
+}
+
+fn material_of(mesh: &Mesh, f: usize) -> u32 {
+    mesh.face_materials.get(f).copied().unwrap_or(0)
+}
+
+/// Check what the writer relies on; return the corner attributes every level carries.
+fn check_inputs(h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> std::result::Result<Attributes, String> {
+    if opts.tool.len() as u64 > MAX_TOOL_BYTES {
+        return Err(format!("tool string of {} bytes exceeds {MAX_TOOL_BYTES}", opts.tool.len()));
+    }
+    let nl = h.levels.len();
+    if nl == 0 || lv.levels.len() != nl {
+        return Err(format!("{nl} hierarchy levels but {} level meshes; need the same number, at least 1", lv.levels.len()));
+    }
+    if nl >= u32::MAX as usize {
+        return Err(format!("{nl} levels"));
+    }
+    let m0 = &lv.levels[0].mesh;
+    if m0.face_count() == 0 {
+        return Err("nothing to write: level 0 has no faces".into());
+    }
+    if h.clusters.face_group.len() != m0.face_count() {
+        return Err(format!("clusters label {} faces but level 0 has {}", h.clusters.face_group.len(), m0.face_count()));
+    }
+    if let Some(f) = h.clusters.face_group.iter().position(|&c| c as usize >= h.clusters.groups.len()) {
+        return Err(format!("face {f} is in cluster {} of {}", h.clusters.face_group[f], h.clusters.groups.len()));
+    }
+    let has = |m: &Mesh| Attributes { normals: !m.normals.is_empty(), uvs: !m.uvs.is_empty(), colors: !m.colors.is_empty() };
+    let attributes = has(m0);
+    let materials = material_table(m0).len();
+    let mut total_nodes = 0usize;
+    for (l, (hl, ml)) in h.levels.iter().zip(&lv.levels).enumerate() {
+        let m = &ml.mesh;
+        let nf = m.face_count();
+        let ng = hl.groups.len();
+        total_nodes += ng;
+        let ctx = |msg: String| format!("level {l}: {msg}");
+        if has(m) != attributes {
+            return Err(ctx(format!("corner attributes {:?} differ from level 0's {attributes:?}", has(m))));
+        }
+        for (name, len) in [("normals", m.normals.len()), ("uvs", m.uvs.len()), ("colors", m.colors.len())] {
+            if len != 0 && len != 3 * nf {
+                return Err(ctx(format!("{len} {name} for {nf} faces")));
+            }
+        }
+        if !m.face_materials.is_empty() && m.face_materials.len() != nf {
+            return Err(ctx(format!("{} face materials for {nf} faces", m.face_materials.len())));
+        }
+        if let Some(f) = (0..nf).find(|&f| material_of(m, f) as usize >= materials) {
+            return Err(ctx(format!("face {f} has material {} of {materials}", material_of(m, f))));
+        }
+        if let Some(f) = m.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= m.vertex_count())) {
+            return Err(ctx(format!("face {f} indexes past {} vertices", m.vertex_count())));
+        }
+        if ml.face_group.len() != nf {
+            return Err(ctx(format!("{} face groups for {nf} faces", ml.face_group.len())));
+        }
+        if let Some(f) = ml.face_group.iter().position(|&g| g as usize >= ng) {
+            return Err(ctx(format!("face {f} is in group {} of {ng}", ml.face_group[f])));
+        }
+        if ml.group_error.len() != ng {
+            return Err(ctx(format!("{} group errors for {ng} groups", ml.group_error.len())));
+        }
+        if let Some(g) = ml.group_error.iter().position(|e| !e.is_finite()) {
+            return Err(ctx(format!("group {g} has error {}", ml.group_error[g])));
+        }
+        if hl.parent.len() != ng {
+            return Err(ctx(format!("{} parents for {ng} groups", hl.parent.len())));
+        }
+        let above = h.levels.get(l + 1).map(|a| a.groups.len());
+        for (g, &p) in hl.parent.iter().enumerate() {
+            let ok = match above {
+                Some(na) => (p as usize) < na,
+                None => p == hierarchy::NO_PARENT,
+            };
+            if !ok {
+                return Err(ctx(format!("group {g} has parent {p}")));
+            }
+        }
+        if hl.neighbors.len() != ng || hl.neighbors.items.iter().any(|&x| x as usize >= ng) {
+            return Err(ctx("neighbour lists do not match the groups".into()));
+        }
+        if let Some(g) = hl.groups.iter().position(|gi| !(gi.center.is_finite() && gi.radius.is_finite() && gi.cone.axis.is_finite())) {
+            return Err(ctx(format!("group {g} has non-finite bounds or cone")));
+        }
+    }
+    if total_nodes >= NO_PARENT as usize {
+        return Err(format!("{total_nodes} nodes"));
+    }
+    Ok(attributes)
+}
+
+/// The geometry of `faces` of `mesh`, as the format stores it. Faces are ordered by culling cluster
+/// (level 0), then material; vertices are deduplicated corners (grid point and attributes) in
+/// order of first use. Cluster records start from the hierarchy's cones and spheres
+/// ([`bounds::cluster`]).
+fn node_geometry(
+    mesh: &Mesh,
+    q: &Quantized,
+    grid: &Grid,
+    faces: &[u32],
+    clusters: Option<&hierarchy::Level>,
+    attrs: Attributes,
+) -> std::result::Result<GeometryCodes, String> {
+    let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
+    let mut order: Vec<u32> = faces.to_vec();
+    order.sort_by_key(|&f| (cluster_of(f), material_of(mesh, f as usize), f));
+
+    type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
+    let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());
+    let mut out = GeometryCodes { indices: Vec::with_capacity(order.len() * 3), ..GeometryCodes::default() };
+    for &f in &order {
+        for k in 0..3 {
+            let corner = 3 * f as usize + k;
+            let g = q.points[mesh.triangles[f as usize][k] as usize];
+            let n = if attrs.normals { octa::encode(mesh.normals[corner]) } else { [0; 2] };
+            let uv = if attrs.uvs { mesh.uvs[corner].to_array().map(f32::to_bits) } else { [0; 2] };
+            let c = if attrs.colors { mesh.colors[corner] } else { [0; 4] };
+            let next = index_of.len() as u32;
+            let i = *index_of.entry((g, n, uv, c)).or_insert_with(|| {
+                out.points.push(g);
+                if attrs.normals {
+                    out.normals.push(n);
+                }
+                if attrs.uvs {
+                    out.uvs.push(uv);
+                }
+                if attrs.colors {
+                    out.colors.push(c);
+                }
+                next
+            });
+            out.indices.push(i);
+        }
+    }
+
+    let mut first = 0u32;
+    for run in order.chunk_by(|&a, &b| material_of(mesh, a as usize) == material_of(mesh, b as usize)) {
+        out.material_ranges.push(MaterialRange { material: material_of(mesh, run[0] as usize), first_index: 3 * first, index_count: 3 * run.len() as u32 });
+        first += run.len() as u32;
+    }
+
+    if let Some(cl) = clusters {
+        let (base, span) = base_and_span(&out.points);
+        let shift = cluster_shift(span, grid.bits);
+        let mut records = Vec::new();
+        for run in order.chunk_by(|&a, &b| cluster_of(a) == cluster_of(b)) {
+            let g = &cl.groups[cluster_of(run[0]) as usize];
+            if !(g.center.is_finite() && g.radius.is_finite()) {
+                return Err(format!("cluster {}: bounds are not finite", cluster_of(run[0])));
+            }
+            let record = bounds::cluster(mesh, q, grid, run, (g.center, g.radius, g.cone), base, span, shift);
+            for piece in run.chunks(u16::MAX as usize) {
+                records.push(crate::format::geom::v2::ClusterCodes { faces: piece.len() as u16, ..record });
+            }
+        }
+        out.clusters = Some((shift, records));
+    }
+    Ok(out)
+}
