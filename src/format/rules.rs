@@ -102,15 +102,14 @@ pub(crate) fn skeleton(
         &neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize]
     };
     let mut totals = vec![(0u64, 0u64, 0u64); levels.len()];
+    // Each node's own values first, so that a bad value is named at its node, not at its parent's.
+    let mut sane = vec![false; nodes.len()];
     for (i, n) in nodes.iter().enumerate() {
-        if sink.full() {
-            return;
-        }
         let t = &mut totals[n.level as usize];
         let end = n.offset + n.size as u64;
         *t = (t.0 + n.faces as u64, t.1 + n.vertices as u64, t.2 + n.size as u64 + super::chunk::padding(end));
         let (min, max) = boxes[i];
-        let sane = n.cone.axis.is_finite()
+        sane[i] = n.cone.axis.is_finite()
             && (n.cone.axis.length() - 1.0).abs() < 1e-3
             && (0.0..=std::f32::consts::PI).contains(&n.cone.half_angle)
             && n.center.is_finite()
@@ -121,11 +120,19 @@ pub(crate) fn skeleton(
             && min.cmple(max).all()
             && n.error.is_finite()
             && n.error >= 0.0;
-        if !sane {
-            sink.push(problem(i, format!("cone, bounds or error out of range (error {})", n.error)));
+        if !sane[i] {
+            sink.push(problem(i, format!("cone, bounds or error out of range (error {}, radius {})", n.error, n.radius)));
+        }
+    }
+    for (i, n) in nodes.iter().enumerate() {
+        if sink.full() {
+            return;
+        }
+        if !sane[i] {
             continue;
         }
-        for c in n.first_child..n.first_child + n.child_count {
+        let (min, max) = boxes[i];
+        for c in (n.first_child..n.first_child + n.child_count).filter(|&c| sane[c as usize]) {
             let ch = &nodes[c as usize];
             if !cone_covers(n.cone.half_angle, angle(n.cone.axis, ch.cone.axis) + ch.cone.half_angle as f64) {
                 sink.push(problem(i, format!("cone does not contain child {c}'s")));

@@ -1,0 +1,210 @@
+//! Rewrite the golden vectors in `format-spec/vectors/`: small chunk files and, for each, what a
+//! reader must make of it: the whole file decoded (`format::inspect::dump`) or the words its refusal
+//! must contain. `cargo run --release --example make_vectors`; `tests/format_vectors.rs` checks that
+//! the Rust reader agrees with every vector, and the viewer's JavaScript reader checks the same files.
+
+use glam::Vec2;
+use std::io::Cursor;
+use std::path::Path;
+use strata::format::{self, HierarchyParams, Reader};
+use strata::levels::{self, LevelParams};
+use strata::mesh::{Adjacency, Material, Mesh};
+use strata::camera::{Camera, Projection};
+use strata::format::skeleton::Skeleton;
+use strata::stream::cache::record_bytes;
+use strata::stream::refine::{Limits, Priority, Refiner};
+use strata::stream::session::orbit;
+use strata::write::{write_to, WriteOptions};
+use serde_json::json;
+
+/// The chunk file of `mesh`, grouped with `params` and simplified per level.
+fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64) -> Vec<u8> {
+    let adjacency = Adjacency::build(&mesh);
+    let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
+    let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
+    let mut out = Cursor::new(Vec::new());
+    let opts = WriteOptions { metres_per_unit, params, level_ratio: 0.5, tool: "strata vectors".into() };
+    write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
+    out.into_inner()
+}
+
+/// A unit square of two triangles: one level, one node, no corner attributes.
+fn plane() -> Vec<u8> {
+    let positions = vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::new(1.0, 1.0, 0.0), glam::Vec3::Y];
+    let mesh = Mesh { positions, triangles: vec![[0, 1, 2], [0, 2, 3]], ..Mesh::default() }.clean().expect("finite").0;
+    convert(mesh, HierarchyParams::default(), 1.0)
+}
+
+/// A sphere of 80 faces with every corner attribute (normals, UVs, colors) and two materials,
+/// grouped small enough for several levels, neighbours and clusters.
+fn sphere() -> Vec<u8> {
+    let mut mesh = strata::fixtures::colored_sphere(1);
+    mesh.uvs = mesh.normals.iter().map(|n| Vec2::new(0.5 + 0.5 * n.x, 0.5 + 0.5 * n.y)).collect();
+    mesh.materials = vec![
+        Material { name: "south".into(), base_color: [0.2, 0.4, 0.8, 1.0], texture: None },
+        Material { name: "north".into(), base_color: [0.9, 0.5, 0.1, 1.0], texture: Some("north.png".into()) },
+    ];
+    mesh.face_materials = mesh.face_normals.iter().map(|n| u32::from(n.z > 0.0)).collect();
+    let params = HierarchyParams { cluster_faces: 4, leaf_faces: 10, growth: 2, top_groups: 2, ..HierarchyParams::default() };
+    convert(mesh, params, 0.0)
+}
+
+/// Offsets of the chunks read at open, by ID.
+fn chunk_at(bytes: &[u8], id: &str) -> usize {
+    let rd = Reader::open(Cursor::new(bytes)).expect("a valid file");
+    rd.skeleton_chunks().iter().find(|c| c.id == id).expect("chunk present").offset as usize
+}
+
+fn size_at(bytes: &[u8], at: usize) -> usize {
+    u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes")) as usize
+}
+
+/// Recompute the CRC of the chunk at `at`.
+fn reseal(bytes: &mut [u8], at: usize) {
+    let size = size_at(bytes, at);
+    let crc = strata::format::chunk::crc32(&bytes[at + 16..at + 16 + size]);
+    bytes[at + 16 + size..at + 20 + size].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// `good` with the last node's geometric error NaN, every checksum recomputed.
+fn nan_error(good: &[u8]) -> (Vec<u8>, u32) {
+    let mut bytes = good.to_vec();
+    let (node, skel) = (chunk_at(good, "NODE"), chunk_at(good, "SKEL"));
+    let last = Reader::open(Cursor::new(good)).expect("valid").nodes().len() - 1;
+    let field = node + 16 + 56 * last + 36;
+    bytes[field..field + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    reseal(&mut bytes, node);
+    reseal(&mut bytes, skel);
+    (bytes, last as u32)
+}
+
+/// `good` with one index of node 0's geometry past its vertices, every checksum recomputed.
+fn index_past_vertices(good: &[u8]) -> Vec<u8> {
+    let rd = Reader::open(Cursor::new(good)).expect("valid");
+    let (n, node, skel) = (rd.nodes()[0], chunk_at(good, "NODE"), chunk_at(good, "SKEL"));
+    let mut bytes = good.to_vec();
+    let geom = n.offset as usize;
+    let (mut at, end) = (geom + 16, geom + 16 + size_at(good, geom));
+    while &bytes[at..at + 4] != b"INDX" {
+        let after = at + 20 + size_at(&bytes, at);
+        at = after + (8 - after % 8) % 8;
+        assert!(at < end, "node 0 has an INDX chunk");
+    }
+    let width = u32::from_le_bytes(bytes[at + 4..at + 8].try_into().expect("4 bytes")) as usize;
+    bytes[at + 16..at + 16 + width].copy_from_slice(&n.vertices.to_le_bytes()[..width]);
+    reseal(&mut bytes, at);
+    reseal(&mut bytes, geom);
+    let crc = bytes[end..end + 4].to_vec();
+    bytes[node + 16 + 52..node + 16 + 56].copy_from_slice(&crc);
+    reseal(&mut bytes, node);
+    reseal(&mut bytes, skel);
+    bytes
+}
+
+/// A camera as JSON.
+fn camera_json(c: &Camera) -> serde_json::Value {
+    let v = |v: glam::Vec3| json!([v.x as f64, v.y as f64, v.z as f64]);
+    let projection = match c.projection {
+        Projection::Perspective { fov_y } => json!({ "perspective": { "fov_y": fov_y as f64 } }),
+        Projection::Orthographic { height } => json!({ "orthographic": { "height": height as f64 } }),
+    };
+    json!({ "eye": v(c.eye), "target": v(c.target), "up": v(c.up), "projection": projection,
+            "width": c.width, "height": c.height, "near": c.near as f64, "far": c.far as f64 })
+}
+
+/// The front of `skeleton` for `camera` and `limits`: shown and culled nodes.
+fn front(skeleton: &Skeleton, camera: &Camera, limits: &Limits) -> (Vec<u32>, Vec<u32>) {
+    let attrs = skeleton.header.attributes;
+    let cut = Refiner::default().select(skeleton, camera, limits, &[], &|n| record_bytes(n, attrs));
+    (cut.shown, cut.culled)
+}
+
+/// Whether the front of `camera` and `limits` stays the same when the eye, the target and the
+/// threshold move slightly: no decision lies within rounding of its threshold.
+fn stable(skeleton: &Skeleton, camera: &Camera, limits: &Limits) -> bool {
+    let base = front(skeleton, camera, limits);
+    let scale = 1e-4 * camera.eye.distance(camera.target).max(1e-3);
+    let nudges = [glam::Vec3::X, -glam::Vec3::X, glam::Vec3::Y, -glam::Vec3::Y, glam::Vec3::Z, -glam::Vec3::Z];
+    nudges.iter().all(|&d| {
+        let mut c = *camera;
+        c.eye += d * scale;
+        c.target += glam::Vec3::new(d.y, d.z, d.x) * scale;
+        front(skeleton, &c, limits) == base
+    }) && [0.999, 1.001].iter().all(|k| front(skeleton, camera, &Limits { pixel_error: limits.pixel_error * k, ..*limits }) == base)
+}
+
+/// Golden fronts of `file`: orbit cameras from far to near and an orthographic one, under several
+/// thresholds, budgets and orders; only those robust to rounding.
+fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
+    let rd = Reader::open(Cursor::new(bytes)).expect("valid");
+    let skeleton = rd.skeleton();
+    let h = &skeleton.header;
+    let (center, radius) = ((h.min + h.max) * 0.5, (h.max - h.min).length() * 0.5);
+    let top_faces: u64 = skeleton.level_nodes(skeleton.top()).map(|i| skeleton.nodes[i as usize].faces as u64).sum();
+    let mut cameras: Vec<Camera> = [0, 6, 10, 13, 16, 24].iter().map(|&i| orbit(center, radius, i, 32, 640, 480)).collect();
+    let mut ortho = cameras[5];
+    ortho.projection = Projection::Orthographic { height: 2.5 * radius };
+    cameras.push(ortho);
+    let mut out = Vec::new();
+    for camera in &cameras {
+        for (pixel_error, max_faces, priority) in [
+            (1.0, None, Priority::Error),
+            (8.0, None, Priority::Error),
+            (0.5, Some(2 * top_faces), Priority::Error),
+            (0.5, Some(2 * top_faces), Priority::Silhouette),
+            (0.5, Some(2 * top_faces), Priority::Breadth),
+        ] {
+            let limits = Limits { pixel_error, max_faces, max_bytes: None, priority };
+            if !stable(skeleton, camera, &limits) {
+                continue;
+            }
+            let (shown, culled) = front(skeleton, camera, &limits);
+            let priority = match priority {
+                Priority::Error => "error",
+                Priority::Silhouette => "silhouette",
+                Priority::Breadth => "breadth",
+            };
+            out.push(json!({
+                "file": file,
+                "camera": camera_json(camera),
+                "limits": { "pixel_error": pixel_error as f64, "max_faces": max_faces, "max_bytes": null, "priority": priority },
+                "held": [],
+                "front": shown,
+                "culled": culled,
+            }));
+        }
+    }
+    out
+}
+
+fn main() -> anyhow::Result<()> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
+    std::fs::create_dir_all(&dir)?;
+    let sphere = sphere();
+    let (nan, nan_node) = nan_error(&sphere);
+    let valid = [("plane", plane()), ("sphere", sphere.clone())];
+    let refused = [
+        ("refused-nan-error", nan, vec![format!("node {nan_node}"), "error".to_string()]),
+        ("refused-index-past-vertices", index_past_vertices(&sphere), vec!["node 0".to_string(), "index".to_string()]),
+    ];
+    for (name, bytes) in valid {
+        let rd = Reader::open(Cursor::new(&bytes))?;
+        let json = format::inspect::dump(&rd)?;
+        std::fs::write(dir.join(format!("{name}.strata")), &bytes)?;
+        std::fs::write(dir.join(format!("{name}.json")), serde_json::to_string_pretty(&json)? + "\n")?;
+        println!("{name}: {} bytes, {} nodes", bytes.len(), rd.nodes().len());
+    }
+    let golden = fronts("sphere.strata", &sphere);
+    let distinct: std::collections::HashSet<String> = golden.iter().map(|f| f["front"].to_string()).collect();
+    std::fs::write(dir.join("fronts.json"), serde_json::to_string_pretty(&golden)? + "\n")?;
+    println!("fronts: {} of sphere.strata ({} distinct)", golden.len(), distinct.len());
+    for (name, bytes, words) in refused {
+        let refusal = Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));
+        let message = refusal.expect_err("a refused vector is refused").to_string();
+        assert!(words.iter().all(|w| message.contains(w)), "{name}: {message}");
+        std::fs::write(dir.join(format!("{name}.strata")), &bytes)?;
+        std::fs::write(dir.join(format!("{name}.json")), serde_json::to_string_pretty(&serde_json::json!({ "refused": words }))? + "\n")?;
+        println!("{name}: refused with \"{message}\"");
+    }
+    Ok(())
+}
