@@ -633,7 +633,7 @@ fn extract(a: ExtractArgs) -> Result<()> {
 }
 
 fn stream(a: StreamArgs) -> Result<()> {
-    use strata::stream::{session, Budgets, Priority, Streamer};
+    use strata::stream::{play, session, Budgets, Priority, Streamer};
     let opened = Instant::now();
     let reader = open_chunk_file(&a.file)?;
     if let Some(out) = &a.export_cut {
@@ -676,60 +676,20 @@ fn stream(a: StreamArgs) -> Result<()> {
         Vec::new()
     };
     let mut streamer = Streamer::new(reader, budgets)?;
-    // Frames are drawn strip by strip; a whole one is kept only to be written out.
-    let mut strips = strata::render::Strips::new(width, height);
-    let mut frame_rgba = if a.frames_dir.is_some() { vec![0u8; 4 * width as usize * height as usize] } else { Vec::new() };
-    let (mut plain_front, mut plain_full) = (image_if(a.compare_full, width, height), image_if(a.compare_full, width, height));
-    let mut last_ms = None;
-    for (k, camera) in cameras.iter().enumerate() {
-        let rep = streamer.update(camera, last_ms)?;
-        let start = Instant::now();
-        let parts: Vec<strata::render::Part> = rep
-            .front
-            .iter()
-            .filter_map(|&i| {
-                let g = streamer.geometry(i)?;
-                Some(strata::render::Part { positions: &g.positions, normals: &g.normals, indices: &g.indices, color: strata::render::palette(i) })
-            })
-            .collect();
-        let row_bytes = 4 * width as usize;
-        strips.draw(camera, &parts, |row, rgba| {
-            if let Some(out) = frame_rgba.get_mut(row as usize * row_bytes..row as usize * row_bytes + rgba.len()) {
-                out.copy_from_slice(rgba);
-            }
-        });
-        let draw_ms = start.elapsed().as_secs_f64() * 1e3;
-        if let Some(d) = &a.frames_dir {
-            strata::render::write_rgba_png(&d.join(format!("frame{k:05}.png")), width, height, &frame_rgba)?;
+    let opts = play::PlayOptions { width, height, pixels: a.frames_dir.is_some(), compare_full: a.compare_full };
+    play::play(&mut streamer, &cameras, opts, &full, opened, |f| {
+        let (rep, s) = (&f.report, &f.report.stats);
+        if let (Some(d), Some(rgba)) = (&a.frames_dir, f.rgba) {
+            strata::render::write_rgba_png(&d.join(format!("frame{:05}.png", rep.frame)), width, height, rgba)?;
         }
-        last_ms = Some((rep.stats.refine_ms + draw_ms) as f32);
-        let since_open_ms = opened.elapsed().as_secs_f64() * 1e3;
-        let retained = match (&mut plain_front, &mut plain_full) {
-            (Some(front), Some(whole)) => {
-                const PLAIN: [u8; 4] = [200, 200, 200, 255];
-                front.clear();
-                whole.clear();
-                for &i in &rep.front {
-                    if let Some(g) = streamer.geometry(i) {
-                        front.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
-                    }
-                }
-                for g in &full {
-                    whole.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
-                }
-                Some(strata::stream::retention::retention(front, whole))
-            }
-            _ => None,
-        };
-        let s = &rep.stats;
         if a.json {
             let mut v = serde_json::json!({
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
-                "refine_ms": s.refine_ms, "draw_ms": draw_ms, "since_open_ms": since_open_ms,
+                "refine_ms": s.refine_ms, "draw_ms": f.draw_ms, "since_open_ms": f.since_open_ms,
             });
-            if let Some(r) = retained {
+            if let Some(r) = f.retained {
                 v["retained"] = serde_json::json!(r.shaded);
                 v["coverage_retained"] = serde_json::json!(r.coverage);
             }
@@ -739,16 +699,17 @@ fn stream(a: StreamArgs) -> Result<()> {
             println!(
                 "frame {:>4}  nodes {:>5}  faces {:>8}  levels [{}]  +{} -{}  read {} B  resident {} B  px {:.2}  refine {:.2} ms  draw {:.2} ms",
                 rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
-                s.resident_bytes, s.pixel_error, s.refine_ms, draw_ms
+                s.resident_bytes, s.pixel_error, s.refine_ms, f.draw_ms
             );
-            if k == 0 {
-                println!("           first frame ready {since_open_ms:.1} ms after opening the file");
+            if rep.frame == 0 {
+                println!("           first frame ready {:.1} ms after opening the file", f.since_open_ms);
             }
-            if let Some(r) = retained {
+            if let Some(r) = f.retained {
                 println!("           retained {:.4} (coverage {:.4})", r.shaded, r.coverage);
             }
         }
-    }
+        Ok(())
+    })?;
     if let Some(out) = &a.export_cut {
         let mesh = streamer.front_mesh();
         strata::export::write(out, &mesh)?;
@@ -757,11 +718,6 @@ fn stream(a: StreamArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// A cleared image when `wanted`.
-fn image_if(wanted: bool, width: u32, height: u32) -> Option<strata::render::Image> {
-    wanted.then(|| strata::render::Image::new(width, height))
 }
 
 /// Three comma-separated numbers.

@@ -6,10 +6,12 @@
 //! - [`cache`]: resident geometry under a memory budget, LRU;
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
 //! - [`retention`]: shape retention of a front's image against the full-detail one;
-//! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines.
+//! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines;
+//! - [`play`]: a viewing session played frame by frame, drawn with the software renderer.
 
 pub mod budget;
 pub mod cache;
+pub mod play;
 pub mod refine;
 pub mod retention;
 pub mod session;
