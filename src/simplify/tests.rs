@@ -1,7 +1,8 @@
 //! Unit tests of the simplifier.
 
-use super::*;
-use crate::mesh::{Adjacency, Material};
+use super::{simplify, Simplified, SimplifyOptions};
+use crate::mesh::{Adjacency, Material, Mesh, VertexFaces, NO_FACE};
+use glam::{Vec2, Vec3};
 use proptest::prelude::*;
 use std::collections::HashMap;
 
