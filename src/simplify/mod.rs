@@ -47,6 +47,21 @@
 //! own group. Removing a face f from its group can only split the group through f, and the faces
 //! across f's two other edges become edge neighbours after the collapse, so the group neither
 //! splits nor vanishes. This also lets group outlines simplify, as the method asks.
+//!
+//! Where each part lives:
+//! - `mod.rs`: the public API ([`SimplifyOptions`], [`Simplified`], [`simplify()`]);
+//! - `quadric.rs`: the quadric error metric;
+//! - `state.rs`: the collapse state (`State`): vertex and face records, their construction from
+//!   the input (quadrics, locks, vertex kinds), the queries the other parts share, and the output;
+//! - `collapse.rs`: the candidates of an edge, the checks (link condition, group survival, face
+//!   shape) and the collapse itself;
+//! - `queue.rs`: queue entries, ranking, and the pass loop (`State::run`);
+//! - `topology.rs`: the changes of topology that [`SimplifyOptions::topology`] allows (cutting
+//!   handles and necks, dropping closed tetrahedra);
+//! - `prefetch.rs`: x86_64 prefetching for the pass loop and ranking;
+//! - `tests.rs`: unit tests.
+//!
+//! Alternatives that were measured and lost are in `notes/simplify.md`.
 
 mod collapse;
 mod prefetch;
@@ -63,8 +78,7 @@ use state::State;
 /// How far to simplify and which collapses to allow.
 ///
 /// The default bounds on face turn and shape were chosen by measurement (`cargo bench --bench
-/// simplify`): 60° and 0.05 left the CT head at 3% of its faces with 31% more mean distance to the
-/// input than 75° and 0.02, and more than meshoptimizer's, while the bunny hardly changed.
+/// simplify`; the settings measured against them are in `notes/simplify.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimplifyOptions {
     /// Stop once at most this many faces remain, as far as the rules allow. Default 0: only

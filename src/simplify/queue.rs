@@ -166,16 +166,7 @@ impl State {
     /// An edge found illegal is tried again in the next pass only if a collapse touched its ends
     /// or their neighbours; otherwise it waits until the queue runs dry, and is then tried once
     /// more.
-    ///
-    /// Measured alternatives (CT head at 10%): ranking a survivor's edges right after its
-    /// collapse, sequentially while its data is in cache, was slower than this parallel
-    /// ranking after the pass (pass 1: 182 ms against 122 + 27 ms), and slower still when those
-    /// edges joined the current pass through the heap (306 ms); a 3× window instead of 1.5×
-    /// made the bunny's Hausdorff distance up to 25% worse for at most 10% less time. Changing
-    /// which failed edges are retried when is not neutral either: retrying blocked edges as soon
-    /// as a collapse touches them, or leaving link-condition failures to the final retry, made
-    /// the CT head's mean distance at 1% 4-7% worse (the latter also the bunny's Hausdorff at 1%
-    /// 7% worse); taking a pass's edges in vertex order within octaves of key did not help.
+    // Alternatives to this order that were measured and lost: notes/simplify.md.
     pub(super) fn run(&mut self, opts: &SimplifyOptions) {
         let limit = opts.max_error.map_or(f64::INFINITY, |e| f64::from(e).powi(2));
         let mut changed = vec![false; self.verts.len()];
