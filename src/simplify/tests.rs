@@ -1,42 +1,10 @@
 //! Unit tests of the simplifier.
 
 use super::{simplify, Simplified, SimplifyOptions};
+use crate::fixtures;
 use crate::mesh::{Adjacency, Material, Mesh, VertexFaces, NO_FACE};
 use glam::{Vec2, Vec3};
 use proptest::prelude::*;
-use std::collections::HashMap;
-
-fn icosphere(levels: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut positions: Vec<Vec3> = [
-        (-1., t, 0.), (1., t, 0.), (-1., -t, 0.), (1., -t, 0.), (0., -1., t), (0., 1., t),
-        (0., -1., -t), (0., 1., -t), (t, 0., -1.), (t, 0., 1.), (-t, 0., -1.), (-t, 0., 1.),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut triangles: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-        [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-        [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut next = Vec::new();
-        for [a, b, c] in triangles {
-            let mut m = |x: u32, y: u32| {
-                *mid.entry((x.min(y), x.max(y))).or_insert_with(|| {
-                    positions.push((positions[x as usize] + positions[y as usize]).normalize());
-                    positions.len() as u32 - 1
-                })
-            };
-            let (ab, bc, ca) = (m(a, b), m(b, c), m(c, a));
-            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        triangles = next;
-    }
-    Mesh { positions, triangles, ..Default::default() }.clean().expect("finite").0
-}
 
 /// A deterministic hash in [-0.5, 0.5).
 fn noise(i: u64) -> f32 {
@@ -45,8 +13,12 @@ fn noise(i: u64) -> f32 {
     ((z >> 40) as f32 / (1u64 << 24) as f32) - 0.5
 }
 
-fn noisy_sphere(levels: u32, amount: f32, seed: u64) -> Mesh {
-    let mut m = icosphere(levels);
+/// An icosphere without normals whose vertices move radially by independent white noise of
+/// `amount` (peak to peak): neighbours jump independently, which the flip and shape checks must
+/// survive. `fixtures::noisy_sphere` is smooth noise over a cube-sphere, a gentler surface.
+fn rough_sphere(levels: u32, amount: f32, seed: u64) -> Mesh {
+    let mut m = fixtures::icosphere(levels);
+    m.normals.clear();
     for (i, p) in m.positions.iter_mut().enumerate() {
         *p *= 1.0 + amount * noise(seed ^ i as u64);
     }
@@ -54,30 +26,12 @@ fn noisy_sphere(levels: u32, amount: f32, seed: u64) -> Mesh {
     m
 }
 
-/// An n×n open grid on a gentle bump, one border loop.
-fn grid(n: u32) -> Mesh {
-    let mut positions = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
-            positions.push(Vec3::new(x, y, 0.2 * (3.0 * x).sin() * (2.0 * y).cos()));
-        }
-    }
-    let at = |i: u32, j: u32| j * (n + 1) + i;
-    let mut triangles = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-            triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-        }
-    }
-    Mesh { positions, triangles, ..Default::default() }.clean().expect("finite").0
-}
-
 /// An icosphere with smooth normals, a spherical UV map whose seam runs along one meridian,
 /// and two materials (upper and lower half).
 fn seamed_sphere(levels: u32) -> Mesh {
-    let mut m = icosphere(levels);
+    let mut m = fixtures::icosphere(levels);
+    // Normals of the rotated sphere are set below with the UVs.
+    m.normals.clear();
     // Rotate slightly so no vertex sits exactly on the poles' singular meridian.
     for p in &mut m.positions {
         *p = glam::Quat::from_rotation_z(0.1) * *p;
@@ -105,12 +59,16 @@ fn seamed_sphere(levels: u32) -> Mesh {
 
 /// A grid with a fin: a third face on one interior edge.
 fn fin() -> Mesh {
-    let mut m = grid(12);
+    let mut m = fixtures::open_grid(12);
     let (a, b) = (m.triangles[40][0], m.triangles[40][2]);
     m.positions.push(Vec3::new(0.45, 0.3, 1.0));
     m.triangles.push([a, b, m.positions.len() as u32 - 1]);
     m.face_materials.push(0);
     m.compute_face_geometry();
+    // The fin's corners: its own face normal, and UVs (x, y) as on the grid.
+    let t = *m.triangles.last().expect("the fin");
+    m.normals.extend([*m.face_normals.last().expect("the fin"); 3]);
+    m.uvs.extend(t.map(|v| m.positions[v as usize].truncate()));
     m
 }
 
@@ -235,7 +193,7 @@ fn opts(target_faces: usize) -> SimplifyOptions {
 
 #[test]
 fn same_face_count_changes_nothing() {
-    for m in [icosphere(2), seamed_sphere(2), grid(6), fin()] {
+    for m in [fixtures::icosphere(2), seamed_sphere(2), fixtures::open_grid(6), fin()] {
         let out = simplify(&m, None, &opts(m.face_count()));
         assert_eq!(out.mesh, m);
         assert_eq!(out.error, 0.0);
@@ -248,7 +206,7 @@ fn same_face_count_changes_nothing() {
 
 #[test]
 fn sphere_reaches_target_without_flips() {
-    let m = noisy_sphere(4, 0.02, 3);
+    let m = rough_sphere(4, 0.02, 3);
     for target in [m.face_count() / 2, m.face_count() / 10, m.face_count() / 100] {
         let out = simplify(&m, None, &opts(target));
         check(&m, &out);
@@ -264,7 +222,7 @@ fn sphere_reaches_target_without_flips() {
         assert!(d.max < 0.2 && out.error < 0.2, "{d:?} {}", out.error);
     }
     // A smooth sphere at 512 faces: a polyhedron that fine is about 0.01 from the sphere.
-    let smooth = icosphere(4);
+    let smooth = fixtures::icosphere(4);
     let out = simplify(&smooth, None, &opts(smooth.face_count() / 10));
     let d = crate::distance::surface_distance(&smooth, &out.mesh, 20_000, 1);
     assert!(d.max < 0.03 && d.mean < 0.006, "{d:?}");
@@ -272,7 +230,7 @@ fn sphere_reaches_target_without_flips() {
 
 #[test]
 fn borders_stay_in_place() {
-    let m = grid(24);
+    let m = fixtures::open_grid(24);
     let out = simplify(&m, None, &opts(m.face_count() / 20));
     check(&m, &out);
     let on_input_border = |p: Vec3| p.x == 0.0 || p.x == 1.0 || p.y == 0.0 || p.y == 1.0;
@@ -439,7 +397,7 @@ fn non_manifold_fin_is_left_alone() {
 
 #[test]
 fn groups_stay_connected_when_simplified_hard() {
-    let cases = [(noisy_sphere(4, 0.05, 9), 40), (grid(40), 25), (seamed_sphere(4), 30), (fin(), 6)];
+    let cases = [(rough_sphere(4, 0.05, 9), 40), (fixtures::open_grid(40), 25), (seamed_sphere(4), 30), (fin(), 6)];
     for (m, k) in cases {
         let groups = patches(&m, k);
         let n_groups = groups.iter().max().map_or(0, |&g| g as usize + 1);
@@ -458,7 +416,7 @@ fn groups_stay_connected_when_simplified_hard() {
 
 #[test]
 fn max_error_stops_early() {
-    let m = noisy_sphere(4, 0.05, 1);
+    let m = rough_sphere(4, 0.05, 1);
     let free = simplify(&m, None, &opts(0));
     let bounded = simplify(&m, None, &SimplifyOptions { max_error: Some(0.01), ..opts(0) });
     check(&m, &bounded);
@@ -479,7 +437,7 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
     #[test]
     fn random_meshes_keep_invariants(seed in 0u64..1000, levels in 1u32..4, amount in 0.0f32..0.3, k in 1usize..20, ratio in 0.0f64..1.0, open in any::<bool>()) {
-        let mut m = noisy_sphere(levels, amount, seed);
+        let mut m = rough_sphere(levels, amount, seed);
         if open {
             // Cut a cap away so the mesh has a border.
             let keep: Vec<usize> = (0..m.face_count()).filter(|&f| m.triangles[f].iter().any(|&v| m.positions[v as usize].z < 0.5)).collect();
