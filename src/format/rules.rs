@@ -144,7 +144,7 @@ pub(crate) fn skeleton(
             if n.center.distance(ch.center) + ch.radius > n.radius * (1.0 + RADIUS_TOLERANCE) + 1e-30 {
                 sink.push(problem(i, format!("sphere does not contain child {c}'s")));
             }
-            if !(ch.error <= n.error) {
+            if ch.error > n.error {
                 sink.push(problem(i, format!("error {} is smaller than child {c}'s {}", n.error, ch.error)));
             }
         }
