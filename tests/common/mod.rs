@@ -4,7 +4,6 @@
 #![allow(dead_code)]
 
 use glam::{Vec2, Vec3};
-use std::collections::HashMap;
 use strata::hierarchy::{self, Hierarchy, HierarchyParams};
 use strata::levels::{LevelMesh, LevelMeshes};
 use strata::mesh::{Adjacency, Material, Mesh};
@@ -12,54 +11,16 @@ use strata::mesh::{Adjacency, Material, Mesh};
 /// An icosphere of radius 1 subdivided `depth` times (20·4^depth faces), with smooth normals,
 /// spherical UVs, colors from the position, and two materials split at z = 0.
 pub fn icosphere(depth: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut positions: Vec<Vec3> = [
-        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
-        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
-        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut triangles: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    let mut mesh = strata::fixtures::icosphere(depth);
+    let corners: Vec<Vec3> = mesh.triangles.iter().flat_map(|t| t.map(|v| mesh.positions[v as usize])).collect();
+    mesh.uvs = corners.iter().map(|p| Vec2::new(p.y.atan2(p.x), p.z.clamp(-1.0, 1.0).acos())).collect();
+    mesh.colors = corners.iter().map(|p| [(p.x * 127.0 + 128.0) as u8, (p.y * 127.0 + 128.0) as u8, (p.z * 127.0 + 128.0) as u8, 255]).collect();
+    mesh.face_materials = mesh.triangles.iter().map(|t| (t.iter().map(|&v| mesh.positions[v as usize].z).sum::<f32>() > 0.0) as u32).collect();
+    mesh.materials = vec![
+        Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()) },
+        Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None },
     ];
-    for _ in 0..depth {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut next = Vec::with_capacity(triangles.len() * 4);
-        for t in &triangles {
-            let mut m = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    positions.push((positions[a as usize] + positions[b as usize]).normalize());
-                    positions.len() as u32 - 1
-                });
-            }
-            next.extend([[t[0], m[0], m[2]], [t[1], m[1], m[0]], [t[2], m[2], m[1]], [m[0], m[1], m[2]]]);
-        }
-        triangles = next;
-    }
-    let corners: Vec<Vec3> = triangles.iter().flat_map(|t| t.map(|v| positions[v as usize])).collect();
-    let face_materials = triangles
-        .iter()
-        .map(|t| (t.iter().map(|&v| positions[v as usize].z).sum::<f32>() > 0.0) as u32)
-        .collect();
-    let mesh = Mesh {
-        normals: corners.clone(),
-        uvs: corners.iter().map(|p| Vec2::new(p.y.atan2(p.x), p.z.clamp(-1.0, 1.0).acos())).collect(),
-        colors: corners.iter().map(|p| [(p.x * 127.0 + 128.0) as u8, (p.y * 127.0 + 128.0) as u8, (p.z * 127.0 + 128.0) as u8, 255]).collect(),
-        face_materials,
-        materials: vec![
-            Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()) },
-            Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None },
-        ],
-        positions,
-        triangles,
-        ..Mesh::default()
-    };
-    mesh.clean().expect("finite").0
+    mesh
 }
 
 /// A wavy `n`×`n`-cell grid (2n² faces), open, without corner attributes.
