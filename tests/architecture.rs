@@ -44,3 +44,34 @@ fn the_format_layer_depends_on_nothing_of_the_build() {
     }
     assert!(found.is_empty(), "src/format may use crate::error and itself only:\n{}", found.join("\n"));
 }
+
+#[test]
+fn the_library_compiles_without_the_command_line_crates() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut found = Vec::new();
+    for file in rust_files(&src) {
+        if file.ends_with("main.rs") || file.starts_with(src.join("cli")) {
+            continue;
+        }
+        for (n, line) in code_lines(&file) {
+            let gated = line.contains("cfg_attr(feature = \"cli\"");
+            if !gated && ["clap::", "indicatif::", "ctrlc::", "anyhow::"].iter().any(|c| line.contains(c)) {
+                found.push(format!("{}:{n}: {}", file.display(), line.trim()));
+            }
+        }
+    }
+    assert!(found.is_empty(), "only the command line (src/main.rs, src/cli/) uses clap, indicatif, ctrlc and anyhow:\n{}", found.join("\n"));
+}
+
+#[test]
+fn every_subcommand_is_a_module_of_its_own() {
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/cli");
+    let text = std::fs::read_to_string(cli.join("mod.rs")).unwrap();
+    let commands: Vec<&str> = text.lines().filter_map(|l| l.trim().strip_prefix("Command::")?.split('(').next()).collect();
+    assert!(commands.len() >= 9, "{commands:?}");
+    for c in commands {
+        assert!(cli.join(format!("{}.rs", c.to_lowercase())).exists(), "subcommand {c} has no src/cli/{}.rs", c.to_lowercase());
+    }
+    let main = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/main.rs")).unwrap();
+    assert!(main.lines().count() < 60, "src/main.rs stays thin");
+}

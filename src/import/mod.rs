@@ -13,7 +13,8 @@ use std::path::Path;
 use std::time::Instant;
 
 /// A mesh file format strata reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Format {
     Obj,
     Gltf,

@@ -20,6 +20,7 @@ pub struct Limits {
 
 /// The order in which a level's refinable nodes claim the budget.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Priority {
     /// Largest projected geometric error (pixels) first: the budget goes where the image is
     /// furthest from full detail. Measured on the bunny, it keeps more of the full-detail image

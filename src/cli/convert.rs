@@ -1,0 +1,128 @@
+//! `strata convert`: import, group, simplify per level and write the chunk file, with progress
+//! bars on a terminal and a summary (text or JSON).
+
+use super::{GroupingArgs, LevelArgs, MeshInput};
+use anyhow::Result;
+use clap::ValueEnum;
+use std::path::PathBuf;
+use strata::pipeline::Normals;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub input: MeshInput,
+    /// The .strata file to write (written to a temporary name, renamed when complete).
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub grouping: GroupingArgs,
+    #[command(flatten)]
+    pub levels: LevelArgs,
+    /// Normals to store: the input's, else smooth ones computed with --crease-angle (auto); only
+    /// the input's (input); none, for the smallest file drawn flat-shaded (none).
+    #[arg(long, value_enum, default_value_t = NormalsArg::Auto)]
+    pub normals: NormalsArg,
+    /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
+    #[arg(long, default_value_t = 60.0)]
+    pub crease_angle: f32,
+    /// No progress bars.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+pub enum NormalsArg {
+    Auto,
+    Input,
+    None,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let opts = strata::pipeline::ConvertOptions { hierarchy: a.grouping.params(),
+        levels: a.levels.params(),
+        normals: match a.normals {
+            NormalsArg::Auto => Normals::Auto { crease_angle: a.crease_angle.to_radians() },
+            NormalsArg::Input => Normals::Input,
+            NormalsArg::None => Normals::None,
+        },
+    };
+    let mut bars = Bars::new(a.quiet || a.json);
+    let c = strata::pipeline::convert(&a.input.mesh, a.input.format, &a.output, &opts, &mut bars)?;
+    drop(bars);
+    for w in &c.warnings {
+        eprintln!("warning: {}: {w}", a.input.mesh.display());
+    }
+    let s = &c.summary;
+    if a.json {
+        println!("{}", serde_json::json!({ "summary": s, "times": c.times, "bytes_per_face": s.bytes_per_face() }));
+        return Ok(());
+    }
+    println!("wrote {} ({} bytes, {:.1} bytes per input face)", a.output.display(), s.file_bytes, s.bytes_per_face());
+    println!("{} input faces, {} levels, {} nodes, {} clusters, skeleton {} bytes", s.input_faces, s.levels.len(), s.nodes, s.clusters, s.skeleton_bytes);
+    println!("{:>6} {:>7} {:>9} {:>11}", "level", "nodes", "faces", "bytes");
+    for l in s.levels.iter().rev() {
+        println!("{:>6} {:>7} {:>9} {:>11}", l.level, l.nodes, l.faces, l.bytes);
+    }
+    let t = c.times;
+    println!(
+        "time: import {:.0} ms, group {:.0} ms, simplify {:.0} ms, write {:.0} ms, total {:.0} ms",
+        t.import_ms,
+        t.group_ms,
+        t.simplify_ms,
+        t.write_ms,
+        t.import_ms + t.group_ms + t.simplify_ms + t.write_ms
+    );
+    Ok(())
+}
+
+/// Progress bars on a terminal, one per stage; nothing when quiet or piped.
+struct Bars {
+    visible: bool,
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Bars {
+    fn new(quiet: bool) -> Bars {
+        use std::io::IsTerminal;
+        Bars { visible: !quiet && std::io::stderr().is_terminal(), bar: None }
+    }
+}
+
+impl strata::pipeline::Progress for Bars {
+    fn stage(&mut self, name: &str, steps: u64) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish();
+        }
+        if !self.visible {
+            return;
+        }
+        let bar = if steps > 0 {
+            let b = indicatif::ProgressBar::new(steps);
+            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+            b
+        } else {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} {spinner} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()));
+            b.enable_steady_tick(std::time::Duration::from_millis(100));
+            b
+        };
+        bar.set_prefix(name.to_string());
+        self.bar = Some(bar);
+    }
+
+    fn step(&mut self) {
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+        }
+    }
+}
+
+impl Drop for Bars {
+    fn drop(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish();
+        }
+    }
+}

@@ -1,0 +1,63 @@
+//! `strata info`: import a mesh and print what it holds: counts, attributes, bounds, topology,
+//! what cleaning removed.
+
+use super::{load, MeshInput};
+use anyhow::{Context, Result};
+use strata::mesh;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub input: MeshInput,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let imp = load(&a.input)?;
+    let m = &imp.mesh;
+    let adj = mesh::Adjacency::build(m);
+    let (components, _) = mesh::components(m);
+    let (lo, hi) = m.bounds().context("empty mesh")?;
+    let attributes: Vec<&str> = [("normals", !m.normals.is_empty()), ("uvs", !m.uvs.is_empty()), ("colors", !m.colors.is_empty())]
+        .into_iter()
+        .filter_map(|(n, present)| present.then_some(n))
+        .collect();
+    if a.json {
+        let v = serde_json::json!({
+            "file": a.input.mesh.display().to_string(),
+            "vertices": m.vertex_count(),
+            "faces": m.face_count(),
+            "source_faces": imp.source_faces,
+            "materials": m.materials.len(),
+            "material_names": m.materials.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
+            "attributes": attributes,
+            "bounds": { "min": lo.to_array(), "max": hi.to_array() },
+            "components": components,
+            "boundary_edges": adj.boundary_edges,
+            "nonmanifold_edges": adj.nonmanifold_edges.len(),
+            "cleaned": imp.cleaned,
+            "warnings": imp.warnings,
+            "import_ms": imp.import_ms,
+        });
+        println!("{v}");
+        return Ok(());
+    }
+    println!("file               {}", a.input.mesh.display());
+    println!("vertices           {}", m.vertex_count());
+    println!("faces              {} (of {} read)", m.face_count(), imp.source_faces);
+    println!("materials          {} ({})", m.materials.len(), m.materials.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", "));
+    println!("attributes         {}", if attributes.is_empty() { "none".to_string() } else { attributes.join(", ") });
+    println!("bounds             [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
+    println!("components         {components}");
+    println!("boundary edges     {}", adj.boundary_edges);
+    println!("non-manifold edges {}", adj.nonmanifold_edges.len());
+    let c = imp.cleaned;
+    println!(
+        "cleaning           welded {} vertices, removed {} degenerate faces, {} duplicate faces, {} unreferenced vertices",
+        c.welded_vertices, c.degenerate_faces, c.duplicate_faces, c.unreferenced_vertices
+    );
+    println!("import time        {:.1} ms", imp.import_ms);
+    Ok(())
+}

@@ -1,0 +1,119 @@
+//! `strata render`: draw a mesh, or one level of a chunk file, to a PNG with the software
+//! rasterizer.
+
+use super::{load, open_chunk_file, MeshInput};
+use anyhow::{Context, Result};
+use clap::ValueEnum;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// A .strata file, or an OBJ, glTF/GLB or PLY mesh.
+    input: PathBuf,
+    /// The PNG to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Eye and target as "ex,ey,ez:tx,ty,tz"; default: framing the model from --view-dir.
+    #[arg(long, allow_hyphen_values = true)]
+    camera: Option<String>,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 45.0)]
+    fov: f32,
+    /// Direction from the model toward the eye for the default camera, as "x,y,z".
+    #[arg(long, default_value = "0.3,0.4,1.0", allow_hyphen_values = true)]
+    view_dir: String,
+    /// Color by: one plain color, each node (strata files), or the level (strata files).
+    #[arg(long, value_enum, default_value_t = RenderColor::Plain)]
+    color: RenderColor,
+    /// Level of a strata file to draw (0 = full detail).
+    #[arg(long, default_value_t = 0)]
+    level: u32,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RenderColor {
+    Plain,
+    Groups,
+    Levels,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    use strata::render::{palette, Image};
+    anyhow::ensure!(a.width > 0 && a.height > 0, "--width and --height must be positive");
+    strata::atomic::protect(&a.input);
+    strata::atomic::check_output(&a.output)?;
+    let plain = [200, 200, 200, 255];
+    let mut image = Image::new(a.width, a.height);
+    let (mut drawn, mut faces, mut draw_ms) = (0, 0, 0.0);
+    let is_strata = a.input.extension().is_some_and(|e| e.eq_ignore_ascii_case("strata"));
+    if is_strata {
+        let rd = open_chunk_file(&a.input)?;
+        let levels = rd.header().levels;
+        anyhow::ensure!(a.level < levels, "--level {}: {} has levels 0..{}", a.level, a.input.display(), levels.saturating_sub(1));
+        let camera = render_camera(&a, rd.header().min, rd.header().max)?;
+        for node in rd.level_nodes(a.level) {
+            let g = rd.read_node(node)?;
+            let color = match a.color {
+                RenderColor::Plain => plain,
+                RenderColor::Groups => palette(node),
+                RenderColor::Levels => palette(a.level),
+            };
+            let start = Instant::now();
+            drawn += image.draw(&camera, &g.positions, &g.normals, &g.indices, color);
+            draw_ms += start.elapsed().as_secs_f64() * 1e3;
+            faces += g.face_count();
+        }
+    } else {
+        anyhow::ensure!(a.color == RenderColor::Plain, "--color groups and levels need a .strata file");
+        let m = load(&MeshInput { mesh: a.input.clone(), format: None })?.mesh;
+        let (min, max) = m.bounds().context("empty mesh")?;
+        let camera = render_camera(&a, min, max)?;
+        // Corner normals become vertices of their own; without them, faces are flat.
+        let (positions, normals, indices): (Vec<_>, Vec<_>, Vec<u32>) = if m.normals.is_empty() {
+            (m.positions.clone(), Vec::new(), m.triangles.iter().flatten().copied().collect())
+        } else {
+            let corners = m.triangles.iter().flatten().map(|&v| m.positions.get(v as usize).copied().unwrap_or(glam::Vec3::NAN)).collect();
+            (corners, m.normals.clone(), (0..3 * m.triangles.len() as u32).collect())
+        };
+        let start = Instant::now();
+        drawn = image.draw(&camera, &positions, &normals, &indices, plain);
+        draw_ms = start.elapsed().as_secs_f64() * 1e3;
+        faces = m.face_count();
+    }
+    image.write_png(&a.output)?;
+    println!("drew {drawn} of {faces} faces at {}x{} in {draw_ms:.1} ms, wrote {}", a.width, a.height, a.output.display());
+    Ok(())
+}
+
+/// Three comma-separated numbers.
+fn parse_vec3(s: &str, what: &str) -> Result<glam::Vec3> {
+    let v: Vec<f32> = s.split(',').map(|x| x.trim().parse::<f32>()).collect::<std::result::Result<_, _>>()
+        .with_context(|| format!("{what}: {s:?} is not three comma-separated numbers"))?;
+    anyhow::ensure!(v.len() == 3 && v.iter().all(|x| x.is_finite()), "{what}: {s:?} is not three comma-separated numbers");
+    Ok(glam::Vec3::new(v[0], v[1], v[2]))
+}
+
+/// The camera of `strata render`: framing the bounding sphere, or at --camera's eye and target.
+fn render_camera(a: &Args, min: glam::Vec3, max: glam::Vec3) -> Result<strata::camera::Camera> {
+    anyhow::ensure!(a.fov > 0.0 && a.fov < 180.0, "--fov must be between 0 and 180 degrees, not {}", a.fov);
+    let (center, radius) = ((min + max) * 0.5, ((max - min).length() * 0.5).max(f32::MIN_POSITIVE));
+    let fov = a.fov.to_radians();
+    let Some(spec) = &a.camera else {
+        return Ok(strata::camera::Camera::framing(center, radius, parse_vec3(&a.view_dir, "--view-dir")?, fov, a.width, a.height));
+    };
+    let (eye, target) = spec.split_once(':').with_context(|| format!("--camera: {spec:?} is not \"ex,ey,ez:tx,ty,tz\""))?;
+    let (eye, target) = (parse_vec3(eye, "--camera eye")?, parse_vec3(target, "--camera target")?);
+    anyhow::ensure!(eye != target, "--camera: the eye and the target are the same point");
+    let mut camera = strata::camera::Camera::framing(center, radius, eye - target, fov, a.width, a.height);
+    let distance = eye.distance(center);
+    camera.eye = eye;
+    camera.target = target;
+    camera.near = (distance - radius).max(1e-4 * (distance + radius));
+    camera.far = distance + radius;
+    Ok(camera)
+}
