@@ -1,9 +1,19 @@
 //! strata: preprocess a huge triangle mesh once into a hierarchical chunk file that a viewer
 //! streams coarse-to-fine, reading only what it needs.
 //!
-//! The pipeline, one module per stage:
-//! import ([`import`]) → clean ([`mesh`]) → group by normal cone ([`cone`], [`group`], [`hierarchy`])
-//! → simplify per level ([`simplify`]) → write the chunk file ([`format`]) → stream ([`stream`]).
+//! Three layers, each using only those before it:
+//!
+//! 1. **The format** ([`mod@format`]): the chunk file alone — records, codecs, the lazy [`format::Reader`]
+//!    over any [`format::ByteSource`], the rules every reader checks, `verify`, and the
+//!    [`format::Writer`] that takes finished nodes. It depends on nothing of the build.
+//! 2. **The build**, read top-down in [`pipeline`]: import ([`mod@import`]) → clean ([`mesh`]) → group by
+//!    normal cone ([`cone`], [`group`], [`hierarchy`]) → simplify per level ([`levels`],
+//!    [`simplify`]) → quantize ([`quantize`]), bound ([`bounds`]) and hand nodes to the writer
+//!    ([`mod@write`]).
+//! 3. **Viewing**: front selection, budgets and sessions over a file's skeleton ([`stream`]), the
+//!    software renderer ([`render`]), one level back as a mesh ([`assemble`]), exports ([`export`]).
+//!
+//! The command line (`src/main.rs`, `src/cli/`) sits on top, behind the default `cli` feature.
 
 pub mod assemble;
 pub mod atomic;
