@@ -50,7 +50,7 @@ fn view(center: Vec3, radius: f32, from: Vec3) -> Camera {
 }
 
 /// Draw a streamer's front into `image`.
-fn draw_front<R: std::io::Read + std::io::Seek>(s: &Streamer<R>, front: &[u32], camera: &Camera, image: &mut Image) {
+fn draw_front<S: strata::format::ByteSource>(s: &Streamer<S>, front: &[u32], camera: &Camera, image: &mut Image) {
     image.clear();
     let parts: Vec<Part> = front
         .iter()
