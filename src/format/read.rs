@@ -53,20 +53,14 @@ impl<S: ByteSource> Reader<S> {
     }
 
     /// Open a file from any byte source; errors name it `path`. Besides every size, offset and
-    /// checksum, the skeleton's rules (spec §6) are checked here and each node's as it is read, so
-    /// that a file [`verify`](super::verify()) refuses is refused by every reader too.
+    /// checksum, each value of the skeleton is checked here, and each node's rules (spec §6) as the
+    /// node is read, so that what [`verify`](super::verify()) refuses no reader uses.
     pub fn open_named(source: S, path: &Path) -> Result<Reader<S>> {
         let rd = Reader::open_unchecked(source, path)?;
-        let mut sink = Sink::new(1);
-        let s = &rd.skeleton;
-        rules::skeleton(&rd.path, &s.header, &s.levels, &s.nodes, &s.neighbors, &rd.node_boxes(), &mut sink);
-        match sink.first() {
-            Some(e) => Err(e),
-            None => Ok(Reader { strict: true, ..rd }),
-        }
+        Ok(Reader { strict: true, ..rd })
     }
 
-    /// Open checking sizes, offsets and checksums only; nodes are decoded without their rules.
+    /// Open checking the skeleton only; nodes are decoded without their rules.
     /// For [`verify`](super::verify()), which checks the rules itself and lists every problem.
     pub(crate) fn open_unchecked(source: S, path: &Path) -> Result<Reader<S>> {
         let len = source.size().map_err(|e| Error::io(path, e))?;
@@ -210,6 +204,7 @@ impl<S: ByteSource> Reader<S> {
         let g = geom::decode(&ctx, &bytes)?;
         if self.strict {
             let mut sink = Sink::new(1);
+            rules::relations(&self.path, &self.skeleton, i, &mut sink);
             rules::node(&self.path, i, &rec, self.node_box(i), &g, &mut sink);
             if let Some(e) = sink.first() {
                 return Err(e);

@@ -1,12 +1,14 @@
-//! The rules of spec §6 that a file must satisfy, in one place for every reader: [`Reader`]
-//! checks the skeleton's rules when it opens a file and a node's rules when it decodes the node,
-//! and stops at the first problem; [`verify`](super::verify()) runs the same functions over the
-//! whole file and lists what they find. What only the whole file can tell (every chunk's frame,
-//! unknown chunks' CRCs, duplicate faces across nodes, the cluster count) is `verify`'s alone.
+//! The rules of spec §6 that a file must satisfy, in one place for every reader: each value's range
+//! is checked as the skeleton is decoded ([`super::skeleton`]); a node's rules here, which
+//! [`Reader`] checks as it decodes the node and stops at the first problem, and
+//! [`verify`](super::verify()) checks for every node and lists. What only the whole file can tell
+//! (every chunk's frame, unknown chunks' CRCs, duplicate faces across nodes, the cluster count) is
+//! `verify`'s alone.
 //!
 //! [`Reader`]: super::Reader
 
-use super::{Header, LevelRecord, NodeGeometry, NodeRecord, NO_PARENT};
+use super::skeleton::Skeleton;
+use super::{NodeGeometry, NodeRecord, NO_PARENT};
 use crate::error::Error;
 use glam::{DVec3, Vec3};
 use std::path::Path;
@@ -55,9 +57,16 @@ pub(crate) fn cone_covers(half: f32, needed: f64) -> bool {
     needed <= half as f64 + ANGLE_TOLERANCE || half as f64 >= std::f64::consts::PI - ANGLE_TOLERANCE
 }
 
+/// The squared distance from a sphere's center within which a point lies in it, with the
+/// tolerance of the stored radius.
+fn sphere_reach(radius: f32) -> f32 {
+    let r = radius * (1.0 + RADIUS_TOLERANCE) + 1e-30;
+    r * r
+}
+
 /// Whether `p` lies in the sphere (center, radius), with the tolerance of the stored radius.
 fn in_sphere(center: Vec3, radius: f32, p: Vec3) -> bool {
-    center.distance(p) <= radius * (1.0 + RADIUS_TOLERANCE) + 1e-30
+    center.distance_squared(p) <= sphere_reach(radius)
 }
 
 /// A cone tested against many face normals: `angle(axis, d) ≤ half + tolerance`, as
@@ -82,98 +91,43 @@ impl ConeTest {
     }
 }
 
-/// The skeleton's rules (§6, §7): each node's values in range; its cone, box and sphere containing
-/// its children's; errors finite, not negative and never below a child's; neighbour lists ascending,
-/// of the same level and symmetric; the top level's boxes inside the `HEAD` bounds; the `LEVL`
-/// totals and `HEAD` input faces matching the node table. `boxes` are the nodes' boxes; the tree
-/// shape itself is checked as the node table is parsed.
-pub(crate) fn skeleton(
-    path: &Path,
-    header: &Header,
-    levels: &[LevelRecord],
-    nodes: &[NodeRecord],
-    neighbors: &[u32],
-    boxes: &[(Vec3, Vec3)],
-    sink: &mut Sink,
-) {
-    let problem = |i: usize, msg: String| Error::at_element(path, format!("node {i}"), msg);
-    let list = |i: usize| {
-        let n = &nodes[i];
-        &neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize]
-    };
-    let mut totals = vec![(0u64, 0u64, 0u64); levels.len()];
-    // Each node's own values first, so that a bad value is named at its node, not at its parent's.
-    let mut sane = vec![false; nodes.len()];
-    for (i, n) in nodes.iter().enumerate() {
-        let t = &mut totals[n.level as usize];
-        let end = n.offset + n.size as u64;
-        *t = (t.0 + n.faces as u64, t.1 + n.vertices as u64, t.2 + n.size as u64 + super::chunk::padding(end));
-        let (min, max) = boxes[i];
-        sane[i] = n.cone.axis.is_finite()
-            && (n.cone.axis.length() - 1.0).abs() < 1e-3
-            && (0.0..=std::f32::consts::PI).contains(&n.cone.half_angle)
-            && n.center.is_finite()
-            && n.radius.is_finite()
-            && n.radius >= 0.0
-            && min.is_finite()
-            && max.is_finite()
-            && min.cmple(max).all()
-            && n.error.is_finite()
-            && n.error >= 0.0;
-        if !sane[i] {
-            sink.push(problem(i, format!("cone, bounds or error out of range (error {}, radius {})", n.error, n.radius)));
+/// Node `i`'s rules on the skeleton (§6, §7): its cone, box and sphere contain its children's and
+/// its error is not below theirs; its neighbour list is strictly ascending, of its own level, without
+/// itself, and each neighbour lists it back; at the top level, its box lies inside the `HEAD`
+/// bounds. Each value's own range (finite, ordered, not negative) and the level totals are checked
+/// as the node table is decoded.
+pub(crate) fn relations(path: &Path, s: &Skeleton, i: u32, sink: &mut Sink) {
+    let problem = |msg: String| Error::at_element(path, format!("node {i}"), msg);
+    let Some(n) = s.nodes.get(i as usize) else { return };
+    let (min, max) = s.node_box(i);
+    for c in s.children(i) {
+        let ch = &s.nodes[c as usize];
+        if !cone_covers(n.cone.half_angle, angle(n.cone.axis, ch.cone.axis) + ch.cone.half_angle as f64) {
+            sink.push(problem(format!("cone does not contain child {c}'s")));
+        }
+        let (cmin, cmax) = s.node_box(c);
+        if !(min.cmple(cmin).all() && cmax.cmple(max).all()) {
+            sink.push(problem(format!("box does not contain child {c}'s")));
+        }
+        if n.center.distance(ch.center) + ch.radius > n.radius * (1.0 + RADIUS_TOLERANCE) + 1e-30 {
+            sink.push(problem(format!("sphere does not contain child {c}'s")));
+        }
+        if ch.error > n.error {
+            sink.push(problem(format!("error {} is smaller than child {c}'s {}", n.error, ch.error)));
         }
     }
-    for (i, n) in nodes.iter().enumerate() {
-        if sink.full() {
-            return;
-        }
-        if !sane[i] {
-            continue;
-        }
-        let (min, max) = boxes[i];
-        for c in (n.first_child..n.first_child + n.child_count).filter(|&c| sane[c as usize]) {
-            let ch = &nodes[c as usize];
-            if !cone_covers(n.cone.half_angle, angle(n.cone.axis, ch.cone.axis) + ch.cone.half_angle as f64) {
-                sink.push(problem(i, format!("cone does not contain child {c}'s")));
-            }
-            let (cmin, cmax) = boxes[c as usize];
-            if !(min.cmple(cmin).all() && cmax.cmple(max).all()) {
-                sink.push(problem(i, format!("box does not contain child {c}'s")));
-            }
-            if n.center.distance(ch.center) + ch.radius > n.radius * (1.0 + RADIUS_TOLERANCE) + 1e-30 {
-                sink.push(problem(i, format!("sphere does not contain child {c}'s")));
-            }
-            if ch.error > n.error {
-                sink.push(problem(i, format!("error {} is smaller than child {c}'s {}", n.error, ch.error)));
-            }
-        }
-        let nb = list(i);
-        if nb.windows(2).any(|w| w[0] >= w[1]) {
-            sink.push(problem(i, "neighbours are not strictly ascending".into()));
-        }
-        let level = &levels[n.level as usize];
-        let range = level.first_node..level.first_node + level.nodes;
-        for &j in nb {
-            if j as usize == i || !range.contains(&j) || list(j as usize).binary_search(&(i as u32)).is_err() {
-                sink.push(problem(i, format!("neighbour {j} is not a different node of level {} listing it back", n.level)));
-            }
-        }
-        if n.parent == NO_PARENT && !(header.min.cmple(min).all() && max.cmple(header.max).all()) {
-            sink.push(problem(i, "box lies outside the HEAD bounds".into()));
+    let nb = s.neighbors(i);
+    if nb.windows(2).any(|w| w[0] >= w[1]) {
+        sink.push(problem("neighbours are not strictly ascending".into()));
+    }
+    let range = s.level_nodes(n.level);
+    for &j in nb {
+        if j == i || !range.contains(&j) || s.neighbors(j).binary_search(&i).is_err() {
+            sink.push(problem(format!("neighbour {j} is not a different node of level {} listing it back", n.level)));
         }
     }
-    for (l, (rec, t)) in levels.iter().zip(&totals).enumerate() {
-        if (rec.faces, rec.vertices, rec.bytes) != *t {
-            sink.push(Error::at_element(
-                path,
-                format!("level {l}"),
-                format!("LEVL says {} faces, {} vertices, {} bytes; the nodes hold {}, {}, {}", rec.faces, rec.vertices, rec.bytes, t.0, t.1, t.2),
-            ));
-        }
-    }
-    if let Some(t) = totals.first().filter(|t| t.0 != header.input_faces) {
-        sink.push(Error::at_element(path, "level 0", format!("nodes hold {} faces, HEAD says the input has {}", t.0, header.input_faces)));
+    if n.parent == NO_PARENT && !(s.header.min.cmple(min).all() && max.cmple(s.header.max).all()) {
+        sink.push(problem("box lies outside the HEAD bounds".into()));
     }
 }
 
@@ -197,20 +151,31 @@ pub(crate) fn node(path: &Path, i: u32, n: &NodeRecord, bbox: (Vec3, Vec3), g: &
         (b - a).cross(c - a)
     };
     let cone = ConeTest::new(n.cone.axis, n.cone.half_angle);
-    if let Some(f) = g.indices.chunks_exact(3).position(|t| !cone.holds(cross(t))) {
-        sink.push(problem(format!("face {f}'s normal lies outside the node's cone")));
+    let mut outside_cone = None;
+    if g.clusters.is_empty() {
+        outside_cone = g.indices.chunks_exact(3).position(|t| !cone.holds(cross(t)));
     }
     for cl in &g.clusters {
-        let cone = ConeTest::new(cl.cone.axis, cl.cone.half_angle);
-        let range = cl.first_face as usize * 3..(cl.first_face + cl.face_count) as usize * 3;
-        let outside = g.indices[range].chunks_exact(3).any(|t| {
-            !cone.holds(cross(t)) || t.iter().any(|&x| !in_sphere(cl.center, cl.radius, g.positions[x as usize]))
-        });
+        // A face within a cluster cone that lies inside the node's is within the node's too.
+        let nested = angle(n.cone.axis, cl.cone.axis) + cl.cone.half_angle as f64 <= n.cone.half_angle as f64;
+        let cl_cone = ConeTest::new(cl.cone.axis, cl.cone.half_angle);
+        let (center, reach) = (cl.center, sphere_reach(cl.radius));
+        let mut outside = false;
+        for (k, t) in g.indices[cl.first_face as usize * 3..(cl.first_face + cl.face_count) as usize * 3].chunks_exact(3).enumerate() {
+            let d = cross(t);
+            outside |= !cl_cone.holds(d) || t.iter().any(|&x| center.distance_squared(g.positions[x as usize]) > reach);
+            if outside_cone.is_none() && !nested && !cone.holds(d) {
+                outside_cone = Some(cl.first_face as usize + k);
+            }
+        }
         if outside {
             sink.push(problem(format!("a face of the cluster at face {} lies outside its cone or sphere", cl.first_face)));
             if sink.full() {
                 return;
             }
         }
+    }
+    if let Some(f) = outside_cone {
+        sink.push(problem(format!("face {f}'s normal lies outside the node's cone")));
     }
 }

@@ -254,6 +254,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     let mut offset = ctx.geometry_start;
     // Children of the levels above are consecutive: node i's are those after its predecessors'.
     let mut next_child = 0u64;
+    // Faces, vertices and bytes per level, to check LEVL against.
+    let mut totals = vec![(0u64, 0u64, 0u64); levels.len()];
     for (l, lev) in levels.iter().enumerate().rev() {
         let end = lev.first_node as u64 + lev.nodes as u64;
         if l + 1 < levels.len() && next_child != end {
@@ -281,9 +283,20 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
                 return Err(bad(format!("neighbours run past the {} of NBRS", neighbors.len())));
             }
             let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
-            let (Some(_), Some(_), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
+            let (Some(lo), Some(hi), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
                 return Err(bad(format!("box or sphere center off the {}-bit grid", grid.bits)));
             };
+            if (0..3).any(|k| lo[k] > hi[k]) {
+                return Err(bad(format!("box min {lo:?} lies above its max {hi:?}")));
+            }
+            let radius = grid.length(radius_decode(radius_code));
+            if !((0.0..=f32::MAX).contains(&error) && radius <= f32::MAX) {
+                return Err(bad(format!("geometric error {error} and radius {radius} must be finite, the error not negative")));
+            }
+            let end = offset + size as u64;
+            let padded = size as u64 + chunk::padding(end);
+            let total = &mut totals[l];
+            *total = (total.0 + faces as u64, total.1 + vertices as u64, total.2 + padded);
             let in_file = size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
             if !in_file {
                 return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
@@ -298,7 +311,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
                 neighbor_count,
                 cone: Cone { axis, half_angle: angle_decode(half) },
                 center: grid.decode(center),
-                radius: grid.length(radius_decode(radius_code)),
+                radius,
                 error,
                 faces,
                 vertices,
@@ -307,8 +320,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
                 crc,
             });
             neighbor_first += neighbor_count as u64;
-            let end = offset + size as u64;
-            offset = end + chunk::padding(end);
+            offset += padded;
         }
     }
     for i in 0..nodes.len() {
@@ -319,6 +331,18 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     }
     if offset > ctx.file_size {
         return Err(fields(node).error(format!("geometry chunks end at {offset}, past the end of the {}-byte file", ctx.file_size)));
+    }
+    for (l, (rec, t)) in levels.iter().zip(&totals).enumerate() {
+        if (rec.faces, rec.vertices, rec.bytes) != *t {
+            let at = levl.payload_offset() + l as u64 * LEVEL_RECORD_BYTES;
+            return Err(fields(levl).error_at(
+                at,
+                format!("level {l}: LEVL says {} faces, {} vertices, {} bytes; the nodes hold {}, {}, {}", rec.faces, rec.vertices, rec.bytes, t.0, t.1, t.2),
+            ));
+        }
+    }
+    if totals[0].0 != h.input_faces {
+        return Err(fields(levl).error(format!("level 0's nodes hold {} faces, HEAD says the input has {}", totals[0].0, h.input_faces)));
     }
     if neighbor_first != neighbors.len() as u64 {
         return Err(nf.error(format!("holds {} neighbours, the nodes use {neighbor_first}", neighbors.len())));

@@ -57,9 +57,6 @@ pub fn verify<S: ByteSource>(r: S, name: &Path) -> Verification {
         }
     };
     walk(&rd, &mut v);
-    let mut sink = Sink::new(MAX_PROBLEMS);
-    rules::skeleton(rd.path(), rd.header(), rd.levels(), rd.nodes(), &rd.skeleton().neighbors, &rd.node_boxes(), &mut sink);
-    sink.problems.into_iter().for_each(|e| v.push(e));
     geometry(&rd, &mut v);
     v
 }
@@ -158,6 +155,7 @@ fn geometry<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
         v.nodes += 1;
         clusters += g.clusters.len() as u64;
         let mut sink = Sink::new(MAX_PROBLEMS);
+        rules::relations(&path, rd.skeleton(), i, &mut sink);
         rules::node(&path, i, &n, rd.node_box(i), &g, &mut sink);
         sink.problems.into_iter().for_each(|e| v.push(e));
         if n.level == 0 {
