@@ -161,8 +161,8 @@ fn check_extensions(path: &Path, root: &json::Root, warnings: &mut Vec<String>) 
     Ok(())
 }
 
-/// The gltf crate's validation, minus what this reader handles itself (required extensions) or
-/// does not need (POSITION min/max).
+/// The gltf crate's validation, minus what this reader handles itself (required extensions,
+/// byteStride) or does not need (POSITION min/max).
 fn validate(path: &Path, root: &json::Root) -> Result<()> {
     use json::validation::{Error as Problem, Validate};
     // The validator indexes the POSITION accessor unchecked: check attribute references first.
@@ -181,7 +181,8 @@ fn validate(path: &Path, root: &json::Root) -> Result<()> {
     root.validate(root, json::Path::new, &mut |at: &dyn Fn() -> json::Path, problem| {
         let at = at().to_string();
         let ignored = (problem == Problem::Unsupported && at.starts_with("extensionsRequired"))
-            || (at.contains("\"POSITION\"") && (at.ends_with(".min") || at.ends_with(".max")));
+            || (at.contains("\"POSITION\"") && (at.ends_with(".min") || at.ends_with(".max")))
+            || at.ends_with(".byteStride");
         if !ignored {
             problems.push((at, problem));
         }
@@ -306,15 +307,16 @@ impl<'a> Buffers<'a> {
     }
 
     /// Decode every element of an accessor (sparse substitutions applied); `decode` gets exactly
-    /// one element's bytes.
-    fn read<T>(&self, a: &gltf::Accessor, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>> {
+    /// one element's bytes. Vertex attributes (`packed` None) step by their view's byteStride;
+    /// data glTF stores tightly packed is named by `packed` (e.g. "indices").
+    fn read<T>(&self, a: &gltf::Accessor, packed: Option<&str>, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>> {
         let err = |message: String| Error::at_element(self.path, format!("accessor {}", a.index()), message);
         let (count, size) = (a.count(), a.size());
         let mut out = Vec::new();
         match a.view() {
             Some(view) => {
                 let bytes = self.view(&view)?;
-                let stride = view.stride().unwrap_or(size);
+                let stride = stride(a, &view, packed).map_err(err)?;
                 let end = count
                     .checked_sub(1)
                     .map_or(Some(0), |last| last.checked_mul(stride)?.checked_add(a.offset())?.checked_add(size));
@@ -342,6 +344,8 @@ impl<'a> Buffers<'a> {
             let k = sparse.count();
             let (indices, values) = (sparse.indices(), sparse.values());
             let index_size = indices.index_type().size();
+            check_packed(&indices.view(), index_size, "sparse indices").map_err(err)?;
+            check_packed(&values.view(), size, "sparse values").map_err(err)?;
             let index_bytes = slice(self.view(&indices.view())?, indices.offset(), k, index_size)
                 .ok_or_else(|| err(format!("{k} sparse indices overrun their buffer view")))?;
             let value_bytes = slice(self.view(&values.view())?, values.offset(), k, size)
@@ -367,7 +371,7 @@ impl<'a> Buffers<'a> {
             ));
         }
         let (ty, normalized) = (a.data_type(), a.normalized());
-        self.read(a, |b| std::array::from_fn(|c| component(b, c, ty, normalized)))
+        self.read(a, None, |b| std::array::from_fn(|c| component(b, c, ty, normalized)))
     }
 
     fn indices(&self, a: &gltf::Accessor) -> Result<Vec<u32>> {
@@ -380,7 +384,7 @@ impl<'a> Buffers<'a> {
                 format!("indices must be unsigned integer scalars, are {:?} {:?}", a.data_type(), a.dimensions()),
             ));
         }
-        self.read(a, uint)
+        self.read(a, Some("indices"), uint)
     }
 
     fn colors(&self, a: &gltf::Accessor) -> Result<Vec<[u8; 4]>> {
@@ -394,6 +398,78 @@ impl<'a> Buffers<'a> {
         } else {
             Ok(self.floats::<4>(a, "COLOR_0")?.into_iter().map(|c| c.map(to_u8)).collect())
         }
+    }
+}
+
+/// The step between elements of accessor `a` in `view`, checked so that elements neither overlap
+/// nor straddle a stride: the view's byteStride for a vertex attribute, the element size for data
+/// glTF stores tightly packed (`packed` names it, e.g. "indices").
+///
+/// glTF also wants a byteStride that is a multiple of 4 within 4..=252, and offsets that are
+/// multiples of the component size: alignment and limits for GPU vertex fetch. Files that break
+/// only those rules are accepted (a byteStride of 0 meaning tightly packed, as the gltf crate reads
+/// it), because this reader decodes every component from bytes: they read exactly as their writer
+/// meant, and refusing them would only lose a model whose data is clear.
+fn stride(a: &gltf::Accessor, view: &gltf::buffer::View, packed: Option<&str>) -> std::result::Result<usize, String> {
+    let (offset, size) = (a.offset(), a.size());
+    if let Some(what) = packed {
+        check_packed(view, size, what)?;
+        return Ok(size);
+    }
+    let Some(stride) = view.stride() else { return Ok(size) };
+    let (dims, ty) = (dimensions_name(a.dimensions()), component_name(a.data_type()));
+    let element = format!("{size}-byte elements ({dims} of {ty})");
+    if stride < size {
+        return Err(format!(
+            "buffer view {} has byteStride {stride}, less than the accessor's {element}: elements would overlap",
+            view.index()
+        ));
+    }
+    // An offset past a whole stride starts at a later element; one that leaves less than an
+    // element before the next stride would read each element across two.
+    if offset % stride + size > stride {
+        return Err(format!(
+            "byteOffset {offset} puts the accessor's {element} across the byteStride {stride} of buffer view {}: \
+             each would run into the next",
+            view.index()
+        ));
+    }
+    Ok(stride)
+}
+
+/// Check that `view` does not give tightly packed data (`what`) a byteStride other than its
+/// element size, which glTF forbids and which would read differently with and without it.
+fn check_packed(view: &gltf::buffer::View, size: usize, what: &str) -> std::result::Result<(), String> {
+    match view.stride() {
+        Some(stride) if stride != size => Err(format!(
+            "{what}: buffer view {} has byteStride {stride}, but glTF stores {what} tightly packed \
+             ({size}-byte elements); the view must not set byteStride",
+            view.index()
+        )),
+        _ => Ok(()),
+    }
+}
+
+fn component_name(ty: DataType) -> &'static str {
+    match ty {
+        DataType::I8 => "byte",
+        DataType::U8 => "unsigned byte",
+        DataType::I16 => "short",
+        DataType::U16 => "unsigned short",
+        DataType::U32 => "unsigned int",
+        DataType::F32 => "float",
+    }
+}
+
+fn dimensions_name(d: Dimensions) -> &'static str {
+    match d {
+        Dimensions::Scalar => "SCALAR",
+        Dimensions::Vec2 => "VEC2",
+        Dimensions::Vec3 => "VEC3",
+        Dimensions::Vec4 => "VEC4",
+        Dimensions::Mat2 => "MAT2",
+        Dimensions::Mat3 => "MAT3",
+        Dimensions::Mat4 => "MAT4",
     }
 }
 
@@ -890,6 +966,40 @@ mod tests {
         assert_eq!(&mesh.positions[..3], &[Vec3::ZERO, Vec3::X, -Vec3::Y]);
         assert_eq!(&mesh.positions[3..], &[Vec3::ZERO, Vec3::new(300., 0., 0.), Vec3::new(0., 7., 0.)]);
         assert_eq!(&mesh.normals[..3], &[Vec3::Z, Vec3::X, Vec3::new(0., 0., -1.)]);
+        assert_eq!(&mesh.uvs[..3], &[Vec2::Y, Vec2::X, Vec2::ZERO]);
+    }
+
+    /// A document whose POSITION accessor holds `FIVE[..3]` at `offset + i * stride` in a view of
+    /// that stride, the bytes between them 0xff.
+    fn strided_positions(stride: usize, offset: usize) -> Value {
+        let mut d = Doc::default();
+        let mut bytes = vec![0xff; offset + 2 * stride.max(12) + 12];
+        for (i, p) in FIVE[..3].iter().enumerate() {
+            let at = offset + i * stride.max(12);
+            bytes[at..at + 12].copy_from_slice(&p.map(f32::to_le_bytes).concat());
+        }
+        let p = d.accessor(&bytes, 5126, 3, "VEC3", json!({"byteOffset": offset}));
+        d.views[0]["byteStride"] = json!(stride);
+        single(&d, json!({"attributes": {"POSITION": p}}))
+    }
+
+    #[test]
+    fn strides_must_keep_elements_apart_but_need_not_be_aligned() {
+        for (stride, offset) in [(12, 0), (16, 4), (14, 2), (256, 0), (0, 0), (12, 24)] {
+            let mesh = read_json(&strided_positions(stride, offset)).0.unwrap_or_else(|e| panic!("{stride}: {e}"));
+            assert_eq!(mesh.positions, FIVE[..3].iter().map(|&p| Vec3::from(p)).collect::<Vec<_>>(), "{offset}");
+        }
+        let refused = [(4, 0, "byteStride 4, less"), (8, 0, "byteStride 8, less"), (16, 8, "byteOffset 8")];
+        for (stride, offset, what) in refused {
+            let e = message(read_json(&strided_positions(stride, offset)).0);
+            assert!(e.contains("accessor 0") && e.contains("buffer view 0") && e.contains(what), "{e}");
+        }
+        // One-byte UVs two bytes apart read correctly, though glTF wants strides of 4 or more.
+        let mut d = Doc::default();
+        let p = d.positions(&FIVE[..3]);
+        let uv = d.accessor(&[0, 255, 255, 0, 0, 0], 5121, 3, "VEC2", json!({"normalized": true}));
+        d.views[1]["byteStride"] = json!(2);
+        let mesh = read_json(&single(&d, json!({"attributes": {"POSITION": p, "TEXCOORD_0": uv}}))).0.unwrap();
         assert_eq!(&mesh.uvs[..3], &[Vec2::Y, Vec2::X, Vec2::ZERO]);
     }
 

@@ -1,0 +1,163 @@
+//! Hostile input through the CLI binary: files built to mislead the importers (strides that overlap
+//! elements, buffers outside the model's folder, cut or overlong ascii PLY lines, coordinates that
+//! overflow later stages, UTF-16 text, empty files). Each ends in a clear error naming the file and
+//! where it went wrong, or imports with a warning, and never panics.
+
+use base64::Engine;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// A fresh directory for one test, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("strata-hostile-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+
+    fn write(&self, name: &str, bytes: impl AsRef<[u8]>) -> PathBuf {
+        let path = self.0.join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).unwrap();
+        }
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Run the binary; returns success, stdout and stderr.
+fn strata(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_strata")).args(args).output().unwrap();
+    let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+    (out.status.success(), text(&out.stdout), text(&out.stderr))
+}
+
+fn info(path: &Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec!["info", path.to_str().unwrap(), "--json"];
+    args.extend_from_slice(extra);
+    strata(&args)
+}
+
+/// `strata info` on `path` fails without panicking, and its error names the file and holds every
+/// one of `expect`.
+#[track_caller]
+fn assert_refused(path: &Path, extra: &[&str], expect: &[&str]) -> String {
+    let (ok, stdout, stderr) = info(path, extra);
+    assert!(!ok, "{} imported: {stdout}", path.display());
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(stderr.contains(name), "error does not name {name}: {stderr}");
+    for e in expect {
+        assert!(stderr.contains(e), "error lacks {e:?}: {stderr}");
+    }
+    stderr
+}
+
+/// `strata info --json` on `path` succeeds; returns the parsed summary.
+#[track_caller]
+fn assert_imports(path: &Path, extra: &[&str]) -> serde_json::Value {
+    let (ok, stdout, stderr) = info(path, extra);
+    assert!(ok, "{} failed: {stderr}", path.display());
+    serde_json::from_str(&stdout).unwrap()
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// One triangle at (0,0,0), (1,0,0), (0,1,0), tightly packed.
+fn triangle_bytes() -> Vec<u8> {
+    f32_bytes(&[0., 0., 0., 1., 0., 0., 0., 1., 0.])
+}
+
+fn data_uri(bytes: &[u8]) -> String {
+    format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(bytes))
+}
+
+/// A glTF document with one buffer and one triangle primitive whose POSITION is accessor 0.
+fn gltf(buffer_uri: &str, byte_length: usize, views: &str, accessors: &str) -> String {
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"{buffer_uri}","byteLength":{byte_length}}}],
+"bufferViews":{views},"accessors":{accessors},
+"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],"nodes":[{{"mesh":0}}],"scenes":[{{"nodes":[0]}}],"scene":0}}"#
+    )
+}
+
+const POSITIONS: &str = r#""componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]"#;
+
+#[test]
+fn gltf_stride_smaller_than_the_element_is_refused() {
+    let dir = TempDir::new("stride");
+    let bin = triangle_bytes();
+    let doc = gltf(
+        &data_uri(&bin),
+        bin.len(),
+        r#"[{"buffer":0,"byteLength":36,"byteStride":4}]"#,
+        &format!(r#"[{{"bufferView":0,{POSITIONS}}}]"#),
+    );
+    let path = dir.write("stride.gltf", doc);
+    assert_refused(&path, &[], &["accessor 0", "buffer view 0", "byteStride 4", "12-byte"]);
+}
+
+#[test]
+fn gltf_element_straddling_its_stride_is_refused() {
+    let dir = TempDir::new("straddle");
+    // Stride 12 and byteOffset 4: every element runs 4 bytes into the next record.
+    let mut bin = vec![0u8; 4];
+    bin.extend(triangle_bytes());
+    let doc = gltf(
+        &data_uri(&bin),
+        bin.len(),
+        r#"[{"buffer":0,"byteLength":40,"byteStride":12}]"#,
+        &format!(r#"[{{"bufferView":0,"byteOffset":4,{POSITIONS}}}]"#),
+    );
+    let path = dir.write("straddle.gltf", doc);
+    assert_refused(&path, &[], &["accessor 0", "buffer view 0", "byteOffset 4", "byteStride 12"]);
+    // Skipping whole records is fine: byteOffset 12 over stride 12 starts at the second element.
+    let mut bin = vec![0u8; 12];
+    bin.extend(triangle_bytes());
+    let doc = gltf(
+        &data_uri(&bin),
+        bin.len(),
+        r#"[{"buffer":0,"byteLength":48,"byteStride":12}]"#,
+        &format!(r#"[{{"bufferView":0,"byteOffset":12,{POSITIONS}}}]"#),
+    );
+    let summary = assert_imports(&dir.write("skip.gltf", doc), &[]);
+    assert_eq!(summary["faces"], 1);
+}
+
+#[test]
+fn gltf_strided_sparse_and_index_views_are_refused() {
+    let dir = TempDir::new("sparse-stride");
+    // Base triangle, then one sparse index (u32) and one sparse value stored every 16 bytes.
+    let mut bin = triangle_bytes();
+    bin.extend(2u32.to_le_bytes());
+    bin.extend(f32_bytes(&[0., 5., 0., 0.]));
+    let views = r#"[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":4},
+        {"buffer":0,"byteOffset":40,"byteLength":16,"byteStride":16}]"#;
+    let sparse = r#""sparse":{"count":1,"indices":{"bufferView":1,"componentType":5125},"values":{"bufferView":2}}"#;
+    let doc = gltf(&data_uri(&bin), bin.len(), views, &format!(r#"[{{"bufferView":0,{POSITIONS},{sparse}}}]"#));
+    let path = dir.write("sparse.gltf", doc);
+    assert_refused(&path, &[], &["accessor 0", "sparse values", "buffer view 2", "byteStride 16"]);
+
+    // Indices are tightly packed in glTF: a u16 index view with byteStride 4 is not honoured.
+    let mut bin = triangle_bytes();
+    bin.extend([0u16, 9, 1, 9, 2, 9].iter().flat_map(|i| i.to_le_bytes()));
+    let views = r#"[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":12,"byteStride":4}]"#;
+    let accessors = format!(
+        r#"[{{"bufferView":0,{POSITIONS}}},{{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}}]"#
+    );
+    let doc = gltf(&data_uri(&bin), bin.len(), views, &accessors)
+        .replace(r#""attributes":{"POSITION":0}"#, r#""attributes":{"POSITION":0},"indices":1"#);
+    let path = dir.write("indices.gltf", doc);
+    assert_refused(&path, &[], &["accessor 1", "buffer view 1", "byteStride 4"]);
+}
