@@ -26,5 +26,5 @@ pub mod simplify;
 pub mod stream;
 
 pub use error::{Error, Location, Result};
-pub use import::{import, Format, Imported};
+pub use import::{import, import_with, Format, ImportOptions, Imported};
 pub use mesh::{Adjacency, CleanReport, Material, Mesh};

@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::hierarchy::{self, HierarchyParams, Level};
-use strata::{culling, format, import, mesh, Format};
+use strata::{culling, format, import_with, mesh, Format, ImportOptions};
 use strata::pipeline::Normals;
 use std::time::Instant;
 
@@ -255,6 +255,15 @@ struct MeshInput {
     /// Read as this format whatever the extension.
     #[arg(long, value_enum)]
     format: Option<Format>,
+    /// Let a glTF file read buffers outside its folder (an absolute path or `..` in a buffer uri).
+    #[arg(long)]
+    allow_outside_files: bool,
+}
+
+impl MeshInput {
+    fn options(&self) -> ImportOptions {
+        ImportOptions { format: self.format, allow_outside_files: self.allow_outside_files }
+    }
 }
 
 #[derive(Args)]
@@ -377,7 +386,7 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn load(input: &MeshInput) -> Result<strata::Imported> {
-    let imported = import(&input.mesh, input.format)?;
+    let imported = import_with(&input.mesh, &input.options())?;
     for w in &imported.warnings {
         eprintln!("warning: {}: {w}", input.mesh.display());
     }
@@ -802,7 +811,7 @@ fn render(a: RenderArgs) -> Result<()> {
         }
     } else {
         anyhow::ensure!(a.color == RenderColor::Plain, "--color groups and levels need a .strata file");
-        let m = load(&MeshInput { mesh: a.input.clone(), format: None })?.mesh;
+        let m = load(&MeshInput { mesh: a.input.clone(), format: None, allow_outside_files: false })?.mesh;
         let (min, max) = m.bounds().context("empty mesh")?;
         let camera = render_camera(&a, min, max)?;
         // Corner normals become vertices of their own; without them, faces are flat.
@@ -882,7 +891,7 @@ fn convert(a: ConvertArgs) -> Result<()> {
         },
     };
     let mut bars = Bars::new(a.quiet || a.json);
-    let c = strata::pipeline::convert(&a.input.mesh, a.input.format, &a.output, &opts, &mut bars)?;
+    let c = strata::pipeline::convert(&a.input.mesh, &a.input.options(), &a.output, &opts, &mut bars)?;
     drop(bars);
     for w in &c.warnings {
         eprintln!("warning: {}: {w}", a.input.mesh.display());

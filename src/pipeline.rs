@@ -4,7 +4,7 @@
 use crate::error::Result;
 use crate::format::{self, WriteOptions, WriteSummary};
 use crate::hierarchy::{self, HierarchyParams};
-use crate::import::{import, Format};
+use crate::import::{import_with, Format, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
@@ -74,10 +74,11 @@ pub struct Converted {
     pub warnings: Vec<String>,
 }
 
-/// Convert the mesh file `input` into the chunk file `output`, which appears only when complete.
+/// Convert the mesh file `input`, read with `import`, into the chunk file `output`, which appears
+/// only when complete.
 pub fn convert(
     input: &Path,
-    format: Option<Format>,
+    import: &ImportOptions,
     output: &Path,
     opts: &ConvertOptions,
     progress: &mut dyn Progress,
@@ -90,7 +91,7 @@ pub fn convert(
     };
 
     progress.stage("import", 0);
-    let mut imported = import(input, format)?;
+    let mut imported = import_with(input, import)?;
     match opts.normals {
         Normals::Auto { crease_angle } if imported.mesh.normals.is_empty() => {
             imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
@@ -112,7 +113,7 @@ pub fn convert(
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);
-    let is_gltf = format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
+    let is_gltf = import.format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
     let write_opts = WriteOptions {
         metres_per_unit: if is_gltf { 1.0 } else { 0.0 },
         params: opts.hierarchy,

@@ -161,3 +161,31 @@ fn gltf_strided_sparse_and_index_views_are_refused() {
     let path = dir.write("indices.gltf", doc);
     assert_refused(&path, &[], &["accessor 1", "buffer view 1", "byteStride 4"]);
 }
+
+#[test]
+fn gltf_buffers_outside_the_model_folder_need_the_flag() {
+    let dir = TempDir::new("outside");
+    let bin = triangle_bytes();
+    let secret = dir.write("secret.bin", &bin);
+    dir.write("model/inside.bin", &bin);
+    let views = r#"[{"buffer":0,"byteLength":36}]"#;
+    let accessors = format!(r#"[{{"bufferView":0,{POSITIONS}}}]"#);
+    let absolute = secret.to_str().unwrap().to_string();
+    std::fs::create_dir_all(dir.0.join("model/sub")).unwrap();
+    for uri in ["../secret.bin", "%2E%2E/secret.bin", "sub/../../secret.bin", absolute.as_str()] {
+        let path = dir.write("model/m.gltf", gltf(uri, bin.len(), views, &accessors));
+        let e = assert_refused(&path, &[], &["buffer 0", uri, "--allow-outside-files"]);
+        assert!(e.contains("outside"), "{e}");
+        assert_eq!(assert_imports(&path, &["--allow-outside-files"])["faces"], 1, "{uri}");
+    }
+    // Inside the folder, `..` that does not climb above it is fine.
+    let path = dir.write("model/m.gltf", gltf("sub/../inside.bin", bin.len(), views, &accessors));
+    assert_eq!(assert_imports(&path, &[])["faces"], 1);
+    // A link inside the folder is the user's own doing: followed.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&secret, dir.0.join("model/link.bin")).unwrap();
+        let path = dir.write("model/m.gltf", gltf("link.bin", bin.len(), views, &accessors));
+        assert_eq!(assert_imports(&path, &[])["faces"], 1);
+    }
+}

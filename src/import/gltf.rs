@@ -15,6 +15,7 @@
 //! those read POSITION and NORMAL as f32 whatever the component type (KHR_mesh_quantization
 //! stores them as integers) and index out of bounds on empty or short accessors.
 
+use super::ImportOptions;
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh};
 use base64::Engine;
@@ -24,7 +25,7 @@ use gltf::json;
 use gltf::mesh::{Mode, Semantic};
 use std::borrow::Cow;
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Component, Path};
 
 /// Required extensions whose data strata cannot decode.
 const UNDECODABLE: &[&str] = &["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression"];
@@ -33,8 +34,9 @@ const HANDLED: &[&str] = &["KHR_mesh_quantization", "KHR_texture_transform"];
 /// Required extensions that change only shading, which strata does not keep.
 const APPEARANCE_ONLY: &[&str] = &["KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif", "KHR_lights_punctual"];
 
-/// Read a glTF or GLB file into a raw, uncleaned mesh.
-pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
+/// Read a glTF or GLB file into a raw, uncleaned mesh. External buffers must lie in the file's
+/// folder unless `options.allow_outside_files`.
+pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let glb = bytes.starts_with(b"glTF");
     let (json_bytes, bin) = if glb { split_glb(path, &bytes)? } else { (&bytes[..], None) };
@@ -57,7 +59,8 @@ pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     if skipped > 0 {
         warnings.push(format!("{skipped} point or line primitives skipped"));
     }
-    let buffers = Buffers::load(path, &doc, bin, bytes.len(), primitives.iter().map(|(_, p, _)| p))?;
+    let used = primitives.iter().map(|(_, p, _)| p);
+    let buffers = Buffers::load(path, &doc, bin, bytes.len(), used, options.allow_outside_files)?;
 
     let mut builder = Builder::new(&doc);
     for (mesh_index, prim, world) in &primitives {
@@ -249,6 +252,7 @@ impl<'a> Buffers<'a> {
         bin: Option<&'a [u8]>,
         file_size: usize,
         primitives: impl Iterator<Item = &'d gltf::Primitive<'d>>,
+        allow_outside: bool,
     ) -> Result<Self> {
         let mut needed = vec![false; doc.buffers().count()];
         for prim in primitives {
@@ -277,7 +281,7 @@ impl<'a> Buffers<'a> {
                 gltf::buffer::Source::Bin => Cow::Borrowed(bin.ok_or_else(|| {
                     Error::at_element(path, &element, "refers to the GLB binary chunk, but there is none")
                 })?),
-                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri)?),
+                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri, allow_outside)?),
             };
             if bytes.len() < buffer.length() {
                 return Err(Error::at_element(
@@ -501,8 +505,9 @@ fn component(b: &[u8], c: usize, ty: DataType, normalized: bool) -> f32 {
     }
 }
 
-/// Read an external or `data:` URI, relative to the glTF file.
-fn load_uri(path: &Path, element: &str, uri: &str) -> Result<Vec<u8>> {
+/// Read an external or `data:` URI, relative to the glTF file. A file name must stay inside the
+/// glTF file's folder unless `allow_outside`.
+fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool) -> Result<Vec<u8>> {
     if let Some(data) = uri.strip_prefix("data:") {
         let Some((header, payload)) = data.split_once(',') else {
             return Err(Error::at_element(path, element, "malformed data URI (no comma)"));
@@ -527,8 +532,41 @@ fn load_uri(path: &Path, element: &str, uri: &str) -> Result<Vec<u8>> {
         ));
     }
     let name = String::from_utf8(percent_decode(uri)).unwrap_or_else(|_| uri.to_string());
-    let file = path.parent().unwrap_or(Path::new("")).join(name);
+    let folder = path.parent().unwrap_or(Path::new(""));
+    if !allow_outside && !stays_inside(Path::new(&name)) {
+        let decoded = if name == uri { String::new() } else { format!(" ({name})") };
+        let shown = if folder.as_os_str().is_empty() { Path::new(".") } else { folder };
+        return Err(Error::at_element(
+            path,
+            element,
+            format!(
+                "uri '{uri}'{decoded} points outside the model's folder {}; strata reads only files \
+                 inside it unless given --allow-outside-files",
+                shown.display()
+            ),
+        ));
+    }
+    let file = folder.join(name);
     std::fs::read(&file).map_err(|e| Error::at_element(path, element, format!("cannot read {}: {e}", file.display())))
+}
+
+/// Whether a relative file name stays inside the folder it is resolved against, by its text alone:
+/// no root or drive, and no `..` that climbs above the folder. Links inside the folder are
+/// followed: placing them there is the folder owner's choice.
+fn stays_inside(name: &Path) -> bool {
+    let mut depth = 0usize;
+    for part in name.components() {
+        match part {
+            Component::Prefix(_) | Component::RootDir => return false,
+            Component::ParentDir => match depth.checked_sub(1) {
+                Some(d) => depth = d,
+                None => return false,
+            },
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    true
 }
 
 /// Decode `%XX` escapes; anything else passes through.
@@ -847,7 +885,7 @@ mod tests {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", serde_json::to_vec_pretty(doc).unwrap());
         let mut warnings = Vec::new();
-        let mesh = read(&path, &mut warnings);
+        let mesh = read(&path, &ImportOptions::default(), &mut warnings);
         if let Ok(m) = &mesh {
             m.validate().unwrap();
         }
@@ -1069,13 +1107,39 @@ mod tests {
         doc["buffers"][0]["uri"] = json!("my%20buffer.bin");
         let dir = TempDir::new();
         let gltf = dir.write("m.gltf", serde_json::to_vec(&doc).unwrap());
-        let missing = message(read(&gltf, &mut Vec::new()));
+        let missing = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(missing.contains("buffer 0") && missing.contains("my buffer.bin"), "{missing}");
         dir.write("my buffer.bin", &d.bin[..d.bin.len() - 1]);
-        let short = message(read(&gltf, &mut Vec::new()));
+        let short = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(short.contains("fewer than its byteLength"), "{short}");
         dir.write("my buffer.bin", &d.bin);
-        assert_eq!(read(&gltf, &mut Vec::new()).unwrap().face_count(), 1);
+        assert_eq!(read(&gltf, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 1);
+    }
+
+    #[test]
+    fn file_names_climbing_out_of_the_folder_are_recognised_by_their_text() {
+        for inside in ["a.bin", "./a.bin", "sub/a.bin", "sub/../a.bin", "sub/./../sub/a.bin", "..a.bin", "a..b"] {
+            assert!(stays_inside(Path::new(inside)), "{inside}");
+        }
+        for outside in ["../a.bin", "sub/../../a.bin", "./../a.bin", "/etc/hostname", "sub/../../sub/a.bin"] {
+            assert!(!stays_inside(Path::new(outside)), "{outside}");
+        }
+    }
+
+    #[test]
+    fn buffers_outside_the_folder_need_permission() {
+        let mut d = Doc::default();
+        let p = d.positions(&FIVE[..3]);
+        let mut doc = single(&d, json!({"attributes": {"POSITION": p}}));
+        doc["buffers"][0]["uri"] = json!("../m.bin");
+        let dir = TempDir::new();
+        dir.write("m.bin", &d.bin);
+        std::fs::create_dir_all(dir.0.join("model")).unwrap();
+        let gltf = dir.write("model/m.gltf", serde_json::to_vec(&doc).unwrap());
+        let e = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
+        assert!(e.contains("buffer 0") && e.contains("'../m.bin'") && e.contains("outside"), "{e}");
+        let allowed = ImportOptions { allow_outside_files: true, ..ImportOptions::default() };
+        assert_eq!(read(&gltf, &allowed, &mut Vec::new()).unwrap().face_count(), 1);
     }
 
     #[test]
@@ -1129,7 +1193,7 @@ mod tests {
     fn bad_json_reports_line_and_column() {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", "{\n  \"asset\": {\"version\": \"2.0\"},\n  \"meshes\": [,]\n}\n");
-        let e = read(&path, &mut Vec::new()).unwrap_err();
+        let e = read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap_err();
         assert_eq!(e.location(), Some(&Location::Line(3)));
         assert!(e.to_string().contains("column"), "{e}");
     }
@@ -1167,15 +1231,15 @@ mod tests {
         let bytes = glb(&d, single(&d, json!({"attributes": {"POSITION": p}, "indices": i, "mode": 5})));
         let dir = TempDir::new();
         let path = dir.write("m.glb", &bytes);
-        assert_eq!(read(&path, &mut Vec::new()).unwrap().face_count(), 3);
+        assert_eq!(read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 3);
         for len in 0..bytes.len() {
             dir.write("m.glb", &bytes[..len]);
-            assert!(read(&path, &mut Vec::new()).is_err(), "prefix of {len} bytes");
+            assert!(read(&path, &ImportOptions::default(), &mut Vec::new()).is_err(), "prefix of {len} bytes");
         }
         let mut small_header = bytes.clone();
         small_header[8..12].copy_from_slice(&4u32.to_le_bytes());
         dir.write("m.glb", &small_header);
-        assert!(message(read(&path, &mut Vec::new())).contains("JSON"));
+        assert!(message(read(&path, &ImportOptions::default(), &mut Vec::new())).contains("JSON"));
     }
 
     /// A document using most of what the reader handles: strips, sparse positions, normals,

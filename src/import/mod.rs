@@ -1,7 +1,7 @@
 //! Import OBJ, glTF/GLB and PLY files into a cleaned [`Mesh`].
 //!
 //! Each format module reads its file into a raw `Mesh` (positions not yet welded, corner arrays
-//! filled or empty); [`import`] then welds and cleans it, and reports what cleaning removed.
+//! filled or empty); [`import_with`] then welds and cleans it, and reports what cleaning removed.
 
 pub mod gltf;
 pub mod obj;
@@ -33,6 +33,17 @@ impl Format {
     }
 }
 
+/// How to import a file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// Read as this format whatever the extension.
+    pub format: Option<Format>,
+    /// Let a glTF file read buffers outside its own folder (an absolute path, or `..` climbing
+    /// above the folder, in a buffer uri). Off by default, so that a model from elsewhere cannot
+    /// make strata read other files.
+    pub allow_outside_files: bool,
+}
+
 /// An imported, cleaned mesh and what happened on the way.
 #[derive(Clone, Debug)]
 pub struct Imported {
@@ -47,10 +58,15 @@ pub struct Imported {
     pub import_ms: f64,
 }
 
-/// Read a mesh file, choosing the format by extension unless `format` is given.
+/// Read a mesh file with default options, choosing the format by extension unless `format` is given.
 pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
+    import_with(path, &ImportOptions { format, ..ImportOptions::default() })
+}
+
+/// Read a mesh file, choosing the format by extension unless the options give one.
+pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     let start = Instant::now();
-    let format = match format.or_else(|| Format::from_path(path)) {
+    let format = match options.format.or_else(|| Format::from_path(path)) {
         Some(f) => f,
         None => {
             return Err(Error::invalid(path, None, "unknown mesh format: use a .obj, .gltf, .glb or .ply file, or --format"))
@@ -59,7 +75,7 @@ pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
     let mut warnings = Vec::new();
     let raw = match format {
         Format::Obj => obj::read(path, &mut warnings)?,
-        Format::Gltf => gltf::read(path, &mut warnings)?,
+        Format::Gltf => gltf::read(path, options, &mut warnings)?,
         Format::Ply => ply::read(path, &mut warnings)?,
     };
     if let Err(e) = raw.validate() {
