@@ -189,3 +189,31 @@ fn gltf_buffers_outside_the_model_folder_need_the_flag() {
         assert_eq!(assert_imports(&path, &[])["faces"], 1);
     }
 }
+
+const ASCII_PLY_HEADER: &str = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n";
+
+#[test]
+fn ascii_ply_cut_inside_its_last_number_is_refused() {
+    let dir = TempDir::new("ply-cut");
+    // As if "3 1 3 2\n" had lost its line end, or "3 1 3 21\n" its last digit and line end.
+    let body = "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2";
+    let cut = dir.write("cut.ply", format!("{ASCII_PLY_HEADER}{body}"));
+    assert_refused(&cut, &[], &["line 15", "'2'", "cut"]);
+    // The same file with a line end, or trailing blanks, after the last value imports.
+    for tail in ["\n", "\r\n", " ", " \n\n"] {
+        let path = dir.write("whole.ply", format!("{ASCII_PLY_HEADER}{body}{tail}"));
+        assert_eq!(assert_imports(&path, &[])["faces"], 2, "{tail:?}");
+    }
+}
+
+#[test]
+fn ascii_ply_line_with_extra_values_names_the_line() {
+    let dir = TempDir::new("ply-extra");
+    let path = dir.write("extra.ply", format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0 7\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n"));
+    assert_refused(&path, &[], &["line 11", "vertex 1", "3 properties", "4 values"]);
+    let path = dir.write("extra_face.ply", format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2 3\n3 1 3 2\n"));
+    assert_refused(&path, &[], &["line 14", "face 0", "1 property", "5 values"]);
+    // A record cut short by its line end is named too, rather than read on into the next line.
+    let path = dir.write("short.ply", format!("{ASCII_PLY_HEADER}0 0 0\n1 0\n0 0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n"));
+    assert_refused(&path, &[], &["line 11", "vertex 1"]);
+}

@@ -5,6 +5,10 @@
 //! positions and optional normals, colors and texture coordinates; `face` polygons are
 //! fan-triangulated and `tristrips` expanded with alternating winding. Every other element is
 //! skipped by its declared types. Vertex attributes are copied onto each triangle corner.
+//!
+//! Ascii records are read one per line, as PLY writes them: a line with more or fewer values than
+//! its record is an error naming the line, and so is a last value that runs into the end of the
+//! file instead of ending in a line end or blank (the file was cut, perhaps inside that number).
 
 use crate::error::{Error, Location, Result};
 use crate::mesh::{Material, Mesh};
@@ -390,12 +394,36 @@ enum FaultKind {
     Eof,
     Token(String, Scalar),
     Count(i64),
+    /// Ascii: the record's line ended before its last value.
+    LineEnd,
+    /// Ascii: this value runs into the end of the file, so the file was cut inside it.
+    Cut(String),
+    /// Ascii: the record's line holds this many values, more than the record takes.
+    Extra(usize),
 }
 
-fn fault_error(path: &Path, f: Fault, e: &Element, record: u64, p: &Property) -> Error {
-    let what = format!("{} {record} (property {})", e.name, p.name);
+/// The error for a fault in record `record` of element `e`, inside property `p` if known.
+fn fault_error(path: &Path, f: Fault, e: &Element, record: u64, p: Option<&Property>) -> Error {
+    let what = match p {
+        Some(p) => format!("{} {record} (property {})", e.name, p.name),
+        None => format!("{} {record}", e.name),
+    };
     let message = match f.kind {
         FaultKind::Eof => format!("file ends inside {what}"),
+        FaultKind::LineEnd => format!("the line ends inside {what} (ascii PLY holds one record per line)"),
+        FaultKind::Cut(token) => format!(
+            "'{token}' in {what} runs into the end of the file: the file looks cut (its last value must be \
+             followed by a line end)"
+        ),
+        FaultKind::Extra(values) => {
+            let n = e.props.len();
+            format!(
+                "element {} has {n} {} but the line has {values} values, more than {what} takes \
+                 (ascii PLY holds one record per line)",
+                e.name,
+                if n == 1 { "property" } else { "properties" }
+            )
+        }
         FaultKind::Token(token, t) => format!("'{token}' is not a valid {} in {what}", t.name()),
         FaultKind::Count(n) if n < 0 => format!("list length {n} in {what} is negative"),
         FaultKind::Count(n) => format!("list length {n} in {what} runs past the end of the file"),
@@ -417,6 +445,12 @@ trait Source {
     fn room(&self, n: u64, t: Scalar) -> bool;
     /// Where the last value read starts.
     fn at(&self) -> Location;
+    /// Move to the start of the next record (ascii: past the line end and any blank lines).
+    fn begin_record(&mut self) {}
+    /// Check that the record just read ends there (ascii: nothing but blanks after it on its line).
+    fn end_record(&mut self) -> Read<()> {
+        Ok(())
+    }
 
     /// A list length, checked against the remaining data.
     fn list_len(&mut self, count: Scalar, item: Scalar) -> Read<usize> {
@@ -512,6 +546,9 @@ impl<B: ByteOrder> Source for Binary<'_, B> {
     }
 }
 
+/// Ascii PLY: one record per line, values separated by blanks. Values are read to their last
+/// byte: one that runs into the end of the file (no line end or blank after it) means the file
+/// was cut inside it.
 struct Ascii<'a> {
     data: &'a [u8],
     pos: usize,
@@ -519,30 +556,52 @@ struct Ascii<'a> {
     token_line: usize,
 }
 
+/// Whitespace inside a line.
+fn is_blank(b: u8) -> bool {
+    b.is_ascii_whitespace() && b != b'\n'
+}
+
 impl<'a> Ascii<'a> {
     fn new(data: &'a [u8], first_line: usize) -> Self {
         Ascii { data, pos: 0, line: first_line, token_line: first_line }
     }
 
-    fn token(&mut self) -> Read<&'a [u8]> {
-        while let Some(&b) = self.data.get(self.pos).filter(|b| b.is_ascii_whitespace()) {
-            self.line += (b == b'\n') as usize;
+    fn skip_blanks(&mut self) {
+        while self.data.get(self.pos).is_some_and(|&b| is_blank(b)) {
             self.pos += 1;
         }
-        if self.pos == self.data.len() {
+    }
+
+    /// The next value on the current line.
+    fn token(&mut self) -> Read<&'a [u8]> {
+        self.skip_blanks();
+        match self.data.get(self.pos) {
             // Blame the line of the last value read: the record it starts is incomplete.
-            return Err(Fault { at: self.at(), kind: FaultKind::Eof });
+            None => return Err(Fault { at: self.at(), kind: FaultKind::Eof }),
+            Some(b'\n') => return Err(Fault { at: Location::Line(self.line), kind: FaultKind::LineEnd }),
+            Some(_) => {}
         }
         self.token_line = self.line;
         let start = self.pos;
         while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
             self.pos += 1;
         }
-        Ok(&self.data[start..self.pos])
+        let token = &self.data[start..self.pos];
+        if self.pos == self.data.len() {
+            return Err(Fault { at: self.at(), kind: FaultKind::Cut(String::from_utf8_lossy(token).into_owned()) });
+        }
+        Ok(token)
     }
 
     fn bad(&self, token: &[u8], t: Scalar) -> Fault {
         Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(token).into_owned(), t) }
+    }
+
+    /// The number of values on the current line.
+    fn values_on_line(&self) -> usize {
+        let start = self.data[..self.pos].iter().rposition(|&b| b == b'\n').map_or(0, |n| n + 1);
+        let end = self.data[self.pos..].iter().position(|&b| b == b'\n').map_or(self.data.len(), |n| self.pos + n);
+        self.data[start..end].split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()).count()
     }
 }
 
@@ -596,6 +655,21 @@ impl Source for Ascii<'_> {
     fn at(&self) -> Location {
         Location::Line(self.token_line)
     }
+
+    fn begin_record(&mut self) {
+        while let Some(&b) = self.data.get(self.pos).filter(|b| b.is_ascii_whitespace()) {
+            self.line += (b == b'\n') as usize;
+            self.pos += 1;
+        }
+    }
+
+    fn end_record(&mut self) -> Read<()> {
+        self.skip_blanks();
+        match self.data.get(self.pos) {
+            None | Some(b'\n') => Ok(()),
+            Some(_) => Err(Fault { at: Location::Line(self.line), kind: FaultKind::Extra(self.values_on_line()) }),
+        }
+    }
 }
 
 /// Accumulates what the body holds.
@@ -635,9 +709,11 @@ impl<'p> Reader<'p> {
                 self.faces(src, e, face)?;
             } else if !e.props.is_empty() {
                 for r in 0..e.count {
+                    src.begin_record();
                     for p in &e.props {
-                        skip_property(src, p).map_err(|f| fault_error(self.path, f, e, r, p))?;
+                        skip_property(src, p).map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
                     }
+                    src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
                 }
             }
         }
@@ -656,13 +732,15 @@ impl<'p> Reader<'p> {
         v[ALPHA] = 255.0;
         let color_float = plan.slot_types.map(|t| t.is_some_and(Scalar::is_float));
         for r in 0..e.count {
+            src.begin_record();
             for (p, slot) in e.props.iter().zip(&plan.slots) {
                 let got = match (p.kind, slot) {
                     (Kind::Scalar(t), Some(s)) => src.value(t).map(|x| v[*s] = x),
                     _ => skip_property(src, p),
                 };
-                got.map_err(|f| fault_error(self.path, f, e, r, p))?;
+                got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
+            src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
             let position = Vec3::new(v[X] as f32, v[X + 1] as f32, v[X + 2] as f32);
             if !position.is_finite() {
                 return Err(Error::at_element(
@@ -698,8 +776,10 @@ impl<'p> Reader<'p> {
         let mut indices: Vec<i64> = Vec::new();
         let mut texcoords: Vec<f64> = Vec::new();
         for r in 0..e.count {
+            src.begin_record();
             if fast {
                 if let Some(t) = src.triangle(face.count_type, face.index_type) {
+                    src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
                     self.polygon(&t, &[], e, r)?;
                     continue;
                 }
@@ -712,8 +792,9 @@ impl<'p> Reader<'p> {
                     Kind::List(c, t) if Some(k) == face.texcoord => read_list(src, c, t, &mut texcoords, |s, t| s.value(t)),
                     _ => skip_property(src, p),
                 };
-                got.map_err(|f| fault_error(self.path, f, e, r, p))?;
+                got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
+            src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
             if face.strips {
                 self.strip(&indices, e, r)?;
             } else {
@@ -1239,6 +1320,32 @@ mod tests {
         let e = err(good.replacen("\n3 2 1 0\n", "\n-3 2 1 0\n", 1).as_bytes());
         assert_eq!(at_line(&e), 14);
         assert!(e.to_string().contains("list length -3"), "{e}");
+    }
+
+    #[test]
+    fn ascii_records_are_one_per_line_and_read_to_the_last_byte() {
+        let good = String::from_utf8(triangle_file(Encoding::Ascii)).unwrap();
+        // Blank lines, trailing blanks and CRLF line ends are fine.
+        for text in [good.replacen("\n1 1 0\n", "\n\n 1 1 0 \t\n\n", 1), good.replace("\n3", "\r\n3"), format!("{good} ")] {
+            assert_eq!(ok(text.as_bytes()).face_count(), 2, "{text}");
+        }
+        // Cut right after the last value, after a blank, and inside a value.
+        for (cut, what) in [(1, "'0' in face 1"), (2, "file ends inside face 1"), (3, "in face 1")] {
+            let e = err(&good.as_bytes()[..good.len() - cut]);
+            assert_eq!(at_line(&e), 14, "{e}");
+            assert!(e.to_string().contains(what), "{e}");
+        }
+        let cases = [
+            ("\n1 1 0\n", "\n1 1 0 5\n", 11, "element vertex has 3 properties but the line has 4 values, more than vertex 1"),
+            ("\n3 2 1 0\n", "\n3 2 1 0 2\n", 14, "element face has 1 property but the line has 5 values, more than face 1"),
+            ("\n1 1 0\n", "\n1 1\n0\n", 11, "the line ends inside vertex 1 (property z)"),
+            ("\n3 0 1 2\n", "\n3 0 1\n2\n", 13, "the line ends inside face 0 (property vertex_indices)"),
+        ];
+        for (from, to, line, what) in cases {
+            let e = err(good.replacen(from, to, 1).as_bytes());
+            assert_eq!(at_line(&e), line, "{e}");
+            assert!(e.to_string().contains(what), "{e}");
+        }
     }
 
     #[test]
