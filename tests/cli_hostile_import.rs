@@ -217,3 +217,39 @@ fn ascii_ply_line_with_extra_values_names_the_line() {
     let path = dir.write("short.ply", format!("{ASCII_PLY_HEADER}0 0 0\n1 0\n0 0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n"));
     assert_refused(&path, &[], &["line 11", "vertex 1"]);
 }
+
+#[test]
+fn utf16_text_is_recognised() {
+    let dir = TempDir::new("utf16");
+    let utf16 = |text: &str, bom: bool, big: bool| -> Vec<u8> {
+        let mut out = if !bom {
+            vec![]
+        } else if big {
+            vec![0xfe, 0xff]
+        } else {
+            vec![0xff, 0xfe]
+        };
+        for unit in text.encode_utf16() {
+            out.extend(if big { unit.to_be_bytes() } else { unit.to_le_bytes() });
+        }
+        out
+    };
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    for (name, bom, big) in [("le.obj", true, false), ("be.obj", true, true), ("nobom.obj", false, false)] {
+        assert_refused(&dir.write(name, utf16(obj, bom, big)), &[], &["UTF-16", "UTF-8"]);
+    }
+    let ply = format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n");
+    assert_refused(&dir.write("utf16.ply", utf16(&ply, true, false)), &[], &["UTF-16", "UTF-8"]);
+    let bin = triangle_bytes();
+    let doc = gltf(&data_uri(&bin), bin.len(), r#"[{"buffer":0,"byteLength":36}]"#, &format!(r#"[{{"bufferView":0,{POSITIONS}}}]"#));
+    assert_refused(&dir.write("utf16.gltf", utf16(&doc, true, false)), &[], &["UTF-16", "UTF-8"]);
+}
+
+#[test]
+fn empty_files_say_they_are_empty() {
+    let dir = TempDir::new("empty");
+    for name in ["empty.obj", "empty.ply", "empty.glb", "empty.gltf"] {
+        let e = assert_refused(&dir.write(name, b""), &[], &["empty (0 bytes)"]);
+        assert!(!e.contains("JSON"), "{e}");
+    }
+}

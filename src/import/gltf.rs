@@ -37,7 +37,7 @@ const APPEARANCE_ONLY: &[&str] = &["KHR_texture_basisu", "EXT_texture_webp", "EX
 /// Read a glTF or GLB file into a raw, uncleaned mesh. External buffers must lie in the file's
 /// folder unless `options.allow_outside_files`.
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_file(path)?;
     let glb = bytes.starts_with(b"glTF");
     let (json_bytes, bin) = if glb { split_glb(path, &bytes)? } else { (&bytes[..], None) };
     let root = parse_json(path, json_bytes, glb)?;
@@ -125,6 +125,9 @@ fn split_glb<'a>(path: &Path, bytes: &'a [u8]) -> Result<(&'a [u8], Option<&'a [
 fn parse_json(path: &Path, bytes: &[u8], glb: bool) -> Result<json::Root> {
     let bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
     json::Root::from_slice(bytes).map_err(|e| {
+        if let Some(why) = super::utf16_hint(bytes) {
+            return Error::invalid(path, None, why);
+        }
         let text = e.to_string();
         let message = format!("invalid glTF JSON: {}", text.rsplit_once(" at line ").map_or(text.as_str(), |(m, _)| m));
         match (e.line(), glb) {

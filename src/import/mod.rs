@@ -58,6 +58,39 @@ pub struct Imported {
     pub import_ms: f64,
 }
 
+/// Read a whole mesh file. An empty one is an error that says so, rather than whatever its
+/// format's parser makes of no bytes.
+fn read_file(path: &Path) -> Result<Vec<u8>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(Error::invalid(path, None, EMPTY));
+    }
+    Ok(bytes)
+}
+
+const EMPTY: &str = "the file is empty (0 bytes)";
+
+/// If `bytes` look like UTF-16 text, an error message saying so: they start with a UTF-16 byte
+/// order mark, or have NUL in every other byte, as ASCII text saved as UTF-16 without a mark does.
+/// Text formats are read as UTF-8 (or ASCII), where neither can occur.
+fn utf16_hint(bytes: &[u8]) -> Option<String> {
+    let why = match bytes {
+        [0xff, 0xfe, ..] => "it starts with the UTF-16 little-endian byte order mark FF FE".to_string(),
+        [0xfe, 0xff, ..] => "it starts with the UTF-16 big-endian byte order mark FE FF".to_string(),
+        _ => {
+            let sample = &bytes[..bytes.len().min(1024) & !1];
+            let pairs = sample.len() / 2;
+            let nul = |parity: usize| sample.iter().skip(parity).step_by(2).filter(|&&b| b == 0).count();
+            let (even, odd) = (nul(0), nul(1));
+            if pairs < 2 || even.min(odd) * 4 > pairs || even.max(odd) * 4 < 3 * pairs {
+                return None;
+            }
+            format!("{} of its first {} bytes are NUL, every other one", even + odd, sample.len())
+        }
+    };
+    Some(format!("the file looks UTF-16 encoded ({why}); strata reads text as UTF-8: re-save it as UTF-8"))
+}
+
 /// Read a mesh file with default options, choosing the format by extension unless `format` is given.
 pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
     import_with(path, &ImportOptions { format, ..ImportOptions::default() })
@@ -89,4 +122,27 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
     Ok(Imported { mesh, source_faces, cleaned, warnings, import_ms: start.elapsed().as_secs_f64() * 1e3 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn utf16(text: &str, big: bool) -> Vec<u8> {
+        text.encode_utf16().flat_map(|u| if big { u.to_be_bytes() } else { u.to_le_bytes() }).collect()
+    }
+
+    #[test]
+    fn utf16_text_is_recognised_and_utf8_is_not() {
+        let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        let marked = [[0xff, 0xfe].as_slice(), &utf16(text, false)].concat();
+        assert!(utf16_hint(&marked).unwrap().contains("FF FE"));
+        assert!(utf16_hint(&[0xfe, 0xff, 0, b'v']).unwrap().contains("FE FF"));
+        for big in [false, true] {
+            assert!(utf16_hint(&utf16(text, big)).unwrap().contains("NUL"), "{big}");
+        }
+        for plain in [text.as_bytes(), "ply\nformat ascii 1.0\n".as_bytes(), b"\0\0", b"", &[0u8; 64], &[7u8; 64]] {
+            assert_eq!(utf16_hint(plain), None, "{plain:?}");
+        }
+    }
 }

@@ -24,10 +24,13 @@ const USEMTL_TABLE: &str = "\0strata-usemtl-names";
 
 /// Read an OBJ file into a raw, uncleaned mesh.
 pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_file(path)?;
+    if let Some(why) = super::utf16_hint(&bytes) {
+        return Err(Error::invalid(path, None, why));
+    }
     let text = String::from_utf8_lossy(&bytes);
     if text.trim().is_empty() {
-        return Err(Error::invalid(path, None, "empty file"));
+        return Err(Error::invalid(path, None, "the file holds only whitespace"));
     }
     let scan = scan(&text).map_err(|(line, what)| Error::at_line(path, line, what))?;
     if scan.faces == 0 {

@@ -20,7 +20,7 @@ use std::path::Path;
 /// Read a PLY file into a raw, uncleaned mesh: positions as in the file, one triangle list.
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
 pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes, warnings)
 }
 
@@ -134,7 +134,7 @@ struct Header {
 
 fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Header> {
     if bytes.is_empty() {
-        return Err(Error::at_byte(path, 0, "empty file"));
+        return Err(Error::at_byte(path, 0, super::EMPTY));
     }
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -151,7 +151,8 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
         let text = std::str::from_utf8(raw).ok();
         if line == 1 {
             if text.map(str::trim) != Some("ply") {
-                return Err(Error::at_line(path, 1, "not a PLY file: the first line must be 'ply'"));
+                let why = super::utf16_hint(bytes).unwrap_or_else(|| "the first line must be 'ply'".into());
+                return Err(Error::at_line(path, 1, format!("not a PLY file: {why}")));
             }
             continue;
         }
