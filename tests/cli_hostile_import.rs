@@ -253,3 +253,17 @@ fn empty_files_say_they_are_empty() {
         assert!(!e.contains("JSON"), "{e}");
     }
 }
+
+#[test]
+fn obj_index_errors_count_in_proper_plurals() {
+    let dir = TempDir::new("plural");
+    let cases = [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "the file has 3 vertices"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n", "the file has 1 texture coordinate"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 0 0 1\nf 1//1 2//3 3//1\n", "the file has 2 normals"),
+    ];
+    for (text, expect) in cases {
+        let e = assert_refused(&dir.write("index.obj", text), &[], &[]);
+        assert!(e.trim_end().ends_with(expect), "{e}");
+    }
+}

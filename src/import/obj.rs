@@ -159,6 +159,7 @@ struct ForwardRef {
 }
 
 const KIND_NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+const KIND_PLURALS: [&str; 3] = ["vertices", "texture coordinates", "normals"];
 
 /// Check every line tobj would act on; on the first bad one return its 1-based number and what
 /// is wrong with it.
@@ -269,11 +270,9 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
     }
     let totals = [s.positions, s.texcoords, s.normals];
     if let Some(f) = forward.iter().find(|f| f.index > totals[f.kind]) {
-        let what = KIND_NAMES[f.kind];
-        return Err((
-            f.line,
-            format!("face {what} index {} out of range: the file has {} {what}s", f.index, totals[f.kind]),
-        ));
+        let (what, total) = (KIND_NAMES[f.kind], totals[f.kind]);
+        let counted = if total == 1 { what } else { KIND_PLURALS[f.kind] };
+        return Err((f.line, format!("face {what} index {} out of range: the file has {total} {counted}", f.index)));
     }
     Ok(s)
 }
