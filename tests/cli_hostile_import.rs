@@ -219,6 +219,40 @@ fn ascii_ply_line_with_extra_values_names_the_line() {
 }
 
 #[test]
+fn huge_coordinates_are_refused_at_import() {
+    let dir = TempDir::new("huge");
+    let obj = dir.write("huge.obj", "v 0 0 0\nv 1e38 0 0\nv 0 1e38 0\nf 1 2 3\n");
+    assert_refused(&obj, &[], &["line 2", "1e38", "exceeds"]);
+    let simplified = dir.0.join("simplified.obj");
+    let (ok, _, stderr) = strata(&["simplify", obj.to_str().unwrap(), "--ratio", "0.5", "-o", simplified.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("line 2") && stderr.contains("exceeds"), "{stderr}");
+    let out = dir.0.join("huge.strata");
+    let (ok, _, stderr) = strata(&["convert", obj.to_str().unwrap(), out.to_str().unwrap(), "-q"]);
+    assert!(!ok && stderr.contains("huge.obj") && stderr.contains("exceeds"), "{stderr}");
+
+    let ply = dir.write(
+        "huge.ply",
+        format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0\n0 1 0\n-3e20 -3e20 0\n3 0 1 2\n3 1 3 2\n"),
+    );
+    assert_refused(&ply, &[], &["vertex 3", "-3e20", "exceeds"]);
+
+    let bin = f32_bytes(&[0., 0., 0., 2e19, 0., 0., 0., 2e19, 0.]);
+    let doc = gltf(&data_uri(&bin), bin.len(), r#"[{"buffer":0,"byteLength":36}]"#, &format!(r#"[{{"bufferView":0,{POSITIONS}}}]"#));
+    let gltf = dir.write("huge.gltf", doc);
+    assert_refused(&gltf, &[], &["mesh 0 primitive 0", "vertex 1", "2e19", "exceeds"]);
+}
+
+#[test]
+fn non_finite_normals_and_uvs_are_replaced_with_a_warning() {
+    let dir = TempDir::new("nan-attributes");
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt nan 1\nvn 0 0 1\nvn nan 0 inf\nf 1/1/1 2/2/2 3/1/1\n";
+    let summary = assert_imports(&dir.write("nan.obj", obj), &[]);
+    let warnings = summary["warnings"].to_string();
+    assert!(warnings.contains("1 corner normal") && warnings.contains("face"), "{warnings}");
+    assert!(warnings.contains("1 corner UV") && warnings.contains("(0, 0)"), "{warnings}");
+}
+
+#[test]
 fn utf16_text_is_recognised() {
     let dir = TempDir::new("utf16");
     let utf16 = |text: &str, bom: bool, big: bool| -> Vec<u8> {

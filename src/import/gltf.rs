@@ -17,7 +17,7 @@
 
 use super::ImportOptions;
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::{coordinate_problem, Material, Mesh};
 use base64::Engine;
 use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -663,10 +663,16 @@ impl Builder {
         let element = format!("mesh {mesh_index} primitive {}", prim.index());
         let err = |message: String| Error::at_element(path, &element, message);
 
-        let positions = match prim.get(&Semantic::Positions) {
-            Some(a) => buffers.floats::<3>(&a, "POSITION")?,
+        let positions: Vec<Vec3> = match prim.get(&Semantic::Positions) {
+            Some(a) => buffers.floats::<3>(&a, "POSITION")?.into_iter().map(|p| world.transform_point3(p.into())),
             None => return Err(err("no POSITION attribute".into())),
-        };
+        }
+        .collect();
+        for (i, p) in positions.iter().enumerate() {
+            if let Some(problem) = coordinate_problem(p.as_dvec3().to_array()) {
+                return Err(err(format!("vertex {i}: {problem}")));
+            }
+        }
         let n = positions.len();
         let base = self.mesh.positions.len();
         if base + n > u32::MAX as usize {
@@ -699,7 +705,9 @@ impl Builder {
                 buffers
                     .floats::<3>(&a, "NORMAL")?
                     .into_iter()
-                    .map(|v| (normal_matrix * Vec3::from(v)).normalize_or_zero())
+                    .map(Vec3::from)
+                    // A NaN or infinite normal stays so, for the import to replace and report.
+                    .map(|v| if v.is_finite() { (normal_matrix * v).normalize_or_zero() } else { v })
                     .collect::<Vec<_>>(),
             ),
             None => None,
@@ -729,7 +737,7 @@ impl Builder {
         };
 
         let m = &mut self.mesh;
-        m.positions.extend(positions.into_iter().map(|p| world.transform_point3(Vec3::from(p))));
+        m.positions.extend(positions);
         let flip = linear.determinant() < 0.0;
         let first_face = m.triangles.len();
         for t in triangles {

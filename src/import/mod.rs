@@ -1,14 +1,17 @@
 //! Import OBJ, glTF/GLB and PLY files into a cleaned [`Mesh`].
 //!
 //! Each format module reads its file into a raw `Mesh` (positions not yet welded, corner arrays
-//! filled or empty); [`import_with`] then welds and cleans it, and reports what cleaning removed.
+//! filled or empty); [`import_with`] then refuses unusable positions (NaN, infinite, or beyond
+//! [`crate::mesh::MAX_COORDINATE`]), replaces NaN or infinite normals and UVs with a warning, welds
+//! and cleans the mesh, and reports what cleaning removed.
 
 pub mod gltf;
 pub mod obj;
 pub mod ply;
 
 use crate::error::{Error, Result};
-use crate::mesh::{CleanReport, Mesh};
+use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
+use glam::Vec2;
 use std::path::Path;
 use std::time::Instant;
 
@@ -106,7 +109,7 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
         }
     };
     let mut warnings = Vec::new();
-    let raw = match format {
+    let mut raw = match format {
         Format::Obj => obj::read(path, &mut warnings)?,
         Format::Gltf => gltf::read(path, options, &mut warnings)?,
         Format::Ply => ply::read(path, &mut warnings)?,
@@ -114,6 +117,13 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     if let Err(e) = raw.validate() {
         return Err(Error::invalid(path, None, format!("internal import error: {e}")));
     }
+    // Readers check positions where they can name a line or primitive; this catches the rest.
+    for (i, p) in raw.positions.iter().enumerate() {
+        if let Some(problem) = coordinate_problem(p.as_dvec3().to_array()) {
+            return Err(Error::at_element(path, format!("vertex {i}"), problem));
+        }
+    }
+    replace_non_finite_corners(&mut raw, &mut warnings);
     let source_faces = raw.face_count();
     let (mesh, cleaned) = raw.clean().map_err(|e| {
         Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite")
@@ -122,6 +132,35 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
     Ok(Imported { mesh, source_faces, cleaned, warnings, import_ms: start.elapsed().as_secs_f64() * 1e3 })
+}
+
+/// Replace NaN or infinite corner normals by their face's normal and such UVs by (0, 0), with a
+/// warning per attribute. Unlike a position, neither shapes the mesh: a normal follows from the
+/// positions (writers emit NaN ones for degenerate faces), and a UV only places a texture, so the
+/// file stays usable, and the warning says what changed.
+fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
+    let mut normals = 0;
+    for (c, n) in mesh.normals.iter_mut().enumerate() {
+        if !n.is_finite() {
+            *n = triangle_cross(&mesh.positions, &mesh.triangles[c / 3]).normalize_or_zero().as_vec3();
+            normals += 1;
+        }
+    }
+    let mut uvs = 0;
+    for uv in mesh.uvs.iter_mut().filter(|uv| !uv.is_finite()) {
+        *uv = Vec2::ZERO;
+        uvs += 1;
+    }
+    match normals {
+        0 => {}
+        1 => warnings.push("1 corner normal was NaN or infinite and got its face's normal".into()),
+        n => warnings.push(format!("{n} corner normals were NaN or infinite and got their face's normal")),
+    }
+    match uvs {
+        0 => {}
+        1 => warnings.push("1 corner UV was NaN or infinite and got UV (0, 0)".into()),
+        n => warnings.push(format!("{n} corner UVs were NaN or infinite and got UV (0, 0)")),
+    }
 }
 
 #[cfg(test)]
@@ -144,5 +183,26 @@ mod tests {
         for plain in [text.as_bytes(), "ply\nformat ascii 1.0\n".as_bytes(), b"\0\0", b"", &[0u8; 64], &[7u8; 64]] {
             assert_eq!(utf16_hint(plain), None, "{plain:?}");
         }
+    }
+
+    #[test]
+    fn non_finite_normals_and_uvs_are_replaced_and_reported() {
+        let mut mesh = Mesh {
+            positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+            triangles: vec![[0, 1, 2], [0, 2, 1]],
+            normals: vec![glam::Vec3::NAN, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::INFINITY, glam::Vec3::X],
+            uvs: vec![Vec2::ONE, Vec2::new(f32::NAN, 0.0), Vec2::ONE, Vec2::ONE, Vec2::ONE, Vec2::ONE],
+            ..Mesh::default()
+        };
+        let mut warnings = Vec::new();
+        replace_non_finite_corners(&mut mesh, &mut warnings);
+        assert_eq!(mesh.normals[0], glam::Vec3::Z);
+        assert_eq!(mesh.normals[4], -glam::Vec3::Z);
+        assert_eq!(mesh.normals[5], glam::Vec3::X);
+        assert_eq!(mesh.uvs[1], Vec2::ZERO);
+        assert_eq!(warnings, [
+            "2 corner normals were NaN or infinite and got their face's normal",
+            "1 corner UV was NaN or infinite and got UV (0, 0)",
+        ]);
     }
 }

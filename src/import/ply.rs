@@ -11,7 +11,7 @@
 //! file instead of ending in a line end or blank (the file was cut, perhaps inside that number).
 
 use crate::error::{Error, Location, Result};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::{coordinate_problem, Material, Mesh};
 use byteorder::{BigEndian, ByteOrder, LittleEndian};
 use glam::{Vec2, Vec3};
 use std::marker::PhantomData;
@@ -742,15 +742,10 @@ impl<'p> Reader<'p> {
                 got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
             src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
-            let position = Vec3::new(v[X] as f32, v[X + 1] as f32, v[X + 2] as f32);
-            if !position.is_finite() {
-                return Err(Error::at_element(
-                    self.path,
-                    format!("vertex {r}"),
-                    "coordinate is NaN or infinite (or too large for 32-bit floats)",
-                ));
+            if let Some(problem) = coordinate_problem([v[X], v[X + 1], v[X + 2]]) {
+                return Err(Error::at_element(self.path, format!("vertex {r}"), problem));
             }
-            self.positions.push(position);
+            self.positions.push(Vec3::new(v[X] as f32, v[X + 1] as f32, v[X + 2] as f32));
             if normals {
                 self.normals.push(Vec3::new(v[NX] as f32, v[NX + 1] as f32, v[NX + 2] as f32));
             }
