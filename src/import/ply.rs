@@ -411,7 +411,7 @@ fn fault_error(path: &Path, f: Fault, e: &Element, record: u64, p: Option<&Prope
     };
     let message = match f.kind {
         FaultKind::Eof => format!("file ends inside {what}"),
-        FaultKind::LineEnd => format!("the line ends inside {what} (ascii PLY holds one record per line)"),
+        FaultKind::LineEnd => format!("the line ends inside {what}: ascii PLY holds one record per line"),
         FaultKind::Cut(token) => format!(
             "'{token}' in {what} runs into the end of the file: the file looks cut (its last value must be \
              followed by a line end)"
@@ -553,45 +553,58 @@ impl<B: ByteOrder> Source for Binary<'_, B> {
 struct Ascii<'a> {
     data: &'a [u8],
     pos: usize,
+    /// The line `pos` is on.
     line: usize,
-    token_line: usize,
+    /// The line of the record being read (at the end of the data, of the last one read).
+    record_line: usize,
 }
 
 /// Whitespace inside a line.
 fn is_blank(b: u8) -> bool {
-    b.is_ascii_whitespace() && b != b'\n'
+    matches!(b, b' ' | b'\t' | b'\r' | b'\x0c')
 }
 
 impl<'a> Ascii<'a> {
     fn new(data: &'a [u8], first_line: usize) -> Self {
-        Ascii { data, pos: 0, line: first_line, token_line: first_line }
+        Ascii { data, pos: 0, line: first_line, record_line: first_line }
     }
 
     fn skip_blanks(&mut self) {
-        while self.data.get(self.pos).is_some_and(|&b| is_blank(b)) {
-            self.pos += 1;
+        let data = self.data;
+        let mut pos = self.pos;
+        while pos < data.len() && is_blank(data[pos]) {
+            pos += 1;
         }
+        self.pos = pos;
     }
 
     /// The next value on the current line.
     fn token(&mut self) -> Read<&'a [u8]> {
         self.skip_blanks();
-        match self.data.get(self.pos) {
-            // Blame the line of the last value read: the record it starts is incomplete.
-            None => return Err(Fault { at: self.at(), kind: FaultKind::Eof }),
-            Some(b'\n') => return Err(Fault { at: Location::Line(self.line), kind: FaultKind::LineEnd }),
+        let (data, start) = (self.data, self.pos);
+        match data.get(start) {
+            None => return Err(self.end_of_data()),
+            Some(b'\n') => return Err(Fault { at: self.at(), kind: FaultKind::LineEnd }),
             Some(_) => {}
         }
-        self.token_line = self.line;
-        let start = self.pos;
-        while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
-            self.pos += 1;
+        let mut end = start + 1;
+        while end < data.len() && !data[end].is_ascii_whitespace() {
+            end += 1;
         }
-        let token = &self.data[start..self.pos];
-        if self.pos == self.data.len() {
-            return Err(Fault { at: self.at(), kind: FaultKind::Cut(String::from_utf8_lossy(token).into_owned()) });
-        }
-        Ok(token)
+        self.pos = end;
+        Ok(&data[start..end])
+    }
+
+    /// The fault of reaching the end of the data: a cut value if the data ends inside one (or
+    /// right after it, without a line end), else a missing one.
+    fn end_of_data(&self) -> Fault {
+        let data = self.data;
+        let value = data.len() - data.iter().rev().take_while(|b| !b.is_ascii_whitespace()).count();
+        let kind = match &data[value..] {
+            [] => FaultKind::Eof,
+            cut => FaultKind::Cut(String::from_utf8_lossy(cut).into_owned()),
+        };
+        Fault { at: self.at(), kind }
     }
 
     fn bad(&self, token: &[u8], t: Scalar) -> Fault {
@@ -654,21 +667,32 @@ impl Source for Ascii<'_> {
     }
 
     fn at(&self) -> Location {
-        Location::Line(self.token_line)
+        Location::Line(self.record_line)
     }
 
     fn begin_record(&mut self) {
-        while let Some(&b) = self.data.get(self.pos).filter(|b| b.is_ascii_whitespace()) {
-            self.line += (b == b'\n') as usize;
-            self.pos += 1;
+        let data = self.data;
+        let (mut pos, mut line) = (self.pos, self.line);
+        while pos < data.len() && data[pos].is_ascii_whitespace() {
+            line += (data[pos] == b'\n') as usize;
+            pos += 1;
         }
+        // At the end of the data, errors blame the line of the last record read.
+        if pos < data.len() {
+            self.record_line = line;
+        }
+        (self.pos, self.line) = (pos, line);
     }
 
     fn end_record(&mut self) -> Read<()> {
         self.skip_blanks();
         match self.data.get(self.pos) {
-            None | Some(b'\n') => Ok(()),
-            Some(_) => Err(Fault { at: Location::Line(self.line), kind: FaultKind::Extra(self.values_on_line()) }),
+            Some(b'\n') => Ok(()),
+            None => match self.end_of_data() {
+                Fault { kind: FaultKind::Eof, .. } => Ok(()),
+                cut => Err(cut),
+            },
+            Some(_) => Err(Fault { at: self.at(), kind: FaultKind::Extra(self.values_on_line()) }),
         }
     }
 }
