@@ -13,7 +13,12 @@
 //!
 //! Accessors are read by one bounds-checked reader here rather than the gltf crate's iterators:
 //! those read POSITION and NORMAL as f32 whatever the component type (KHR_mesh_quantization
-//! stores them as integers) and index out of bounds on empty or short accessors.
+//! stores them as integers) and index out of bounds on empty or short accessors. The reader also
+//! checks strides and offsets against element sizes, so that no element is read from bytes that
+//! belong to another.
+//!
+//! External buffers are read only from the glTF file's folder, unless
+//! [`ImportOptions::allow_outside_files`]. Images are never read: materials keep their names.
 
 use super::ImportOptions;
 use crate::error::{Error, Result};
