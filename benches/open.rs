@@ -25,7 +25,7 @@ fn main() {
         }
         let out = std::env::temp_dir().join(format!("strata-open-bench-{}.strata", std::process::id()));
         let opts = strata::pipeline::ConvertOptions::default();
-        strata::pipeline::convert(&large, None, &out, &opts, &mut strata::pipeline::Silent).expect("convert");
+        strata::pipeline::convert(&large, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
         files.push(out);
     }
     println!("{:<40} {:>12} {:>12} {:>8} {:>12} {:>9}", "file", "file bytes", "bytes read", "share", "RSS added", "open ms");

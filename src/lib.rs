@@ -40,5 +40,5 @@ pub mod stream;
 pub mod write;
 
 pub use error::{Error, Location, Result};
-pub use import::{import, Format, Imported};
+pub use import::{import, import_with, Format, ImportOptions, Imported};
 pub use mesh::{Adjacency, CleanReport, Material, Mesh};

@@ -12,6 +12,33 @@ pub const NO_FACE: u32 = u32::MAX;
 
 pub use crate::format::Material;
 
+/// The largest coordinate magnitude strata accepts; importers refuse vertices beyond it.
+///
+/// Later stages compute in f32 with fourth powers of lengths: the squared length of summed
+/// area-weighted normals when grouping, products of dot products when finding closest points for
+/// the distance measure. Within ±1e9 on every axis, lengths stay under 2·√3·1e9 ≈ 3.5e9 and their
+/// fourth powers under 1.5e38, below f32's 3.4e38. Past about 4e9 they overflow to infinity and
+/// grouping and measurement silently change (squared lengths overflow near 1.8e19, where `convert`
+/// fails outright). Quadrics are f64 and do not set the limit.
+pub const MAX_COORDINATE: f32 = 1e9;
+
+/// Why a vertex position cannot be used, if it cannot: a coordinate that is NaN or infinite, or
+/// beyond [`MAX_COORDINATE`]. Takes f64 so that readers can check values before narrowing them.
+pub fn coordinate_problem(p: [f64; 3]) -> Option<String> {
+    // The common case in one test: NaN fails every comparison.
+    if p.iter().all(|c| c.abs() <= f64::from(MAX_COORDINATE)) {
+        return None;
+    }
+    if p.iter().any(|c| !c.is_finite()) {
+        return Some("coordinate is NaN or infinite".into());
+    }
+    let c = p.into_iter().find(|c| c.abs() > f64::from(MAX_COORDINATE))?;
+    // A value that came from f32 prints as the f32 it is (1e38, not 9.99999968e37).
+    let shown = if f64::from(c as f32) == c { format!("{:e}", c as f32) } else { format!("{c:e}") };
+    Some(format!("coordinate {shown} exceeds the largest magnitude strata accepts ({MAX_COORDINATE:e})"))
+}
+
+
 /// A triangle mesh. Corner arrays (`normals`, `uvs`, `colors`) are either empty (attribute absent)
 /// or hold exactly `3 * triangles.len()` entries, corner `3 * f + k` belonging to `triangles[f][k]`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -383,6 +410,16 @@ mod tests {
         let mut m = quad_with_extras();
         m.positions[4].y = f32::NAN;
         assert_eq!(m.clean().unwrap_err(), NonFiniteVertex { index: 4 });
+    }
+
+    #[test]
+    fn coordinate_problems_name_the_value() {
+        assert_eq!(coordinate_problem([0.0, -1e9, 1e9]), None);
+        assert_eq!(coordinate_problem([0.0, f64::NAN, 1e30]).unwrap(), "coordinate is NaN or infinite");
+        let e = coordinate_problem([1.0, f64::from(1e38f32), -2e300]).unwrap();
+        assert_eq!(e, "coordinate 1e38 exceeds the largest magnitude strata accepts (1e9)");
+        assert!(coordinate_problem([-2e300, 0.0, 0.0]).unwrap().contains("-2e300"));
+        assert!(coordinate_problem([0.1 + 1e9, 0.0, 0.0]).unwrap().contains("1.0000000001e9"));
     }
 
     #[test]

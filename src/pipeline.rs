@@ -5,7 +5,7 @@ use crate::error::Result;
 use crate::format::WriteSummary;
 use crate::write::{self, WriteOptions};
 use crate::hierarchy::{self, HierarchyParams};
-use crate::import::{import, Format};
+use crate::import::{import_with, Format, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
@@ -75,11 +75,11 @@ pub struct Converted {
     pub warnings: Vec<String>,
 }
 
-/// Convert the mesh file `input` into the chunk file `output`, which appears only when complete.
-/// An output that is a directory or the input itself is refused before any work.
+/// Convert the mesh file `input`, read with `import`, into the chunk file `output`, which appears
+/// only when complete. An output that is a directory or the input itself is refused before any work.
 pub fn convert(
     input: &Path,
-    format: Option<Format>,
+    import: &ImportOptions,
     output: &Path,
     opts: &ConvertOptions,
     progress: &mut dyn Progress,
@@ -94,7 +94,7 @@ pub fn convert(
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
     progress.stage("import", 0);
-    let mut imported = import(input, format)?;
+    let mut imported = import_with(input, import)?;
     match opts.normals {
         Normals::Auto { crease_angle } if imported.mesh.normals.is_empty() => {
             imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
@@ -116,7 +116,7 @@ pub fn convert(
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);
-    let is_gltf = format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
+    let is_gltf = import.format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
     let write_opts = WriteOptions {
         metres_per_unit: if is_gltf { 1.0 } else { 0.0 },
         params: opts.hierarchy,

@@ -226,7 +226,7 @@ fn large_mesh_sizes() {
     }
     let out = std::env::temp_dir().join(format!("strata-large-{}.strata", std::process::id()));
     let opts = strata::pipeline::ConvertOptions::default();
-    let c = strata::pipeline::convert(&path, None, &out, &opts, &mut strata::pipeline::Silent).expect("convert");
+    let c = strata::pipeline::convert(&path, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
     let rd = Reader::open_path(&out).expect("open");
     let (file, read) = (c.summary.file_bytes, rd.bytes_read());
     std::fs::remove_file(&out).ok();

@@ -6,11 +6,12 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::ImportOptions;
 
 fn inputs() -> Vec<(String, PathBuf)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut out = Vec::new();
-    let mut push_dir = |prefix: &str, dir: &Path, out: &mut Vec<(String, PathBuf)>| {
+    let push_dir = |prefix: &str, dir: &Path, out: &mut Vec<(String, PathBuf)>| {
         let mut stack = vec![dir.to_path_buf()];
         while let Some(d) = stack.pop() {
             let Ok(entries) = std::fs::read_dir(&d) else { continue };
@@ -50,7 +51,7 @@ fn converted_files_are_byte_identical_to_the_recorded_ones() {
     let out = dir.join("out.strata");
     let mut now = BTreeMap::new();
     for (name, path) in inputs() {
-        let hash = match convert(&path, None, &out, &ConvertOptions::default(), &mut Silent) {
+        let hash = match convert(&path, &ImportOptions::default(), &out, &ConvertOptions::default(), &mut Silent) {
             Ok(_) => {
                 let bytes = std::fs::read(&out).unwrap();
                 format!("{:08x}:{}", crc32fast::hash(&bytes), bytes.len())

@@ -15,7 +15,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use strata::hierarchy::HierarchyParams;
-use strata::{format, import, Format};
+use strata::{format, import_with, Format, ImportOptions};
 
 #[derive(Parser)]
 #[command(name = "strata", version, about = "Make huge triangle meshes viewable on small machines")]
@@ -69,6 +69,15 @@ pub struct MeshInput {
     /// Read as this format whatever the extension.
     #[arg(long, value_enum)]
     format: Option<Format>,
+    /// Let a glTF file read buffers outside its folder (an absolute path or `..` in a buffer uri).
+    #[arg(long)]
+    allow_outside_files: bool,
+}
+
+impl MeshInput {
+    fn options(&self) -> ImportOptions {
+        ImportOptions { format: self.format, allow_outside_files: self.allow_outside_files }
+    }
 }
 
 /// Grouping parameters (METHOD.md §3); angles in degrees.
@@ -148,7 +157,7 @@ fn open_chunk_file(path: &Path) -> strata::error::Result<format::Reader<std::fs:
 }
 
 fn load(input: &MeshInput) -> Result<strata::Imported> {
-    let imported = import(&input.mesh, input.format)?;
+    let imported = import_with(&input.mesh, &input.options())?;
     for w in &imported.warnings {
         eprintln!("warning: {}: {w}", input.mesh.display());
     }

@@ -70,7 +70,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     } else {
         anyhow::ensure!(a.color == RenderColor::Plain, "--color groups and levels need a .strata file");
-        let m = load(&MeshInput { mesh: a.input.clone(), format: None })?.mesh;
+        let m = load(&MeshInput { mesh: a.input.clone(), format: None, allow_outside_files: false })?.mesh;
         let (min, max) = m.bounds().context("empty mesh")?;
         let camera = render_camera(&a, min, max)?;
         // Corner normals become vertices of their own; without them, faces are flat.

@@ -13,10 +13,16 @@
 //!
 //! Accessors are read by one bounds-checked reader here rather than the gltf crate's iterators:
 //! those read POSITION and NORMAL as f32 whatever the component type (KHR_mesh_quantization
-//! stores them as integers) and index out of bounds on empty or short accessors.
+//! stores them as integers) and index out of bounds on empty or short accessors. The reader also
+//! checks strides and offsets against element sizes, so that no element is read from bytes that
+//! belong to another.
+//!
+//! External buffers are read only from the glTF file's folder, unless
+//! [`ImportOptions::allow_outside_files`]. Images are never read: materials keep their names.
 
+use super::ImportOptions;
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::{coordinate_problem, Material, Mesh};
 use base64::Engine;
 use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -24,7 +30,7 @@ use gltf::json;
 use gltf::mesh::{Mode, Semantic};
 use std::borrow::Cow;
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Component, Path};
 
 /// Required extensions whose data strata cannot decode.
 const UNDECODABLE: &[&str] = &["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression"];
@@ -33,9 +39,10 @@ const HANDLED: &[&str] = &["KHR_mesh_quantization", "KHR_texture_transform"];
 /// Required extensions that change only shading, which strata does not keep.
 const APPEARANCE_ONLY: &[&str] = &["KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif", "KHR_lights_punctual"];
 
-/// Read a glTF or GLB file into a raw, uncleaned mesh.
-pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+/// Read a glTF or GLB file into a raw, uncleaned mesh. External buffers must lie in the file's
+/// folder unless `options.allow_outside_files`.
+pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
+    let bytes = super::read_file(path)?;
     let glb = bytes.starts_with(b"glTF");
     let (json_bytes, bin) = if glb { split_glb(path, &bytes)? } else { (&bytes[..], None) };
     let root = parse_json(path, json_bytes, glb)?;
@@ -57,7 +64,8 @@ pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     if skipped > 0 {
         warnings.push(format!("{skipped} point or line primitives skipped"));
     }
-    let buffers = Buffers::load(path, &doc, bin, bytes.len(), primitives.iter().map(|(_, p, _)| p))?;
+    let used = primitives.iter().map(|(_, p, _)| p);
+    let buffers = Buffers::load(path, &doc, bin, bytes.len(), used, options.allow_outside_files)?;
 
     let mut builder = Builder::new(&doc);
     for (mesh_index, prim, world) in &primitives {
@@ -122,6 +130,9 @@ fn split_glb<'a>(path: &Path, bytes: &'a [u8]) -> Result<(&'a [u8], Option<&'a [
 fn parse_json(path: &Path, bytes: &[u8], glb: bool) -> Result<json::Root> {
     let bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
     json::Root::from_slice(bytes).map_err(|e| {
+        if let Some(why) = super::utf16_hint(bytes) {
+            return Error::invalid(path, None, why);
+        }
         let text = e.to_string();
         let message = format!("invalid glTF JSON: {}", text.rsplit_once(" at line ").map_or(text.as_str(), |(m, _)| m));
         match (e.line(), glb) {
@@ -161,8 +172,8 @@ fn check_extensions(path: &Path, root: &json::Root, warnings: &mut Vec<String>) 
     Ok(())
 }
 
-/// The gltf crate's validation, minus what this reader handles itself (required extensions) or
-/// does not need (POSITION min/max).
+/// The gltf crate's validation, minus what this reader handles itself (required extensions,
+/// byteStride) or does not need (POSITION min/max).
 fn validate(path: &Path, root: &json::Root) -> Result<()> {
     use json::validation::{Error as Problem, Validate};
     // The validator indexes the POSITION accessor unchecked: check attribute references first.
@@ -181,7 +192,8 @@ fn validate(path: &Path, root: &json::Root) -> Result<()> {
     root.validate(root, json::Path::new, &mut |at: &dyn Fn() -> json::Path, problem| {
         let at = at().to_string();
         let ignored = (problem == Problem::Unsupported && at.starts_with("extensionsRequired"))
-            || (at.contains("\"POSITION\"") && (at.ends_with(".min") || at.ends_with(".max")));
+            || (at.contains("\"POSITION\"") && (at.ends_with(".min") || at.ends_with(".max")))
+            || at.ends_with(".byteStride");
         if !ignored {
             problems.push((at, problem));
         }
@@ -248,6 +260,7 @@ impl<'a> Buffers<'a> {
         bin: Option<&'a [u8]>,
         file_size: usize,
         primitives: impl Iterator<Item = &'d gltf::Primitive<'d>>,
+        allow_outside: bool,
     ) -> Result<Self> {
         let mut needed = vec![false; doc.buffers().count()];
         for prim in primitives {
@@ -276,7 +289,7 @@ impl<'a> Buffers<'a> {
                 gltf::buffer::Source::Bin => Cow::Borrowed(bin.ok_or_else(|| {
                     Error::at_element(path, &element, "refers to the GLB binary chunk, but there is none")
                 })?),
-                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri)?),
+                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri, allow_outside)?),
             };
             if bytes.len() < buffer.length() {
                 return Err(Error::at_element(
@@ -306,15 +319,16 @@ impl<'a> Buffers<'a> {
     }
 
     /// Decode every element of an accessor (sparse substitutions applied); `decode` gets exactly
-    /// one element's bytes.
-    fn read<T>(&self, a: &gltf::Accessor, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>> {
+    /// one element's bytes. Vertex attributes (`packed` None) step by their view's byteStride;
+    /// data glTF stores tightly packed is named by `packed` (e.g. "indices").
+    fn read<T>(&self, a: &gltf::Accessor, packed: Option<&str>, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>> {
         let err = |message: String| Error::at_element(self.path, format!("accessor {}", a.index()), message);
         let (count, size) = (a.count(), a.size());
         let mut out = Vec::new();
         match a.view() {
             Some(view) => {
                 let bytes = self.view(&view)?;
-                let stride = view.stride().unwrap_or(size);
+                let stride = stride(a, &view, packed).map_err(err)?;
                 let end = count
                     .checked_sub(1)
                     .map_or(Some(0), |last| last.checked_mul(stride)?.checked_add(a.offset())?.checked_add(size));
@@ -342,6 +356,8 @@ impl<'a> Buffers<'a> {
             let k = sparse.count();
             let (indices, values) = (sparse.indices(), sparse.values());
             let index_size = indices.index_type().size();
+            check_packed(&indices.view(), index_size, "sparse indices").map_err(err)?;
+            check_packed(&values.view(), size, "sparse values").map_err(err)?;
             let index_bytes = slice(self.view(&indices.view())?, indices.offset(), k, index_size)
                 .ok_or_else(|| err(format!("{k} sparse indices overrun their buffer view")))?;
             let value_bytes = slice(self.view(&values.view())?, values.offset(), k, size)
@@ -367,7 +383,7 @@ impl<'a> Buffers<'a> {
             ));
         }
         let (ty, normalized) = (a.data_type(), a.normalized());
-        self.read(a, |b| std::array::from_fn(|c| component(b, c, ty, normalized)))
+        self.read(a, None, |b| std::array::from_fn(|c| component(b, c, ty, normalized)))
     }
 
     fn indices(&self, a: &gltf::Accessor) -> Result<Vec<u32>> {
@@ -380,7 +396,7 @@ impl<'a> Buffers<'a> {
                 format!("indices must be unsigned integer scalars, are {:?} {:?}", a.data_type(), a.dimensions()),
             ));
         }
-        self.read(a, uint)
+        self.read(a, Some("indices"), uint)
     }
 
     fn colors(&self, a: &gltf::Accessor) -> Result<Vec<[u8; 4]>> {
@@ -394,6 +410,78 @@ impl<'a> Buffers<'a> {
         } else {
             Ok(self.floats::<4>(a, "COLOR_0")?.into_iter().map(|c| c.map(to_u8)).collect())
         }
+    }
+}
+
+/// The step between elements of accessor `a` in `view`, checked so that elements neither overlap
+/// nor straddle a stride: the view's byteStride for a vertex attribute, the element size for data
+/// glTF stores tightly packed (`packed` names it, e.g. "indices").
+///
+/// glTF also wants a byteStride that is a multiple of 4 within 4..=252, and offsets that are
+/// multiples of the component size: alignment and limits for GPU vertex fetch. Files that break
+/// only those rules are accepted (a byteStride of 0 meaning tightly packed, as the gltf crate reads
+/// it), because this reader decodes every component from bytes: they read exactly as their writer
+/// meant, and refusing them would only lose a model whose data is clear.
+fn stride(a: &gltf::Accessor, view: &gltf::buffer::View, packed: Option<&str>) -> std::result::Result<usize, String> {
+    let (offset, size) = (a.offset(), a.size());
+    if let Some(what) = packed {
+        check_packed(view, size, what)?;
+        return Ok(size);
+    }
+    let Some(stride) = view.stride() else { return Ok(size) };
+    let (dims, ty) = (dimensions_name(a.dimensions()), component_name(a.data_type()));
+    let element = format!("{size}-byte elements ({dims} of {ty})");
+    if stride < size {
+        return Err(format!(
+            "buffer view {} has byteStride {stride}, less than the accessor's {element}: elements would overlap",
+            view.index()
+        ));
+    }
+    // An offset past a whole stride starts at a later element; one that leaves less than an
+    // element before the next stride would read each element across two.
+    if offset % stride + size > stride {
+        return Err(format!(
+            "byteOffset {offset} puts the accessor's {element} across the byteStride {stride} of buffer view {}: \
+             each would run into the next",
+            view.index()
+        ));
+    }
+    Ok(stride)
+}
+
+/// Check that `view` does not give tightly packed data (`what`) a byteStride other than its
+/// element size, which glTF forbids and which would read differently with and without it.
+fn check_packed(view: &gltf::buffer::View, size: usize, what: &str) -> std::result::Result<(), String> {
+    match view.stride() {
+        Some(stride) if stride != size => Err(format!(
+            "{what}: buffer view {} has byteStride {stride}, but glTF stores {what} tightly packed \
+             ({size}-byte elements); the view must not set byteStride",
+            view.index()
+        )),
+        _ => Ok(()),
+    }
+}
+
+fn component_name(ty: DataType) -> &'static str {
+    match ty {
+        DataType::I8 => "byte",
+        DataType::U8 => "unsigned byte",
+        DataType::I16 => "short",
+        DataType::U16 => "unsigned short",
+        DataType::U32 => "unsigned int",
+        DataType::F32 => "float",
+    }
+}
+
+fn dimensions_name(d: Dimensions) -> &'static str {
+    match d {
+        Dimensions::Scalar => "SCALAR",
+        Dimensions::Vec2 => "VEC2",
+        Dimensions::Vec3 => "VEC3",
+        Dimensions::Vec4 => "VEC4",
+        Dimensions::Mat2 => "MAT2",
+        Dimensions::Mat3 => "MAT3",
+        Dimensions::Mat4 => "MAT4",
     }
 }
 
@@ -425,8 +513,9 @@ fn component(b: &[u8], c: usize, ty: DataType, normalized: bool) -> f32 {
     }
 }
 
-/// Read an external or `data:` URI, relative to the glTF file.
-fn load_uri(path: &Path, element: &str, uri: &str) -> Result<Vec<u8>> {
+/// Read an external or `data:` URI, relative to the glTF file. A file name must stay inside the
+/// glTF file's folder unless `allow_outside`.
+fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool) -> Result<Vec<u8>> {
     if let Some(data) = uri.strip_prefix("data:") {
         let Some((header, payload)) = data.split_once(',') else {
             return Err(Error::at_element(path, element, "malformed data URI (no comma)"));
@@ -451,8 +540,41 @@ fn load_uri(path: &Path, element: &str, uri: &str) -> Result<Vec<u8>> {
         ));
     }
     let name = String::from_utf8(percent_decode(uri)).unwrap_or_else(|_| uri.to_string());
-    let file = path.parent().unwrap_or(Path::new("")).join(name);
+    let folder = path.parent().unwrap_or(Path::new(""));
+    if !allow_outside && !stays_inside(Path::new(&name)) {
+        let decoded = if name == uri { String::new() } else { format!(" ({name})") };
+        let shown = if folder.as_os_str().is_empty() { Path::new(".") } else { folder };
+        return Err(Error::at_element(
+            path,
+            element,
+            format!(
+                "uri '{uri}'{decoded} points outside the model's folder {}; strata reads only files \
+                 inside it unless given --allow-outside-files",
+                shown.display()
+            ),
+        ));
+    }
+    let file = folder.join(name);
     std::fs::read(&file).map_err(|e| Error::at_element(path, element, format!("cannot read {}: {e}", file.display())))
+}
+
+/// Whether a relative file name stays inside the folder it is resolved against, by its text alone:
+/// no root or drive, and no `..` that climbs above the folder. Links inside the folder are
+/// followed: placing them there is the folder owner's choice.
+fn stays_inside(name: &Path) -> bool {
+    let mut depth = 0usize;
+    for part in name.components() {
+        match part {
+            Component::Prefix(_) | Component::RootDir => return false,
+            Component::ParentDir => match depth.checked_sub(1) {
+                Some(d) => depth = d,
+                None => return false,
+            },
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    true
 }
 
 /// Decode `%XX` escapes; anything else passes through.
@@ -546,10 +668,16 @@ impl Builder {
         let element = format!("mesh {mesh_index} primitive {}", prim.index());
         let err = |message: String| Error::at_element(path, &element, message);
 
-        let positions = match prim.get(&Semantic::Positions) {
-            Some(a) => buffers.floats::<3>(&a, "POSITION")?,
+        let positions: Vec<Vec3> = match prim.get(&Semantic::Positions) {
+            Some(a) => buffers.floats::<3>(&a, "POSITION")?.into_iter().map(|p| world.transform_point3(p.into())),
             None => return Err(err("no POSITION attribute".into())),
-        };
+        }
+        .collect();
+        for (i, p) in positions.iter().enumerate() {
+            if let Some(problem) = coordinate_problem(p.as_dvec3().to_array()) {
+                return Err(err(format!("vertex {i}: {problem}")));
+            }
+        }
         let n = positions.len();
         let base = self.mesh.positions.len();
         if base + n > u32::MAX as usize {
@@ -582,7 +710,9 @@ impl Builder {
                 buffers
                     .floats::<3>(&a, "NORMAL")?
                     .into_iter()
-                    .map(|v| (normal_matrix * Vec3::from(v)).normalize_or_zero())
+                    .map(Vec3::from)
+                    // A NaN or infinite normal stays so, for the import to replace and report.
+                    .map(|v| if v.is_finite() { (normal_matrix * v).normalize_or_zero() } else { v })
                     .collect::<Vec<_>>(),
             ),
             None => None,
@@ -612,7 +742,7 @@ impl Builder {
         };
 
         let m = &mut self.mesh;
-        m.positions.extend(positions.into_iter().map(|p| world.transform_point3(Vec3::from(p))));
+        m.positions.extend(positions);
         let flip = linear.determinant() < 0.0;
         let first_face = m.triangles.len();
         for t in triangles {
@@ -771,7 +901,7 @@ mod tests {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", serde_json::to_vec_pretty(doc).unwrap());
         let mut warnings = Vec::new();
-        let mesh = read(&path, &mut warnings);
+        let mesh = read(&path, &ImportOptions::default(), &mut warnings);
         if let Ok(m) = &mesh {
             m.validate().unwrap();
         }
@@ -893,6 +1023,40 @@ mod tests {
         assert_eq!(&mesh.uvs[..3], &[Vec2::Y, Vec2::X, Vec2::ZERO]);
     }
 
+    /// A document whose POSITION accessor holds `FIVE[..3]` at `offset + i * stride` in a view of
+    /// that stride, the bytes between them 0xff.
+    fn strided_positions(stride: usize, offset: usize) -> Value {
+        let mut d = Doc::default();
+        let mut bytes = vec![0xff; offset + 2 * stride.max(12) + 12];
+        for (i, p) in FIVE[..3].iter().enumerate() {
+            let at = offset + i * stride.max(12);
+            bytes[at..at + 12].copy_from_slice(&p.map(f32::to_le_bytes).concat());
+        }
+        let p = d.accessor(&bytes, 5126, 3, "VEC3", json!({"byteOffset": offset}));
+        d.views[0]["byteStride"] = json!(stride);
+        single(&d, json!({"attributes": {"POSITION": p}}))
+    }
+
+    #[test]
+    fn strides_must_keep_elements_apart_but_need_not_be_aligned() {
+        for (stride, offset) in [(12, 0), (16, 4), (14, 2), (256, 0), (0, 0), (12, 24)] {
+            let mesh = read_json(&strided_positions(stride, offset)).0.unwrap_or_else(|e| panic!("{stride}: {e}"));
+            assert_eq!(mesh.positions, FIVE[..3].iter().map(|&p| Vec3::from(p)).collect::<Vec<_>>(), "{offset}");
+        }
+        let refused = [(4, 0, "byteStride 4, less"), (8, 0, "byteStride 8, less"), (16, 8, "byteOffset 8")];
+        for (stride, offset, what) in refused {
+            let e = message(read_json(&strided_positions(stride, offset)).0);
+            assert!(e.contains("accessor 0") && e.contains("buffer view 0") && e.contains(what), "{e}");
+        }
+        // One-byte UVs two bytes apart read correctly, though glTF wants strides of 4 or more.
+        let mut d = Doc::default();
+        let p = d.positions(&FIVE[..3]);
+        let uv = d.accessor(&[0, 255, 255, 0, 0, 0], 5121, 3, "VEC2", json!({"normalized": true}));
+        d.views[1]["byteStride"] = json!(2);
+        let mesh = read_json(&single(&d, json!({"attributes": {"POSITION": p, "TEXCOORD_0": uv}}))).0.unwrap();
+        assert_eq!(&mesh.uvs[..3], &[Vec2::Y, Vec2::X, Vec2::ZERO]);
+    }
+
     #[test]
     fn sparse_accessors_replace_base_values() {
         let mut d = Doc::default();
@@ -959,13 +1123,39 @@ mod tests {
         doc["buffers"][0]["uri"] = json!("my%20buffer.bin");
         let dir = TempDir::new();
         let gltf = dir.write("m.gltf", serde_json::to_vec(&doc).unwrap());
-        let missing = message(read(&gltf, &mut Vec::new()));
+        let missing = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(missing.contains("buffer 0") && missing.contains("my buffer.bin"), "{missing}");
         dir.write("my buffer.bin", &d.bin[..d.bin.len() - 1]);
-        let short = message(read(&gltf, &mut Vec::new()));
+        let short = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(short.contains("fewer than its byteLength"), "{short}");
         dir.write("my buffer.bin", &d.bin);
-        assert_eq!(read(&gltf, &mut Vec::new()).unwrap().face_count(), 1);
+        assert_eq!(read(&gltf, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 1);
+    }
+
+    #[test]
+    fn file_names_climbing_out_of_the_folder_are_recognised_by_their_text() {
+        for inside in ["a.bin", "./a.bin", "sub/a.bin", "sub/../a.bin", "sub/./../sub/a.bin", "..a.bin", "a..b"] {
+            assert!(stays_inside(Path::new(inside)), "{inside}");
+        }
+        for outside in ["../a.bin", "sub/../../a.bin", "./../a.bin", "/etc/hostname", "sub/../../sub/a.bin"] {
+            assert!(!stays_inside(Path::new(outside)), "{outside}");
+        }
+    }
+
+    #[test]
+    fn buffers_outside_the_folder_need_permission() {
+        let mut d = Doc::default();
+        let p = d.positions(&FIVE[..3]);
+        let mut doc = single(&d, json!({"attributes": {"POSITION": p}}));
+        doc["buffers"][0]["uri"] = json!("../m.bin");
+        let dir = TempDir::new();
+        dir.write("m.bin", &d.bin);
+        std::fs::create_dir_all(dir.0.join("model")).unwrap();
+        let gltf = dir.write("model/m.gltf", serde_json::to_vec(&doc).unwrap());
+        let e = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
+        assert!(e.contains("buffer 0") && e.contains("'../m.bin'") && e.contains("outside"), "{e}");
+        let allowed = ImportOptions { allow_outside_files: true, ..ImportOptions::default() };
+        assert_eq!(read(&gltf, &allowed, &mut Vec::new()).unwrap().face_count(), 1);
     }
 
     #[test]
@@ -1019,7 +1209,7 @@ mod tests {
     fn bad_json_reports_line_and_column() {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", "{\n  \"asset\": {\"version\": \"2.0\"},\n  \"meshes\": [,]\n}\n");
-        let e = read(&path, &mut Vec::new()).unwrap_err();
+        let e = read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap_err();
         assert_eq!(e.location(), Some(&Location::Line(3)));
         assert!(e.to_string().contains("column"), "{e}");
     }
@@ -1057,15 +1247,15 @@ mod tests {
         let bytes = glb(&d, single(&d, json!({"attributes": {"POSITION": p}, "indices": i, "mode": 5})));
         let dir = TempDir::new();
         let path = dir.write("m.glb", &bytes);
-        assert_eq!(read(&path, &mut Vec::new()).unwrap().face_count(), 3);
+        assert_eq!(read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 3);
         for len in 0..bytes.len() {
             dir.write("m.glb", &bytes[..len]);
-            assert!(read(&path, &mut Vec::new()).is_err(), "prefix of {len} bytes");
+            assert!(read(&path, &ImportOptions::default(), &mut Vec::new()).is_err(), "prefix of {len} bytes");
         }
         let mut small_header = bytes.clone();
         small_header[8..12].copy_from_slice(&4u32.to_le_bytes());
         dir.write("m.glb", &small_header);
-        assert!(message(read(&path, &mut Vec::new())).contains("JSON"));
+        assert!(message(read(&path, &ImportOptions::default(), &mut Vec::new())).contains("JSON"));
     }
 
     /// A document using most of what the reader handles: strips, sparse positions, normals,

@@ -1,14 +1,17 @@
 //! Import OBJ, glTF/GLB and PLY files into a cleaned [`Mesh`].
 //!
 //! Each format module reads its file into a raw `Mesh` (positions not yet welded, corner arrays
-//! filled or empty); [`import`] then welds and cleans it, and reports what cleaning removed.
+//! filled or empty); [`import_with`] then refuses unusable positions (NaN, infinite, or beyond
+//! [`crate::mesh::MAX_COORDINATE`]), replaces NaN or infinite normals and UVs with a warning, welds
+//! and cleans the mesh, and reports what cleaning removed.
 
 pub mod gltf;
 pub mod obj;
 pub mod ply;
 
 use crate::error::{Error, Result};
-use crate::mesh::{CleanReport, Mesh};
+use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
+use glam::Vec2;
 use std::path::Path;
 use std::time::Instant;
 
@@ -34,6 +37,17 @@ impl Format {
     }
 }
 
+/// How to import a file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// Read as this format whatever the extension.
+    pub format: Option<Format>,
+    /// Let a glTF file read buffers outside its own folder (an absolute path, or `..` climbing
+    /// above the folder, in a buffer uri). Off by default, so that a model from elsewhere cannot
+    /// make strata read other files.
+    pub allow_outside_files: bool,
+}
+
 /// An imported, cleaned mesh and what happened on the way.
 #[derive(Clone, Debug)]
 pub struct Imported {
@@ -48,25 +62,70 @@ pub struct Imported {
     pub import_ms: f64,
 }
 
-/// Read a mesh file, choosing the format by extension unless `format` is given.
+/// Read a whole mesh file. An empty one is an error that says so, rather than whatever its
+/// format's parser makes of no bytes.
+fn read_file(path: &Path) -> Result<Vec<u8>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(Error::invalid(path, None, EMPTY));
+    }
+    Ok(bytes)
+}
+
+const EMPTY: &str = "the file is empty (0 bytes)";
+
+/// If `bytes` look like UTF-16 text, an error message saying so: they start with a UTF-16 byte
+/// order mark, or have NUL in every other byte, as ASCII text saved as UTF-16 without a mark does.
+/// Text formats are read as UTF-8 (or ASCII), where neither can occur.
+fn utf16_hint(bytes: &[u8]) -> Option<String> {
+    let why = match bytes {
+        [0xff, 0xfe, ..] => "it starts with the UTF-16 little-endian byte order mark FF FE".to_string(),
+        [0xfe, 0xff, ..] => "it starts with the UTF-16 big-endian byte order mark FE FF".to_string(),
+        _ => {
+            let sample = &bytes[..bytes.len().min(1024) & !1];
+            let pairs = sample.len() / 2;
+            let nul = |parity: usize| sample.iter().skip(parity).step_by(2).filter(|&&b| b == 0).count();
+            let (even, odd) = (nul(0), nul(1));
+            if pairs < 2 || even.min(odd) * 4 > pairs || even.max(odd) * 4 < 3 * pairs {
+                return None;
+            }
+            format!("{} of its first {} bytes are NUL, every other one", even + odd, sample.len())
+        }
+    };
+    Some(format!("the file looks UTF-16 encoded ({why}); strata reads text as UTF-8: re-save it as UTF-8"))
+}
+
+/// Read a mesh file with default options, choosing the format by extension unless `format` is given.
 pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
+    import_with(path, &ImportOptions { format, ..ImportOptions::default() })
+}
+
+/// Read a mesh file, choosing the format by extension unless the options give one.
+pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     let start = Instant::now();
     crate::atomic::protect(path);
-    let format = match format.or_else(|| Format::from_path(path)) {
+    let format = match options.format.or_else(|| Format::from_path(path)) {
         Some(f) => f,
         None => {
             return Err(Error::invalid(path, None, "unknown mesh format: use a .obj, .gltf, .glb or .ply file, or --format"))
         }
     };
     let mut warnings = Vec::new();
-    let raw = match format {
+    let mut raw = match format {
         Format::Obj => obj::read(path, &mut warnings)?,
-        Format::Gltf => gltf::read(path, &mut warnings)?,
+        Format::Gltf => gltf::read(path, options, &mut warnings)?,
         Format::Ply => ply::read(path, &mut warnings)?,
     };
     if let Err(e) = raw.validate() {
         return Err(Error::invalid(path, None, format!("internal import error: {e}")));
     }
+    // Readers check positions where they can name a line or primitive; this catches the rest.
+    for (i, p) in raw.positions.iter().enumerate() {
+        if let Some(problem) = coordinate_problem(p.as_dvec3().to_array()) {
+            return Err(Error::at_element(path, format!("vertex {i}"), problem));
+        }
+    }
+    replace_non_finite_corners(&mut raw, &mut warnings);
     let source_faces = raw.face_count();
     let (mesh, cleaned) = raw.clean().map_err(|e| {
         Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite")
@@ -75,4 +134,77 @@ pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
     Ok(Imported { mesh, source_faces, cleaned, warnings, import_ms: start.elapsed().as_secs_f64() * 1e3 })
+}
+
+/// Replace NaN or infinite corner normals by their face's normal and such UVs by (0, 0), with a
+/// warning per attribute. Unlike a position, neither shapes the mesh: a normal follows from the
+/// positions (writers emit NaN ones for degenerate faces), and a UV only places a texture, so the
+/// file stays usable, and the warning says what changed.
+fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
+    let mut normals = 0;
+    for (c, n) in mesh.normals.iter_mut().enumerate() {
+        if !n.is_finite() {
+            *n = triangle_cross(&mesh.positions, &mesh.triangles[c / 3]).normalize_or_zero().as_vec3();
+            normals += 1;
+        }
+    }
+    let mut uvs = 0;
+    for uv in mesh.uvs.iter_mut().filter(|uv| !uv.is_finite()) {
+        *uv = Vec2::ZERO;
+        uvs += 1;
+    }
+    match normals {
+        0 => {}
+        1 => warnings.push("1 corner normal was NaN or infinite and got its face's normal".into()),
+        n => warnings.push(format!("{n} corner normals were NaN or infinite and got their face's normal")),
+    }
+    match uvs {
+        0 => {}
+        1 => warnings.push("1 corner UV was NaN or infinite and got UV (0, 0)".into()),
+        n => warnings.push(format!("{n} corner UVs were NaN or infinite and got UV (0, 0)")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn utf16(text: &str, big: bool) -> Vec<u8> {
+        text.encode_utf16().flat_map(|u| if big { u.to_be_bytes() } else { u.to_le_bytes() }).collect()
+    }
+
+    #[test]
+    fn utf16_text_is_recognised_and_utf8_is_not() {
+        let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        let marked = [[0xff, 0xfe].as_slice(), &utf16(text, false)].concat();
+        assert!(utf16_hint(&marked).unwrap().contains("FF FE"));
+        assert!(utf16_hint(&[0xfe, 0xff, 0, b'v']).unwrap().contains("FE FF"));
+        for big in [false, true] {
+            assert!(utf16_hint(&utf16(text, big)).unwrap().contains("NUL"), "{big}");
+        }
+        for plain in [text.as_bytes(), "ply\nformat ascii 1.0\n".as_bytes(), b"\0\0", b"", &[0u8; 64], &[7u8; 64]] {
+            assert_eq!(utf16_hint(plain), None, "{plain:?}");
+        }
+    }
+
+    #[test]
+    fn non_finite_normals_and_uvs_are_replaced_and_reported() {
+        let mut mesh = Mesh {
+            positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+            triangles: vec![[0, 1, 2], [0, 2, 1]],
+            normals: vec![glam::Vec3::NAN, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::INFINITY, glam::Vec3::X],
+            uvs: vec![Vec2::ONE, Vec2::new(f32::NAN, 0.0), Vec2::ONE, Vec2::ONE, Vec2::ONE, Vec2::ONE],
+            ..Mesh::default()
+        };
+        let mut warnings = Vec::new();
+        replace_non_finite_corners(&mut mesh, &mut warnings);
+        assert_eq!(mesh.normals[0], glam::Vec3::Z);
+        assert_eq!(mesh.normals[4], -glam::Vec3::Z);
+        assert_eq!(mesh.normals[5], glam::Vec3::X);
+        assert_eq!(mesh.uvs[1], Vec2::ZERO);
+        assert_eq!(warnings, [
+            "2 corner normals were NaN or infinite and got their face's normal",
+            "1 corner UV was NaN or infinite and got UV (0, 0)",
+        ]);
+    }
 }

@@ -10,7 +10,7 @@
 //! its line number, and tobj only ever sees input that passed.
 
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::{coordinate_problem, Material, Mesh};
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 use std::cell::RefCell;
@@ -24,10 +24,13 @@ const USEMTL_TABLE: &str = "\0strata-usemtl-names";
 
 /// Read an OBJ file into a raw, uncleaned mesh.
 pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_file(path)?;
+    if let Some(why) = super::utf16_hint(&bytes) {
+        return Err(Error::invalid(path, None, why));
+    }
     let text = String::from_utf8_lossy(&bytes);
     if text.trim().is_empty() {
-        return Err(Error::invalid(path, None, "empty file"));
+        return Err(Error::invalid(path, None, "the file holds only whitespace"));
     }
     let scan = scan(&text).map_err(|(line, what)| Error::at_line(path, line, what))?;
     if scan.faces == 0 {
@@ -156,6 +159,7 @@ struct ForwardRef {
 }
 
 const KIND_NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+const KIND_PLURALS: [&str; 3] = ["vertices", "texture coordinates", "normals"];
 
 /// Check every line tobj would act on; on the first bad one return its 1-based number and what
 /// is wrong with it.
@@ -167,24 +171,24 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
         let mut words = line.split_ascii_whitespace();
         match words.next() {
             Some("v") => {
-                let mut xyz = [0f32; 3];
+                let mut xyz = [0f64; 3];
                 for c in &mut xyz {
                     *c = number(words.next(), "v", "3 coordinates").map_err(|e| (n, e))?;
                 }
-                if !xyz.iter().all(|c| c.is_finite()) {
-                    return Err((n, "vertex coordinate is NaN or infinite".into()));
+                if let Some(problem) = coordinate_problem(xyz) {
+                    return Err((n, problem));
                 }
                 let rest = [words.next(), words.next(), words.next(), words.next()];
                 match rest {
                     [None, ..] => {}
                     [Some(w), None, ..] => {
-                        if number(Some(w), "v", "a w weight").map_err(|e| (n, e))? == 0.0 {
+                        if number::<f32>(Some(w), "v", "a w weight").map_err(|e| (n, e))? == 0.0 {
                             return Err((n, "vertex weight w is 0".into()));
                         }
                     }
                     [Some(r), Some(g), Some(b), None] => {
                         for c in [r, g, b] {
-                            number(Some(c), "v", "an RGB color").map_err(|e| (n, e))?;
+                            number::<f32>(Some(c), "v", "an RGB color").map_err(|e| (n, e))?;
                         }
                         s.colored += 1;
                     }
@@ -197,13 +201,13 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
             }
             Some("vt") => {
                 for _ in 0..2 {
-                    number(words.next(), "vt", "2 coordinates").map_err(|e| (n, e))?;
+                    number::<f32>(words.next(), "vt", "2 coordinates").map_err(|e| (n, e))?;
                 }
                 s.texcoords += 1;
             }
             Some("vn") => {
                 for _ in 0..3 {
-                    number(words.next(), "vn", "3 components").map_err(|e| (n, e))?;
+                    number::<f32>(words.next(), "vn", "3 components").map_err(|e| (n, e))?;
                 }
                 s.normals += 1;
             }
@@ -266,17 +270,15 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
     }
     let totals = [s.positions, s.texcoords, s.normals];
     if let Some(f) = forward.iter().find(|f| f.index > totals[f.kind]) {
-        let what = KIND_NAMES[f.kind];
-        return Err((
-            f.line,
-            format!("face {what} index {} out of range: the file has {} {what}s", f.index, totals[f.kind]),
-        ));
+        let (what, total) = (KIND_NAMES[f.kind], totals[f.kind]);
+        let counted = if total == 1 { what } else { KIND_PLURALS[f.kind] };
+        return Err((f.line, format!("face {what} index {} out of range: the file has {total} {counted}", f.index)));
     }
     Ok(s)
 }
 
 /// Parse one number of a `v`/`vt`/`vn` line, or say what was expected.
-fn number(word: Option<&str>, element: &str, expected: &str) -> std::result::Result<f32, String> {
+fn number<T: std::str::FromStr>(word: Option<&str>, element: &str, expected: &str) -> std::result::Result<T, String> {
     match word {
         None => Err(format!("{element} needs {expected}")),
         Some(w) => w.parse().map_err(|_| format!("{element}: '{w}' is not a number")),

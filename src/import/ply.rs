@@ -5,9 +5,13 @@
 //! positions and optional normals, colors and texture coordinates; `face` polygons are
 //! fan-triangulated and `tristrips` expanded with alternating winding. Every other element is
 //! skipped by its declared types. Vertex attributes are copied onto each triangle corner.
+//!
+//! Ascii records are read one per line, as PLY writes them: a line with more or fewer values than
+//! its record is an error naming the line, and so is a last value that runs into the end of the
+//! file instead of ending in a line end or blank (the file was cut, perhaps inside that number).
 
 use crate::error::{Error, Location, Result};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::{coordinate_problem, Material, Mesh};
 use byteorder::{BigEndian, ByteOrder, LittleEndian};
 use glam::{Vec2, Vec3};
 use std::marker::PhantomData;
@@ -16,7 +20,7 @@ use std::path::Path;
 /// Read a PLY file into a raw, uncleaned mesh: positions as in the file, one triangle list.
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
 pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes, warnings)
 }
 
@@ -130,7 +134,7 @@ struct Header {
 
 fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Header> {
     if bytes.is_empty() {
-        return Err(Error::at_byte(path, 0, "empty file"));
+        return Err(Error::at_byte(path, 0, super::EMPTY));
     }
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -147,7 +151,8 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
         let text = std::str::from_utf8(raw).ok();
         if line == 1 {
             if text.map(str::trim) != Some("ply") {
-                return Err(Error::at_line(path, 1, "not a PLY file: the first line must be 'ply'"));
+                let why = super::utf16_hint(bytes).unwrap_or_else(|| "the first line must be 'ply'".into());
+                return Err(Error::at_line(path, 1, format!("not a PLY file: {why}")));
             }
             continue;
         }
@@ -390,12 +395,36 @@ enum FaultKind {
     Eof,
     Token(String, Scalar),
     Count(i64),
+    /// Ascii: the record's line ended before its last value.
+    LineEnd,
+    /// Ascii: this value runs into the end of the file, so the file was cut inside it.
+    Cut(String),
+    /// Ascii: the record's line holds this many values, more than the record takes.
+    Extra(usize),
 }
 
-fn fault_error(path: &Path, f: Fault, e: &Element, record: u64, p: &Property) -> Error {
-    let what = format!("{} {record} (property {})", e.name, p.name);
+/// The error for a fault in record `record` of element `e`, inside property `p` if known.
+fn fault_error(path: &Path, f: Fault, e: &Element, record: u64, p: Option<&Property>) -> Error {
+    let what = match p {
+        Some(p) => format!("{} {record} (property {})", e.name, p.name),
+        None => format!("{} {record}", e.name),
+    };
     let message = match f.kind {
         FaultKind::Eof => format!("file ends inside {what}"),
+        FaultKind::LineEnd => format!("the line ends inside {what}: ascii PLY holds one record per line"),
+        FaultKind::Cut(token) => format!(
+            "'{token}' in {what} runs into the end of the file: the file looks cut (its last value must be \
+             followed by a line end)"
+        ),
+        FaultKind::Extra(values) => {
+            let n = e.props.len();
+            format!(
+                "element {} has {n} {} but the line has {values} values, more than {what} takes \
+                 (ascii PLY holds one record per line)",
+                e.name,
+                if n == 1 { "property" } else { "properties" }
+            )
+        }
         FaultKind::Token(token, t) => format!("'{token}' is not a valid {} in {what}", t.name()),
         FaultKind::Count(n) if n < 0 => format!("list length {n} in {what} is negative"),
         FaultKind::Count(n) => format!("list length {n} in {what} runs past the end of the file"),
@@ -417,6 +446,12 @@ trait Source {
     fn room(&self, n: u64, t: Scalar) -> bool;
     /// Where the last value read starts.
     fn at(&self) -> Location;
+    /// Move to the start of the next record (ascii: past the line end and any blank lines).
+    fn begin_record(&mut self) {}
+    /// Check that the record just read ends there (ascii: nothing but blanks after it on its line).
+    fn end_record(&mut self) -> Read<()> {
+        Ok(())
+    }
 
     /// A list length, checked against the remaining data.
     fn list_len(&mut self, count: Scalar, item: Scalar) -> Read<usize> {
@@ -512,37 +547,75 @@ impl<B: ByteOrder> Source for Binary<'_, B> {
     }
 }
 
+/// Ascii PLY: one record per line, values separated by blanks. Values are read to their last
+/// byte: one that runs into the end of the file (no line end or blank after it) means the file
+/// was cut inside it.
 struct Ascii<'a> {
     data: &'a [u8],
     pos: usize,
+    /// The line `pos` is on.
     line: usize,
-    token_line: usize,
+    /// The line of the record being read (at the end of the data, of the last one read).
+    record_line: usize,
+}
+
+/// Whitespace inside a line.
+fn is_blank(b: u8) -> bool {
+    matches!(b, b' ' | b'\t' | b'\r' | b'\x0c')
 }
 
 impl<'a> Ascii<'a> {
     fn new(data: &'a [u8], first_line: usize) -> Self {
-        Ascii { data, pos: 0, line: first_line, token_line: first_line }
+        Ascii { data, pos: 0, line: first_line, record_line: first_line }
     }
 
+    fn skip_blanks(&mut self) {
+        let data = self.data;
+        let mut pos = self.pos;
+        while pos < data.len() && is_blank(data[pos]) {
+            pos += 1;
+        }
+        self.pos = pos;
+    }
+
+    /// The next value on the current line.
     fn token(&mut self) -> Read<&'a [u8]> {
-        while let Some(&b) = self.data.get(self.pos).filter(|b| b.is_ascii_whitespace()) {
-            self.line += (b == b'\n') as usize;
-            self.pos += 1;
+        self.skip_blanks();
+        let (data, start) = (self.data, self.pos);
+        match data.get(start) {
+            None => return Err(self.end_of_data()),
+            Some(b'\n') => return Err(Fault { at: self.at(), kind: FaultKind::LineEnd }),
+            Some(_) => {}
         }
-        if self.pos == self.data.len() {
-            // Blame the line of the last value read: the record it starts is incomplete.
-            return Err(Fault { at: self.at(), kind: FaultKind::Eof });
+        let mut end = start + 1;
+        while end < data.len() && !data[end].is_ascii_whitespace() {
+            end += 1;
         }
-        self.token_line = self.line;
-        let start = self.pos;
-        while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
-            self.pos += 1;
-        }
-        Ok(&self.data[start..self.pos])
+        self.pos = end;
+        Ok(&data[start..end])
+    }
+
+    /// The fault of reaching the end of the data: a cut value if the data ends inside one (or
+    /// right after it, without a line end), else a missing one.
+    fn end_of_data(&self) -> Fault {
+        let data = self.data;
+        let value = data.len() - data.iter().rev().take_while(|b| !b.is_ascii_whitespace()).count();
+        let kind = match &data[value..] {
+            [] => FaultKind::Eof,
+            cut => FaultKind::Cut(String::from_utf8_lossy(cut).into_owned()),
+        };
+        Fault { at: self.at(), kind }
     }
 
     fn bad(&self, token: &[u8], t: Scalar) -> Fault {
         Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(token).into_owned(), t) }
+    }
+
+    /// The number of values on the current line.
+    fn values_on_line(&self) -> usize {
+        let start = self.data[..self.pos].iter().rposition(|&b| b == b'\n').map_or(0, |n| n + 1);
+        let end = self.data[self.pos..].iter().position(|&b| b == b'\n').map_or(self.data.len(), |n| self.pos + n);
+        self.data[start..end].split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()).count()
     }
 }
 
@@ -594,7 +667,33 @@ impl Source for Ascii<'_> {
     }
 
     fn at(&self) -> Location {
-        Location::Line(self.token_line)
+        Location::Line(self.record_line)
+    }
+
+    fn begin_record(&mut self) {
+        let data = self.data;
+        let (mut pos, mut line) = (self.pos, self.line);
+        while pos < data.len() && data[pos].is_ascii_whitespace() {
+            line += (data[pos] == b'\n') as usize;
+            pos += 1;
+        }
+        // At the end of the data, errors blame the line of the last record read.
+        if pos < data.len() {
+            self.record_line = line;
+        }
+        (self.pos, self.line) = (pos, line);
+    }
+
+    fn end_record(&mut self) -> Read<()> {
+        self.skip_blanks();
+        match self.data.get(self.pos) {
+            Some(b'\n') => Ok(()),
+            None => match self.end_of_data() {
+                Fault { kind: FaultKind::Eof, .. } => Ok(()),
+                cut => Err(cut),
+            },
+            Some(_) => Err(Fault { at: self.at(), kind: FaultKind::Extra(self.values_on_line()) }),
+        }
     }
 }
 
@@ -635,9 +734,11 @@ impl<'p> Reader<'p> {
                 self.faces(src, e, face)?;
             } else if !e.props.is_empty() {
                 for r in 0..e.count {
+                    src.begin_record();
                     for p in &e.props {
-                        skip_property(src, p).map_err(|f| fault_error(self.path, f, e, r, p))?;
+                        skip_property(src, p).map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
                     }
+                    src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
                 }
             }
         }
@@ -656,22 +757,19 @@ impl<'p> Reader<'p> {
         v[ALPHA] = 255.0;
         let color_float = plan.slot_types.map(|t| t.is_some_and(Scalar::is_float));
         for r in 0..e.count {
+            src.begin_record();
             for (p, slot) in e.props.iter().zip(&plan.slots) {
                 let got = match (p.kind, slot) {
                     (Kind::Scalar(t), Some(s)) => src.value(t).map(|x| v[*s] = x),
                     _ => skip_property(src, p),
                 };
-                got.map_err(|f| fault_error(self.path, f, e, r, p))?;
+                got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
-            let position = Vec3::new(v[X] as f32, v[X + 1] as f32, v[X + 2] as f32);
-            if !position.is_finite() {
-                return Err(Error::at_element(
-                    self.path,
-                    format!("vertex {r}"),
-                    "coordinate is NaN or infinite (or too large for 32-bit floats)",
-                ));
+            src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
+            if let Some(problem) = coordinate_problem([v[X], v[X + 1], v[X + 2]]) {
+                return Err(Error::at_element(self.path, format!("vertex {r}"), problem));
             }
-            self.positions.push(position);
+            self.positions.push(Vec3::new(v[X] as f32, v[X + 1] as f32, v[X + 2] as f32));
             if normals {
                 self.normals.push(Vec3::new(v[NX] as f32, v[NX + 1] as f32, v[NX + 2] as f32));
             }
@@ -698,8 +796,10 @@ impl<'p> Reader<'p> {
         let mut indices: Vec<i64> = Vec::new();
         let mut texcoords: Vec<f64> = Vec::new();
         for r in 0..e.count {
+            src.begin_record();
             if fast {
                 if let Some(t) = src.triangle(face.count_type, face.index_type) {
+                    src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
                     self.polygon(&t, &[], e, r)?;
                     continue;
                 }
@@ -712,8 +812,9 @@ impl<'p> Reader<'p> {
                     Kind::List(c, t) if Some(k) == face.texcoord => read_list(src, c, t, &mut texcoords, |s, t| s.value(t)),
                     _ => skip_property(src, p),
                 };
-                got.map_err(|f| fault_error(self.path, f, e, r, p))?;
+                got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
+            src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
             if face.strips {
                 self.strip(&indices, e, r)?;
             } else {
@@ -1239,6 +1340,32 @@ mod tests {
         let e = err(good.replacen("\n3 2 1 0\n", "\n-3 2 1 0\n", 1).as_bytes());
         assert_eq!(at_line(&e), 14);
         assert!(e.to_string().contains("list length -3"), "{e}");
+    }
+
+    #[test]
+    fn ascii_records_are_one_per_line_and_read_to_the_last_byte() {
+        let good = String::from_utf8(triangle_file(Encoding::Ascii)).unwrap();
+        // Blank lines, trailing blanks and CRLF line ends are fine.
+        for text in [good.replacen("\n1 1 0\n", "\n\n 1 1 0 \t\n\n", 1), good.replace("\n3", "\r\n3"), format!("{good} ")] {
+            assert_eq!(ok(text.as_bytes()).face_count(), 2, "{text}");
+        }
+        // Cut right after the last value, after a blank, and inside a value.
+        for (cut, what) in [(1, "'0' in face 1"), (2, "file ends inside face 1"), (3, "in face 1")] {
+            let e = err(&good.as_bytes()[..good.len() - cut]);
+            assert_eq!(at_line(&e), 14, "{e}");
+            assert!(e.to_string().contains(what), "{e}");
+        }
+        let cases = [
+            ("\n1 1 0\n", "\n1 1 0 5\n", 11, "element vertex has 3 properties but the line has 4 values, more than vertex 1"),
+            ("\n3 2 1 0\n", "\n3 2 1 0 2\n", 14, "element face has 1 property but the line has 5 values, more than face 1"),
+            ("\n1 1 0\n", "\n1 1\n0\n", 11, "the line ends inside vertex 1 (property z)"),
+            ("\n3 0 1 2\n", "\n3 0 1\n2\n", 13, "the line ends inside face 0 (property vertex_indices)"),
+        ];
+        for (from, to, line, what) in cases {
+            let e = err(good.replacen(from, to, 1).as_bytes());
+            assert_eq!(at_line(&e), line, "{e}");
+            assert!(e.to_string().contains(what), "{e}");
+        }
     }
 
     #[test]

@@ -23,7 +23,7 @@ fn fixture() -> &'static PathBuf {
         let out = dir.join("icosphere.strata");
         let input = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/icosphere.obj"));
         let hierarchy = HierarchyParams { cluster_faces: 4, leaf_faces: 16, top_groups: 2, ..HierarchyParams::default() };
-        convert(&input, None, &out, &ConvertOptions { hierarchy, ..ConvertOptions::default() }, &mut Silent).unwrap();
+        convert(&input, &Default::default(), &out, &ConvertOptions { hierarchy, ..ConvertOptions::default() }, &mut Silent).unwrap();
         out
     })
 }
