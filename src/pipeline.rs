@@ -5,7 +5,7 @@ use crate::error::Result;
 use crate::format::WriteSummary;
 use crate::write::{self, WriteOptions};
 use crate::hierarchy::{self, HierarchyParams};
-use crate::import::{import_with, Format, ImportOptions};
+use crate::import::{import_with, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
@@ -112,13 +112,13 @@ pub fn convert(
     lap(&mut times.group_ms);
 
     progress.stage("simplify", levels::expected_levels(mesh.face_count(), h.levels.len(), &opts.levels) as u64);
+    let metres_per_unit = imported.metres_per_unit;
     let lv = levels::build(imported.mesh, &mut h, &opts.levels, &mut |_| progress.step());
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);
-    let is_gltf = import.format.or_else(|| Format::from_path(input)) == Some(Format::Gltf);
     let write_opts = WriteOptions {
-        metres_per_unit: if is_gltf { 1.0 } else { 0.0 },
+        metres_per_unit: metres_per_unit.unwrap_or(0.0),
         params: opts.hierarchy,
         level_ratio: opts.levels.ratio,
         ..WriteOptions::default()

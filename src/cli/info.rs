@@ -31,6 +31,7 @@ pub fn run(a: Args) -> Result<()> {
             "faces": m.face_count(),
             "source_faces": imp.source_faces,
             "materials": m.materials.len(),
+            "metres_per_unit": imp.metres_per_unit,
             "material_names": m.materials.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
             "attributes": attributes,
             "bounds": { "min": lo.to_array(), "max": hi.to_array() },
@@ -49,6 +50,7 @@ pub fn run(a: Args) -> Result<()> {
     println!("faces              {} (of {} read)", m.face_count(), imp.source_faces);
     println!("materials          {} ({})", m.materials.len(), m.materials.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", "));
     println!("attributes         {}", if attributes.is_empty() { "none".to_string() } else { attributes.join(", ") });
+    println!("units              {}", imp.metres_per_unit.map_or("not stated by the file".to_string(), |m| format!("{m} m per unit")));
     println!("bounds             [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
     println!("components         {components}");
     println!("boundary edges     {}", adj.boundary_edges);

@@ -67,11 +67,18 @@ pub struct MeshInput {
     /// OBJ, glTF/GLB or PLY file.
     mesh: PathBuf,
     /// Read as this format whatever the extension.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = format_parser())]
     format: Option<Format>,
     /// Let a glTF file read buffers outside its folder (an absolute path or `..` in a buffer uri).
     #[arg(long)]
     allow_outside_files: bool,
+}
+
+/// `--format`: the names of the importer table.
+fn format_parser() -> impl clap::builder::TypedValueParser<Value = Format> {
+    use clap::builder::TypedValueParser;
+    let names = strata::import::IMPORTERS.iter().map(|i| clap::builder::PossibleValue::new(i.name));
+    clap::builder::PossibleValuesParser::new(names).map(|name: String| Format::by_name(&name).expect("a listed name"))
 }
 
 impl MeshInput {

@@ -20,7 +20,7 @@
 //! External buffers are read only from the glTF file's folder, unless
 //! [`ImportOptions::allow_outside_files`]. Images are never read: materials keep their names.
 
-use super::ImportOptions;
+use super::{ImportOptions, Raw};
 use crate::error::{Error, Result};
 use crate::mesh::{coordinate_problem, Material, Mesh};
 use base64::Engine;
@@ -41,7 +41,12 @@ const APPEARANCE_ONLY: &[&str] = &["KHR_texture_basisu", "EXT_texture_webp", "EX
 
 /// Read a glTF or GLB file into a raw, uncleaned mesh. External buffers must lie in the file's
 /// folder unless `options.allow_outside_files`.
-pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
+pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
+    // glTF's unit is the metre (glTF 2.0 §3.4).
+    read_mesh(path, options, warnings).map(|mesh| Raw { mesh, metres_per_unit: Some(1.0) })
+}
+
+fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
     let bytes = super::read_file(path)?;
     let glb = bytes.starts_with(b"glTF");
     let (json_bytes, bin) = if glb { split_glb(path, &bytes)? } else { (&bytes[..], None) };
@@ -901,7 +906,7 @@ mod tests {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", serde_json::to_vec_pretty(doc).unwrap());
         let mut warnings = Vec::new();
-        let mesh = read(&path, &ImportOptions::default(), &mut warnings);
+        let mesh = read_mesh(&path, &ImportOptions::default(), &mut warnings);
         if let Ok(m) = &mesh {
             m.validate().unwrap();
         }
@@ -1123,13 +1128,13 @@ mod tests {
         doc["buffers"][0]["uri"] = json!("my%20buffer.bin");
         let dir = TempDir::new();
         let gltf = dir.write("m.gltf", serde_json::to_vec(&doc).unwrap());
-        let missing = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
+        let missing = message(read_mesh(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(missing.contains("buffer 0") && missing.contains("my buffer.bin"), "{missing}");
         dir.write("my buffer.bin", &d.bin[..d.bin.len() - 1]);
-        let short = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
+        let short = message(read_mesh(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(short.contains("fewer than its byteLength"), "{short}");
         dir.write("my buffer.bin", &d.bin);
-        assert_eq!(read(&gltf, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 1);
+        assert_eq!(read_mesh(&gltf, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 1);
     }
 
     #[test]
@@ -1152,10 +1157,10 @@ mod tests {
         dir.write("m.bin", &d.bin);
         std::fs::create_dir_all(dir.0.join("model")).unwrap();
         let gltf = dir.write("model/m.gltf", serde_json::to_vec(&doc).unwrap());
-        let e = message(read(&gltf, &ImportOptions::default(), &mut Vec::new()));
+        let e = message(read_mesh(&gltf, &ImportOptions::default(), &mut Vec::new()));
         assert!(e.contains("buffer 0") && e.contains("'../m.bin'") && e.contains("outside"), "{e}");
         let allowed = ImportOptions { allow_outside_files: true, ..ImportOptions::default() };
-        assert_eq!(read(&gltf, &allowed, &mut Vec::new()).unwrap().face_count(), 1);
+        assert_eq!(read_mesh(&gltf, &allowed, &mut Vec::new()).unwrap().face_count(), 1);
     }
 
     #[test]
@@ -1209,7 +1214,7 @@ mod tests {
     fn bad_json_reports_line_and_column() {
         let dir = TempDir::new();
         let path = dir.write("m.gltf", "{\n  \"asset\": {\"version\": \"2.0\"},\n  \"meshes\": [,]\n}\n");
-        let e = read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap_err();
+        let e = read_mesh(&path, &ImportOptions::default(), &mut Vec::new()).unwrap_err();
         assert_eq!(e.location(), Some(&Location::Line(3)));
         assert!(e.to_string().contains("column"), "{e}");
     }
@@ -1247,15 +1252,15 @@ mod tests {
         let bytes = glb(&d, single(&d, json!({"attributes": {"POSITION": p}, "indices": i, "mode": 5})));
         let dir = TempDir::new();
         let path = dir.write("m.glb", &bytes);
-        assert_eq!(read(&path, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 3);
+        assert_eq!(read_mesh(&path, &ImportOptions::default(), &mut Vec::new()).unwrap().face_count(), 3);
         for len in 0..bytes.len() {
             dir.write("m.glb", &bytes[..len]);
-            assert!(read(&path, &ImportOptions::default(), &mut Vec::new()).is_err(), "prefix of {len} bytes");
+            assert!(read_mesh(&path, &ImportOptions::default(), &mut Vec::new()).is_err(), "prefix of {len} bytes");
         }
         let mut small_header = bytes.clone();
         small_header[8..12].copy_from_slice(&4u32.to_le_bytes());
         dir.write("m.glb", &small_header);
-        assert!(message(read(&path, &ImportOptions::default(), &mut Vec::new())).contains("JSON"));
+        assert!(message(read_mesh(&path, &ImportOptions::default(), &mut Vec::new())).contains("JSON"));
     }
 
     /// A document using most of what the reader handles: strips, sparse positions, normals,

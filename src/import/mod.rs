@@ -1,7 +1,8 @@
 //! Import OBJ, glTF/GLB and PLY files into a cleaned [`Mesh`].
 //!
-//! Each format module reads its file into a raw `Mesh` (positions not yet welded, corner arrays
-//! filled or empty); [`import_with`] then refuses unusable positions (NaN, infinite, or beyond
+//! The formats are the rows of [`IMPORTERS`]. Each format module reads its file into a [`Raw`] mesh
+//! (positions not yet welded, corner arrays filled or empty, and the file's units if it states
+//! them); [`import_with`] then refuses unusable positions (NaN, infinite, or beyond
 //! [`crate::mesh::MAX_COORDINATE`]), replaces NaN or infinite normals and UVs with a warning, welds
 //! and cleans the mesh, and reports what cleaning removed.
 
@@ -15,25 +16,83 @@ use glam::Vec2;
 use std::path::Path;
 use std::time::Instant;
 
-/// A mesh file format strata reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-pub enum Format {
-    Obj,
-    Gltf,
-    Ply,
+/// A mesh file format strata reads: its name on the command line, the file name extensions that
+/// select it, and its reader. Adding a format is one row of [`IMPORTERS`] and one module.
+pub struct Importer {
+    /// As `--format` takes it.
+    pub name: &'static str,
+    /// Lower-case, without the dot.
+    pub extensions: &'static [&'static str],
+    pub read: fn(&Path, &ImportOptions, &mut Vec<String>) -> Result<Raw>,
 }
 
+/// Every format strata reads.
+pub static IMPORTERS: &[Importer] = &[
+    Importer { name: "obj", extensions: &["obj"], read: obj::read },
+    Importer { name: "gltf", extensions: &["gltf", "glb"], read: gltf::read },
+    Importer { name: "ply", extensions: &["ply"], read: ply::read },
+];
+
+/// What a format's reader makes of a file: the raw mesh (positions not yet welded, corner arrays
+/// filled or empty) and what the file says of where the model sits in the world.
+#[derive(Clone, Debug)]
+pub struct Raw {
+    pub mesh: Mesh,
+    /// Metres per model unit when the file says (glTF is in metres); `None` when it does not.
+    pub metres_per_unit: Option<f64>,
+}
+
+/// One of the [`IMPORTERS`].
+#[derive(Clone, Copy)]
+pub struct Format(&'static Importer);
+
 impl Format {
-    /// The format a file name's extension implies (`.gltf` and `.glb` are both glTF).
+    /// The format a file name's extension selects (`.gltf` and `.glb` are both glTF).
     pub fn from_path(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        match ext.as_str() {
-            "obj" => Some(Format::Obj),
-            "gltf" | "glb" => Some(Format::Gltf),
-            "ply" => Some(Format::Ply),
-            _ => None,
+        IMPORTERS.iter().find(|i| i.extensions.contains(&ext.as_str())).map(Format)
+    }
+
+    /// The format named `name` (`obj`, `gltf`, `ply`).
+    pub fn by_name(name: &str) -> Option<Format> {
+        IMPORTERS.iter().find(|i| i.name.eq_ignore_ascii_case(name)).map(Format)
+    }
+
+    pub fn name(self) -> &'static str {
+        self.0.name
+    }
+
+    /// The formats' extensions as a list for messages: `.obj, .gltf, .glb or .ply`.
+    pub fn extension_list() -> String {
+        let all: Vec<String> = IMPORTERS.iter().flat_map(|i| i.extensions.iter().map(|e| format!(".{e}"))).collect();
+        match all.split_last() {
+            Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+            _ => all.join(""),
         }
+    }
+}
+
+impl PartialEq for Format {
+    fn eq(&self, other: &Format) -> bool {
+        std::ptr::eq(self.0, other.0)
+    }
+}
+
+impl Eq for Format {}
+
+impl std::fmt::Debug for Format {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0.name)
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Format, String> {
+        Format::by_name(s).ok_or_else(|| {
+            let names: Vec<&str> = IMPORTERS.iter().map(|i| i.name).collect();
+            format!("unknown format '{s}': strata reads {}", names.join(", "))
+        })
     }
 }
 
@@ -58,6 +117,8 @@ pub struct Imported {
     /// Things that did not stop the import but that a user should know (a missing .mtl, skipped
     /// point primitives, ...).
     pub warnings: Vec<String>,
+    /// Metres per model unit when the file says; `None` when it does not (OBJ, PLY).
+    pub metres_per_unit: Option<f64>,
     /// Wall-clock time of reading and cleaning, in milliseconds.
     pub import_ms: f64,
 }
@@ -104,18 +165,11 @@ pub fn import(path: &Path, format: Option<Format>) -> Result<Imported> {
 pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     let start = Instant::now();
     crate::atomic::protect(path);
-    let format = match options.format.or_else(|| Format::from_path(path)) {
-        Some(f) => f,
-        None => {
-            return Err(Error::invalid(path, None, "unknown mesh format: use a .obj, .gltf, .glb or .ply file, or --format"))
-        }
+    let Some(format) = options.format.or_else(|| Format::from_path(path)) else {
+        return Err(Error::invalid(path, None, format!("unknown mesh format: use a {} file, or --format", Format::extension_list())));
     };
     let mut warnings = Vec::new();
-    let mut raw = match format {
-        Format::Obj => obj::read(path, &mut warnings)?,
-        Format::Gltf => gltf::read(path, options, &mut warnings)?,
-        Format::Ply => ply::read(path, &mut warnings)?,
-    };
+    let Raw { mesh: mut raw, metres_per_unit } = (format.0.read)(path, options, &mut warnings)?;
     if let Err(e) = raw.validate() {
         return Err(Error::invalid(path, None, format!("internal import error: {e}")));
     }
@@ -133,7 +187,7 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     if mesh.triangles.is_empty() {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
-    Ok(Imported { mesh, source_faces, cleaned, warnings, import_ms: start.elapsed().as_secs_f64() * 1e3 })
+    Ok(Imported { mesh, source_faces, cleaned, warnings, metres_per_unit, import_ms: start.elapsed().as_secs_f64() * 1e3 })
 }
 
 /// Replace NaN or infinite corner normals by their face's normal and such UVs by (0, 0), with a

@@ -9,6 +9,7 @@
 //! checked line by line here: the first malformed `v`/`vt`/`vn`/`f` line or out-of-range index is reported with
 //! its line number, and tobj only ever sees input that passed.
 
+use super::{ImportOptions, Raw};
 use crate::error::{Error, Result};
 use crate::mesh::{coordinate_problem, Material, Mesh};
 use glam::{Vec2, Vec3};
@@ -23,7 +24,11 @@ use std::path::Path;
 const USEMTL_TABLE: &str = "\0strata-usemtl-names";
 
 /// Read an OBJ file into a raw, uncleaned mesh.
-pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
+pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
+    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None })
+}
+
+fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     let bytes = super::read_file(path)?;
     if let Some(why) = super::utf16_hint(&bytes) {
         return Err(Error::invalid(path, None, why));
@@ -418,7 +423,7 @@ mod tests {
 
         fn read(&self, name: &str) -> (Result<Mesh>, Vec<String>) {
             let mut warnings = Vec::new();
-            let mesh = read(&self.0.join(name), &mut warnings);
+            let mesh = read_mesh(&self.0.join(name), &mut warnings);
             (mesh, warnings)
         }
     }
@@ -602,7 +607,7 @@ mod tests {
             let e = read_str(text).0.unwrap_err().to_string();
             assert!(e.contains(what), "{e}");
         }
-        let e = read(Path::new("/nonexistent/strata.obj"), &mut Vec::new()).unwrap_err();
+        let e = read_mesh(Path::new("/nonexistent/strata.obj"), &mut Vec::new()).unwrap_err();
         assert!(matches!(e, Error::Io { .. }));
     }
 

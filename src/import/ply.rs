@@ -10,6 +10,7 @@
 //! its record is an error naming the line, and so is a last value that runs into the end of the
 //! file instead of ending in a line end or blank (the file was cut, perhaps inside that number).
 
+use super::{ImportOptions, Raw};
 use crate::error::{Error, Location, Result};
 use crate::mesh::{coordinate_problem, Material, Mesh};
 use byteorder::{BigEndian, ByteOrder, LittleEndian};
@@ -19,7 +20,11 @@ use std::path::Path;
 
 /// Read a PLY file into a raw, uncleaned mesh: positions as in the file, one triangle list.
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
-pub fn read(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
+pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
+    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None })
+}
+
+fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     let bytes = super::read_file(path)?;
     parse(path, &bytes, warnings)
 }
