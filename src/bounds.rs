@@ -97,11 +97,13 @@ pub fn nodes(h: &Hierarchy, lv: &LevelMeshes, faces: &[Lists], grid: &Grid, quan
     Ok(out)
 }
 
-/// The stored record of a culling cluster of faces `run` of `mesh` (a node's base grid point
-/// `base`, its largest offset `span`, the node's cluster `shift`), starting from the hierarchy's
-/// sphere and cone for it, widened to cover the quantized faces.
-pub fn cluster(mesh: &Mesh, q: &Quantized, grid: &Grid, run: &[u32], seed: (Vec3, f32, Cone), base: [u32; 3], span: u32, shift: u32) -> ClusterCodes {
+/// The stored record of a culling cluster of faces `run` of `mesh`, starting from the hierarchy's
+/// sphere and cone for it (`seed`: center, radius, cone), widened to cover the quantized faces.
+/// `node` is where the cluster's node stores positions: its base grid point, largest offset and
+/// cluster shift.
+pub fn cluster(mesh: &Mesh, q: &Quantized, grid: &Grid, run: &[u32], seed: (Vec3, f32, Cone), node: ([u32; 3], u32, u32)) -> ClusterCodes {
     let (center, radius, cone) = seed;
+    let (base, span, shift) = node;
     let target = grid.encode(center);
     let c: [u32; 3] = std::array::from_fn(|k| (target[k].saturating_sub(base[k]).min(span) >> shift).min(u16::MAX as u32));
     let dc = grid.decode(std::array::from_fn(|k| base[k] + (c[k] << shift))).as_dvec3();

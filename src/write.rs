@@ -81,10 +81,9 @@ fn write_named<W: Write>(w: W, path: &Path, h: &Hierarchy, lv: &LevelMeshes, opt
     let top = h.levels.len() - 1;
     for (l, hl) in h.levels.iter().enumerate() {
         let mesh = &lv.levels[l].mesh;
-        for g in 0..hl.groups.len() {
+        for (g, b) in bounds[l].iter().enumerate() {
             let clusters = (l == 0).then_some(&h.clusters);
             let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes).map_err(bad)?;
-            let b = &bounds[l][g];
             writer.add(NodeIn {
                 level: l as u32,
                 key: g as u32,
@@ -258,7 +257,7 @@ fn node_geometry(
             if !(g.center.is_finite() && g.radius.is_finite()) {
                 return Err(format!("cluster {}: bounds are not finite", cluster_of(run[0])));
             }
-            let record = bounds::cluster(mesh, q, grid, run, (g.center, g.radius, g.cone), base, span, shift);
+            let record = bounds::cluster(mesh, q, grid, run, (g.center, g.radius, g.cone), (base, span, shift));
             for piece in run.chunks(u16::MAX as usize) {
                 records.push(crate::format::geom::v2::ClusterCodes { faces: piece.len() as u16, ..record });
             }

@@ -190,7 +190,7 @@ fn a_shrunken_node_box_is_refused_by_the_reader_and_verify() {
     reseal(&mut bytes, node);
     reseal(&mut bytes, skel);
     let rd = Reader::open(Cursor::new(&bytes)).expect("a box on the grid opens");
-    let e = rd.read_node(0).err().expect("the reader checks node 0's box as it reads node 0").to_string();
+    let e = rd.read_node(0).expect_err("the reader checks node 0's box as it reads node 0").to_string();
     assert!(e.contains("node 0") && e.contains("box"), "{e}");
     let v = format::verify(Cursor::new(&bytes), Path::new("shrunk"));
     assert!(v.problems.iter().any(|e| e.to_string().contains("node 0") && e.to_string().contains("box")), "{:?}", v.problems);
