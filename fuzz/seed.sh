@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fill fuzz/corpus/<target>/ with seeds: the small fixtures, the hand-written files in fuzz/seeds/,
-# and for `reader` chunk files converted from small fixtures with the release binary.
+# and for `reader` and `reader_sealed` chunk files converted from small fixtures with the release
+# binary.
 # Run from anywhere; builds the release binary if it is missing. Existing corpus files are kept.
 set -euo pipefail
 
@@ -37,6 +38,9 @@ convert "$fixtures/two_materials.glb" two_materials "${tiny[@]}"
 convert "$fuzz/seeds/quad_ascii.ply" quad_colors_uvs
 convert "$fuzz/seeds/tetra_datauri.gltf" tetra_all_attributes "${tiny[@]}"
 
-for t in reader obj ply gltf; do
+mkdir -p "$corpus/reader_sealed"
+cp "$corpus"/reader/*.strata "$corpus/reader_sealed/"
+
+for t in reader reader_sealed obj ply gltf; do
     printf '%-7s %3d files, %7d bytes\n' "$t" "$(ls "$corpus/$t" | wc -l)" "$(cat "$corpus/$t"/* | wc -c)"
 done

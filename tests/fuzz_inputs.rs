@@ -302,103 +302,6 @@ fn apply(m: &Mutation, b: &mut Vec<u8>, seeds: &[Seed]) {
     }
 }
 
-fn u64_at(b: &[u8], at: usize) -> Option<u64> {
-    Some(u64::from_le_bytes(b.get(at..at.checked_add(8)?)?.try_into().ok()?))
-}
-
-/// The chunk at `at` (ID, flags, size, payload, CRC): its payload range, if it lies in `b`.
-fn payload(b: &[u8], at: usize) -> Option<(usize, usize)> {
-    let size = usize::try_from(u64_at(b, at + 8)?).ok()?;
-    let start = at + 16;
-    let end = start.checked_add(size)?;
-    (end.checked_add(4)? <= b.len()).then_some((start, end))
-}
-
-/// Recompute the CRC of the chunk at `at`; its payload range.
-fn reseal_chunk(b: &mut [u8], at: usize) -> Option<(usize, usize)> {
-    let (s, e) = payload(b, at)?;
-    let crc = crc32fast::hash(&b[s..e]);
-    b[e..e + 4].copy_from_slice(&crc.to_le_bytes());
-    Some((s, e))
-}
-
-/// The chunks inside a payload (sub-chunks), by offset.
-fn subs(b: &[u8], (start, end): (usize, usize)) -> Vec<usize> {
-    let mut out = Vec::new();
-    let mut at = start;
-    while at + 20 <= end {
-        let Some((_, e)) = payload(b, at) else { break };
-        if e + 4 > end {
-            break;
-        }
-        out.push(at);
-        let after = e + 4;
-        at = after + (8 - after % 8) % 8;
-    }
-    out
-}
-
-/// Make a damaged chunk file consistent again where that is easy, so that the damage reaches the
-/// decoding behind the checksums: the prologue CRC, `HEAD`'s file size, every sub-chunk's, `GEOM`
-/// chunk's and top-level chunk's CRC, and the node table's copies of the `GEOM` CRCs. Best effort:
-/// stops where a frame runs past the end.
-fn reseal(b: &mut [u8]) {
-    if b.len() < 16 {
-        return;
-    }
-    let crc = crc32fast::hash(&b[..12]);
-    b[12..16].copy_from_slice(&crc.to_le_bytes());
-    let mut tops = Vec::new();
-    let mut at = 16;
-    while let Some((_, e)) = payload(b, at) {
-        tops.push(at);
-        let after = e + 4;
-        at = after + (8 - after % 8) % 8;
-    }
-    let mut node_table = None;
-    let mut geom_crcs = Vec::new();
-    for &top in &tops {
-        let id: [u8; 4] = b[top..top + 4].try_into().unwrap();
-        if &id == b"HEAD" && b.len() >= top + 24 {
-            let len = b.len() as u64;
-            b[top + 16..top + 24].copy_from_slice(&len.to_le_bytes());
-        }
-        if &id == b"SKEL" || &id == b"GEOM" {
-            let range = payload(b, top).unwrap();
-            for sub in subs(b, range) {
-                if &id == b"SKEL" && &b[sub..sub + 4] == b"NODE" {
-                    node_table = payload(b, sub);
-                }
-                reseal_chunk(b, sub);
-            }
-        }
-        let (_, e) = reseal_chunk(b, top).unwrap();
-        if &id == b"GEOM" {
-            geom_crcs.push(b[e..e + 4].to_vec());
-        }
-    }
-    if let Some((s, e)) = node_table {
-        for (i, crc) in geom_crcs.iter().enumerate() {
-            let field = s + 56 * i + 52;
-            if field + 4 <= e {
-                b[field..field + 4].copy_from_slice(crc);
-            }
-        }
-        // The node table changed: reseal NODE and SKEL again.
-        for &top in &tops {
-            if &b[top..top + 4] == b"SKEL" {
-                let range = payload(b, top).unwrap();
-                for sub in subs(b, range) {
-                    if &b[sub..sub + 4] == b"NODE" {
-                        reseal_chunk(b, sub);
-                    }
-                }
-                reseal_chunk(b, top);
-            }
-        }
-    }
-}
-
 /// Record where each panic is raised, then report it as usual.
 fn watch_panics() {
     static ONCE: std::sync::Once = std::sync::Once::new();
@@ -539,7 +442,7 @@ fn mutated(target: Target, cases: u32) {
                 apply(m, &mut bytes, seeds);
             }
             if reseal {
-                self::reseal(&mut bytes);
+                strata::fuzzing::reseal(&mut bytes);
             }
         }
         let resealed = match (target, reseal) {
