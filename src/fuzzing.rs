@@ -97,9 +97,10 @@ fn subs(b: &[u8], (start, end): (usize, usize)) -> Vec<usize> {
 }
 
 /// Make a damaged chunk file consistent again where that is easy, so that the damage reaches the
-/// decoding behind the checksums (the `reader_sealed` fuzz target, `tests/fuzz_inputs.rs`): the prologue CRC, `HEAD`'s file size, every sub-chunk's, `GEOM`
-/// chunk's and top-level chunk's CRC, and the node table's copies of the `GEOM` CRCs. Best effort:
-/// stops where a frame runs past the end.
+/// decoding behind the checksums (the `reader_sealed` fuzz target, `tests/fuzz_inputs.rs`): the
+/// prologue CRC, `HEAD`'s file size, every sub-chunk's, `GEOM` chunk's and top-level chunk's CRC,
+/// and the node table's copies of the `GEOM` CRCs. Best effort: stops where a frame runs past the
+/// end.
 pub fn reseal(b: &mut [u8]) {
     if b.len() < 16 {
         return;
@@ -116,13 +117,13 @@ pub fn reseal(b: &mut [u8]) {
     let mut node_table = None;
     let mut geom_crcs = Vec::new();
     for &top in &tops {
-        let id: [u8; 4] = b[top..top + 4].try_into().unwrap();
-        if &id == b"HEAD" && b.len() >= top + 24 {
+        let Some(range) = payload(b, top) else { continue };
+        let id = [b[top], b[top + 1], b[top + 2], b[top + 3]];
+        if &id == b"HEAD" && range.1 - range.0 >= 8 {
             let len = b.len() as u64;
-            b[top + 16..top + 24].copy_from_slice(&len.to_le_bytes());
+            b[range.0..range.0 + 8].copy_from_slice(&len.to_le_bytes());
         }
         if &id == b"SKEL" || &id == b"GEOM" {
-            let range = payload(b, top).unwrap();
             for sub in subs(b, range) {
                 if &id == b"SKEL" && &b[sub..sub + 4] == b"NODE" {
                     node_table = payload(b, sub);
@@ -130,9 +131,9 @@ pub fn reseal(b: &mut [u8]) {
                 reseal_chunk(b, sub);
             }
         }
-        let (_, e) = reseal_chunk(b, top).unwrap();
+        reseal_chunk(b, top);
         if &id == b"GEOM" {
-            geom_crcs.push(b[e..e + 4].to_vec());
+            geom_crcs.push(b[range.1..range.1 + 4].to_vec());
         }
     }
     if let Some((s, e)) = node_table {
@@ -144,8 +145,10 @@ pub fn reseal(b: &mut [u8]) {
         }
         // The node table changed: reseal NODE and SKEL again.
         for &top in &tops {
-            if &b[top..top + 4] == b"SKEL" {
-                let range = payload(b, top).unwrap();
+            if &b[top..top + 4] != b"SKEL" {
+                continue;
+            }
+            if let Some(range) = payload(b, top) {
                 for sub in subs(b, range) {
                     if &b[sub..sub + 4] == b"NODE" {
                         reseal_chunk(b, sub);
