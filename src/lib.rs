@@ -26,6 +26,7 @@ pub mod error;
 pub mod export;
 pub mod fixtures;
 pub mod format;
+pub mod fuzzing;
 pub mod group;
 pub mod hierarchy;
 pub mod import;

@@ -301,3 +301,22 @@ fn obj_index_errors_count_in_proper_plurals() {
         assert!(e.trim_end().ends_with(expect), "{e}");
     }
 }
+
+/// A device named as a glTF buffer (allowed outside the folder) or as an OBJ material library is
+/// not read: /dev/zero never ends.
+#[cfg(unix)]
+#[test]
+fn devices_are_not_read_as_buffers_or_material_libraries() {
+    let dir = std::env::temp_dir().join(format!("strata-devices-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions");
+    let gltf = root.join("gltf/buffer_uri_dev_zero.gltf");
+    let out = Command::new(env!("CARGO_BIN_EXE_strata")).args(["info", gltf.to_str().unwrap(), "--allow-outside-files"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("/dev/zero") && err.contains("not a regular file"), "{err}");
+    let obj = root.join("obj/mtllib_dev_zero.obj");
+    let out = Command::new(env!("CARGO_BIN_EXE_strata")).args(["info", obj.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("material library"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

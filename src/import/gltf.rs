@@ -294,7 +294,7 @@ impl<'a> Buffers<'a> {
                 gltf::buffer::Source::Bin => Cow::Borrowed(bin.ok_or_else(|| {
                     Error::at_element(path, &element, "refers to the GLB binary chunk, but there is none")
                 })?),
-                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri, allow_outside)?),
+                gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(path, &element, uri, allow_outside, buffer.length() as u64)?),
             };
             if bytes.len() < buffer.length() {
                 return Err(Error::at_element(
@@ -520,7 +520,9 @@ fn component(b: &[u8], c: usize, ty: DataType, normalized: bool) -> f32 {
 
 /// Read an external or `data:` URI, relative to the glTF file. A file name must stay inside the
 /// glTF file's folder unless `allow_outside`.
-fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool) -> Result<Vec<u8>> {
+/// The bytes of a buffer's `uri` (a data: URI or a file in the model's folder), at most `max_len`
+/// of them (its byteLength: a file may be longer).
+fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool, max_len: u64) -> Result<Vec<u8>> {
     if let Some(data) = uri.strip_prefix("data:") {
         let Some((header, payload)) = data.split_once(',') else {
             return Err(Error::at_element(path, element, "malformed data URI (no comma)"));
@@ -560,7 +562,8 @@ fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool) -> Resul
         ));
     }
     let file = folder.join(name);
-    std::fs::read(&file).map_err(|e| Error::at_element(path, element, format!("cannot read {}: {e}", file.display())))
+    let cannot = |e: &dyn std::fmt::Display| Error::at_element(path, element, format!("cannot read {}: {e}", file.display()));
+    super::read_regular_file(&file, max_len).map_err(|e| cannot(&e))
 }
 
 /// Whether a relative file name stays inside the folder it is resolved against, by its text alone:
@@ -641,11 +644,13 @@ impl Builder {
         for m in doc.materials() {
             let pbr = m.pbr_metallic_roughness();
             let info = pbr.base_color_texture();
+            // The image's JSON, not gltf's Image::source(), which unwraps what an invalid image lacks
+            // (a uri or a bufferView, a bufferView's mimeType); images are only named, never read.
             let texture = info.as_ref().map(|info| {
-                let image = info.texture().source();
-                match image.source() {
-                    gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_string(),
-                    _ => format!("embedded image {}", image.index()),
+                let image = info.texture().source().index();
+                match doc.as_json().images.get(image).and_then(|i| i.uri.as_deref()) {
+                    Some(uri) if !uri.starts_with("data:") => uri.to_string(),
+                    _ => format!("embedded image {image}"),
                 }
             });
             let transform = info.and_then(|info| {

@@ -123,10 +123,24 @@ pub struct Imported {
     pub import_ms: f64,
 }
 
+/// Read at most `max_len` bytes of the regular file at `path`. Devices, pipes and folders are
+/// refused: `/dev/zero` never ends and a pipe may never answer.
+fn read_regular_file(path: &Path, max_len: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"));
+    }
+    let mut bytes = Vec::with_capacity(meta.len().min(max_len) as usize);
+    file.take(max_len).read_to_end(&mut bytes)?;
+    Ok(bytes)
+}
+
 /// Read a whole mesh file. An empty one is an error that says so, rather than whatever its
 /// format's parser makes of no bytes.
 fn read_file(path: &Path) -> Result<Vec<u8>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| Error::io(path, e))?;
     if bytes.is_empty() {
         return Err(Error::invalid(path, None, EMPTY));
     }

@@ -61,7 +61,12 @@ fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
             return Ok((materials, map));
         }
         let full = dir.join(lib);
-        let result = tobj::load_mtl(&full);
+        // Only a regular file: tobj reads a device such as /dev/zero without end.
+        let result = if std::fs::metadata(&full).is_ok_and(|m| !m.is_file()) {
+            Err(tobj::LoadError::OpenFileFailed)
+        } else {
+            tobj::load_mtl(&full)
+        };
         if let Err(e) = &result {
             let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
             let mut ws = mtl_warnings.borrow_mut();
