@@ -48,7 +48,14 @@ fn main() {
     if inputs.is_empty() {
         let shared = root.join("../shared/meshes");
         if shared.exists() {
-            for name in ["scans/ajc_stanford-bunny.obj", "scans/3dhop_gargo.ply", "scans/ajc_horse.ply", "scans/oded_nefertiti-lowres.obj", "scans/stanford_bun_zipper.ply", "large/cthead_skin_native.ply"] {
+            for name in [
+                "scans/ajc_stanford-bunny.obj",
+                "scans/3dhop_gargo.ply",
+                "scans/ajc_horse.ply",
+                "scans/oded_nefertiti-lowres.obj",
+                "scans/stanford_bun_zipper.ply",
+                "large/cthead_skin_native.ply",
+            ] {
                 inputs.push(shared.join(name));
             }
         } else {

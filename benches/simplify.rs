@@ -63,7 +63,20 @@ fn bench(name: &str, mesh: &Mesh) {
     println!("\n{name}: {faces} triangles, {} vertices", mesh.vertex_count());
     println!(
         "{:>5} | {:>7} {:>7} | {:>8} {:>8} {:>5} | {:>7} {:>7} | {:>9} {:>9} {:>5} | {:>9} {:>9} {:>5}",
-        "ratio", "faces S", "faces M", "ms S", "ms M", "S/M", "Mtri/s S", "Mtri/s M", "H/diag S", "H/diag M", "S/M", "mean S", "mean M", "S/M"
+        "ratio",
+        "faces S",
+        "faces M",
+        "ms S",
+        "ms M",
+        "S/M",
+        "Mtri/s S",
+        "Mtri/s M",
+        "H/diag S",
+        "H/diag M",
+        "S/M",
+        "mean S",
+        "mean M",
+        "S/M"
     );
     for ratio in RATIOS {
         let target = (faces as f64 * ratio) as usize;

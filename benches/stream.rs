@@ -13,8 +13,8 @@ use std::time::Instant;
 use strata::camera::Camera;
 use strata::format::Reader;
 use strata::render::{Image, Part};
-use strata::stream::retention::retention;
 use strata::stream::budget::MIN_PIXELS;
+use strata::stream::retention::retention;
 use strata::stream::{Budgets, Priority, Streamer};
 
 const WIDTH: u32 = 640;
@@ -125,7 +125,11 @@ fn memory(mesh: &Path, file: &Path) -> String {
             (Some(s), Some(w)) => format!("; ratio {:.3}", s / w),
             _ => String::new(),
         };
-        out.push(format!("  peak RSS ({name}): strata info {}; strata stream, 4 MB budget, 32-frame orbit {}{ratio}", fmt_mb(whole), fmt_mb(streamed)));
+        out.push(format!(
+            "  peak RSS ({name}): strata info {}; strata stream, 4 MB budget, 32-frame orbit {}{ratio}",
+            fmt_mb(whole),
+            fmt_mb(streamed)
+        ));
     }
     out.join("\n")
 }

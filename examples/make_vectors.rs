@@ -4,18 +4,18 @@
 //! the Rust reader agrees with every vector, and the viewer's JavaScript reader checks the same files.
 
 use glam::Vec2;
+use serde_json::json;
 use std::io::Cursor;
 use std::path::Path;
+use strata::camera::{Camera, Projection};
+use strata::format::skeleton::Skeleton;
 use strata::format::{self, HierarchyParams, Reader};
 use strata::levels::{self, LevelParams};
 use strata::mesh::{Adjacency, Material, Mesh};
-use strata::camera::{Camera, Projection};
-use strata::format::skeleton::Skeleton;
 use strata::stream::cache::record_bytes;
 use strata::stream::refine::{Limits, Priority, Refiner};
 use strata::stream::session::orbit;
 use strata::write::{write_to, WriteOptions};
-use serde_json::json;
 
 /// The chunk file of `mesh`, grouped with `params` and simplified per level.
 fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64) -> Vec<u8> {
@@ -199,7 +199,8 @@ fn main() -> anyhow::Result<()> {
     std::fs::write(dir.join("fronts.json"), serde_json::to_string_pretty(&golden)? + "\n")?;
     println!("fronts: {} of sphere.strata ({} distinct)", golden.len(), distinct.len());
     for (name, bytes, words) in refused {
-        let refusal = Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));
+        let refusal =
+            Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));
         let message = refusal.expect_err("a refused vector is refused").to_string();
         assert!(words.iter().all(|w| message.contains(w)), "{name}: {message}");
         std::fs::write(dir.join(format!("{name}.strata")), &bytes)?;

@@ -1,8 +1,8 @@
 //! One level of a strata file as one [`Mesh`], for `strata extract` and for tests: every node of the
 //! level is read and its node-local vertices are welded back by exact position.
 
-use crate::format::{ByteSource, Reader};
 use crate::error::{Error, Result};
+use crate::format::{ByteSource, Reader};
 use crate::mesh::Mesh;
 use std::collections::HashMap;
 
@@ -11,7 +11,11 @@ use std::collections::HashMap;
 pub fn to_mesh<S: ByteSource>(reader: &Reader<S>, level: u32) -> Result<Mesh> {
     let levels = reader.levels().len() as u32;
     if level >= levels {
-        return Err(Error::invalid(reader.path(), None, format!("level {level} does not exist (the file has levels 0..{})", levels.saturating_sub(1))));
+        return Err(Error::invalid(
+            reader.path(),
+            None,
+            format!("level {level} does not exist (the file has levels 0..{})", levels.saturating_sub(1)),
+        ));
     }
     let attrs = reader.header().attributes;
     let mut mesh = Mesh { materials: reader.materials().to_vec(), ..Mesh::default() };

@@ -38,7 +38,8 @@ pub fn nodes(h: &Hierarchy, lv: &LevelMeshes, faces: &[Lists], grid: &Grid, quan
             if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
                 return Err(format!("level {l} group {g}: bounds are not finite"));
             }
-            let below: Vec<&NodeBounds> = children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &out[l - 1][k as usize]).collect());
+            let below: Vec<&NodeBounds> =
+                children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &out[l - 1][k as usize]).collect());
             let own = faces[l].get(g);
             let (mut lo, mut hi) = (grid.bound(info.min, false), grid.bound(info.max, true));
             let mut grow = |p: [u32; 3]| {
@@ -121,6 +122,7 @@ pub fn cluster(mesh: &Mesh, q: &Quantized, grid: &Grid, run: &[u32], seed: (Vec3
     }
     let (radius, _) = store_radius(grid, needed);
     let axis = cone.axis.normalize_or(Vec3::Z);
-    let (axis_code, half_angle, _) = store_cone(axis, |d| normals.iter().fold(cone.half_angle as f64 + angle(axis, d), |m, &n| m.max(angle(d, n))));
+    let (axis_code, half_angle, _) =
+        store_cone(axis, |d| normals.iter().fold(cone.half_angle as f64 + angle(axis, d), |m, &n| m.max(angle(d, n))));
     ClusterCodes { axis: axis_code, half_angle, faces: 0, center: c.map(|x| x as u16), radius }
 }

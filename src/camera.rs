@@ -110,9 +110,7 @@ impl Camera {
     /// largest it can appear: the basis of screen-space error (faces scale with 1/Z²).
     pub fn pixels_per_unit(&self, distance: f32) -> f32 {
         match self.projection {
-            Projection::Perspective { fov_y } => {
-                self.height as f32 / (2.0 * (0.5 * fov_y).tan() * distance.max(self.near))
-            }
+            Projection::Perspective { fov_y } => self.height as f32 / (2.0 * (0.5 * fov_y).tan() * distance.max(self.near)),
             Projection::Orthographic { height } => self.height as f32 / height.max(f32::MIN_POSITIVE),
         }
     }

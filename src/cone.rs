@@ -165,9 +165,7 @@ pub fn facing_perspective(cone: &Cone, center: Vec3, radius: f32, eye: Vec3) -> 
     let to_eye = eye.as_dvec3() - center.as_dvec3();
     let (d, r) = (to_eye.length(), radius as f64);
     match unit(cone.axis) {
-        Some(a) if r >= 0.0 && d > r && d.is_finite() => {
-            classify(angle(a, to_eye), cone.half_angle as f64, (r / d).asin())
-        }
+        Some(a) if r >= 0.0 && d > r && d.is_finite() => classify(angle(a, to_eye), cone.half_angle as f64, (r / d).asin()),
         _ => Facing::Mixed,
     }
 }
@@ -686,8 +684,7 @@ mod tests {
         let a = normalized(cone.axis);
         let c = cone.half_angle as f64;
         let rim = (c - 1e-7).max(0.0);
-        let mut normals: Vec<Vec3> =
-            views.iter().flat_map(|&v| [rotate(a, v, rim), rotate(a, v, -rim)]).map(DVec3::as_vec3).collect();
+        let mut normals: Vec<Vec3> = views.iter().flat_map(|&v| [rotate(a, v, rim), rotate(a, v, -rim)]).map(DVec3::as_vec3).collect();
         normals.extend((0..30).map(|_| rng.in_cap(a, c).as_vec3()));
         normals.retain(|&n| cone.contains(n, 0.0));
         normals

@@ -98,10 +98,7 @@ fn one_sided(points: &[Vec3A], mesh: &Mesh) -> OneSided {
         })
         .collect();
     let bvh = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-    let d: Vec<f32> = points
-        .par_iter()
-        .map_init(BinaryHeap::new, |queue, &p| closest_distance_sq(&bvh, &tris, p, queue).sqrt())
-        .collect();
+    let d: Vec<f32> = points.par_iter().map_init(BinaryHeap::new, |queue, &p| closest_distance_sq(&bvh, &tris, p, queue).sqrt()).collect();
     let n = d.len() as f64;
     OneSided {
         max: f64::from(d.iter().copied().fold(0.0, f32::max)),
@@ -269,7 +266,11 @@ mod tests {
     fn translated_copy_is_at_the_translation() {
         // A flat square and its copy lifted along its normal: every sample is exactly 0.25 away.
         let p = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
-        let a = Mesh { positions: vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)], triangles: vec![[0, 1, 2], [0, 2, 3]], ..Default::default() };
+        let a = Mesh {
+            positions: vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
+        };
         let mut b = a.clone();
         b.positions.iter_mut().for_each(|q| q.z += 0.25);
         let d = surface_distance(&a, &b, 1000, 7);
@@ -289,10 +290,14 @@ mod tests {
         let mut b = sphere(7, 1.1);
         b.positions.iter_mut().enumerate().for_each(|(i, q)| *q += Vec3::splat(0.05 * ((i * 7919 % 13) as f32 / 13.0 - 0.5)));
         let points = sample_points(&a, 2000, 3);
-        let tris: Vec<Triangle> = b.triangles.iter().map(|t| {
-            let [v0, v1, v2] = t.map(|v| Vec3A::from(b.positions[v as usize]));
-            Triangle { v0, v1, v2 }
-        }).collect();
+        let tris: Vec<Triangle> = b
+            .triangles
+            .iter()
+            .map(|t| {
+                let [v0, v1, v2] = t.map(|v| Vec3A::from(b.positions[v as usize]));
+                Triangle { v0, v1, v2 }
+            })
+            .collect();
         let bvh = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
         let mut queue = BinaryHeap::new();
         for &p in &points {

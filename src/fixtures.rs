@@ -140,7 +140,11 @@ pub fn committed() -> Vec<Fixture> {
     vec![
         f("cube.obj", "smallest closed mesh; hard edges as per-corner normals (`f v//vn`)", cube()),
         f("icosphere.obj", "closed smooth sphere (subdivision 3); shared normals", icosphere(3)),
-        f("noisy_sphere.ply", "scan-like surface at ~100k faces, binary PLY with normals; import speed, grouping, simplification", noisy_sphere(91, 0.08, 1)),
+        f(
+            "noisy_sphere.ply",
+            "scan-like surface at ~100k faces, binary PLY with normals; import speed, grouping, simplification",
+            noisy_sphere(91, 0.08, 1),
+        ),
         f("cad_part.obj", "CAD-like part: through-holes, chamfer, fillet, sharp edges, large flat faces, thin strips", cad_part()),
         f("open_grid.obj", "open height field with a border (32 × 32 quads), normals and UVs", open_grid(32)),
         f("nonmanifold.obj", "an edge shared by three faces and a bowtie vertex", nonmanifold()),
@@ -166,11 +170,8 @@ pub fn isosurface(n: u32, seed: u64) -> Mesh {
             for i in 0..n {
                 let p = at(i, j, k);
                 let d = p - DVec3::splat(0.5);
-                let v = if border(i) || border(j) || border(k) {
-                    -1.0
-                } else {
-                    1.0 - d.length_squared() / 0.16 + 0.6 * fbm(3.0 * p, 3, seed)
-                };
+                let v =
+                    if border(i) || border(j) || border(k) { -1.0 } else { 1.0 - d.length_squared() / 0.16 + 0.6 * fbm(3.0 * p, 3, seed) };
                 field.push((v * 64.0).floor() / 64.0);
             }
         }
@@ -272,18 +273,43 @@ fn box_mesh(lo: DVec3, hi: DVec3) -> Mesh {
 fn icosphere_directions(subdivisions: u32) -> (Vec<DVec3>, Vec<[u32; 3]>) {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut dirs: Vec<DVec3> = [
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ]
     .iter()
     .map(|&p| DVec3::from(p).normalize())
     .collect();
     let mut triangles: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..subdivisions {
         let mut midpoint_of: HashMap<(u32, u32), u32> = HashMap::new();
@@ -433,7 +459,8 @@ impl Profile {
         let hole: Vec<u32> = hole.into_iter().map(|p| self.point(p)).collect();
         let quarter = hole.len() / 4;
         // Corner k sits at 45° + k·90°, counter-clockwise from the top right.
-        let corners = [DVec2::new(1.0, 1.0), DVec2::new(-1.0, 1.0), DVec2::new(-1.0, -1.0), DVec2::new(1.0, -1.0)].map(|c| center + half * c);
+        let corners =
+            [DVec2::new(1.0, 1.0), DVec2::new(-1.0, 1.0), DVec2::new(-1.0, -1.0), DVec2::new(1.0, -1.0)].map(|c| center + half * c);
         for k in 0..4 {
             let c = self.point(corners[k]);
             for j in k * quarter..(k + 1) * quarter {
@@ -581,10 +608,13 @@ mod tests {
     }
 
     fn volume(m: &Mesh) -> f64 {
-        m.triangles.iter().map(|t| {
-            let [a, b, c] = t.map(|v| m.positions[v as usize].as_dvec3());
-            a.dot(b.cross(c)) / 6.0
-        }).sum()
+        m.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| m.positions[v as usize].as_dvec3());
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
     }
 
     /// Cleaning again changes nothing, the arrays are consistent and normals are unit length.
@@ -699,7 +729,8 @@ mod tests {
         let k = m.positions.iter().position(|p| *p == Vec3::new(3.0, 0.0, 0.5)).unwrap() as u32;
         let faces = vf.of(k);
         assert_eq!(faces.len(), 2);
-        let shared: Vec<u32> = m.triangles[faces[0] as usize].iter().filter(|v| m.triangles[faces[1] as usize].contains(v)).copied().collect();
+        let shared: Vec<u32> =
+            m.triangles[faces[0] as usize].iter().filter(|v| m.triangles[faces[1] as usize].contains(v)).copied().collect();
         assert_eq!(shared, [k]);
     }
 

@@ -224,8 +224,7 @@ fn cluster_round(units: &[Unit], pairs: &[[u32; 2]], p: &RoundParams) -> Vec<u32
     }
     let (lo, hi) = units.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), u| (lo.min(u.center), hi.max(u.center)));
     let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
-    let mut order: Vec<(u32, u32)> =
-        units.iter().enumerate().map(|(i, u)| (morton((u.center - lo) * scale), i as u32)).collect();
+    let mut order: Vec<(u32, u32)> = units.iter().enumerate().map(|(i, u)| (morton((u.center - lo) * scale), i as u32)).collect();
     order.par_sort_unstable();
     let mut rank = vec![0u32; n];
     for (r, &(_, i)) in order.iter().enumerate() {
@@ -297,14 +296,7 @@ fn group_pairs(item_pairs: &[[u32; 2]], label: &[u32]) -> Vec<[u32; 2]> {
 
 /// Group summaries of a partition. `labels` maps the groups `below` to the new groups (None for
 /// clusters, built from faces); cones then also enclose the children's cones.
-fn make_level(
-    mesh: &Mesh,
-    face_group: Vec<u32>,
-    labels: Option<&[u32]>,
-    below: &[GroupInfo],
-    max_angle: f32,
-    max_faces: u32,
-) -> Level {
+fn make_level(mesh: &Mesh, face_group: Vec<u32>, labels: Option<&[u32]>, below: &[GroupInfo], max_angle: f32, max_faces: u32) -> Level {
     let ng = face_group.iter().max().map_or(0, |&m| m as usize + 1);
     let faces_of = Lists::from_labels(&face_group, ng);
     let children = labels.map(|l| Lists::from_labels(l, ng)).unwrap_or_default();
@@ -342,13 +334,5 @@ fn make_level(
             GroupInfo { cone, center, radius, min: lo, max: hi, faces: faces.len() as u32, area, area_normal }
         })
         .collect();
-    Level {
-        face_group,
-        parent: Vec::new(),
-        children,
-        neighbors: Lists::default(),
-        groups,
-        max_angle,
-        max_faces,
-    }
+    Level { face_group, parent: Vec::new(), children, neighbors: Lists::default(), groups, max_angle, max_faces }
 }

@@ -57,11 +57,7 @@ const MIN_ADDED_NODE_FACES: usize = 32;
 /// after each level with its index, for progress reports.
 pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
     let ratio = p.ratio.clamp(0.0, 1.0);
-    let first = LevelMesh {
-        mesh,
-        face_group: h.levels[0].face_group.clone(),
-        group_error: vec![0.0; h.levels[0].groups.len()],
-    };
+    let first = LevelMesh { mesh, face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()] };
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {

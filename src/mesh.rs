@@ -38,7 +38,6 @@ pub fn coordinate_problem(p: [f64; 3]) -> Option<String> {
     Some(format!("coordinate {shown} exceeds the largest magnitude strata accepts ({MAX_COORDINATE:e})"))
 }
 
-
 /// A triangle mesh. Corner arrays (`normals`, `uvs`, `colors`) are either empty (attribute absent)
 /// or hold exactly `3 * triangles.len()` entries, corner `3 * f + k` belonging to `triangles[f][k]`.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -3,12 +3,12 @@
 
 use crate::error::Result;
 use crate::format::WriteSummary;
-use crate::write::{self, WriteOptions};
 use crate::hierarchy::{self, HierarchyParams};
 use crate::import::{import_with, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
+use crate::write::{self, WriteOptions};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;

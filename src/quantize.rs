@@ -79,7 +79,9 @@ impl Quantized {
                 }
             }
             let Some((distance, g, p)) = best else {
-                return Err(format!("level 0 vertex {v}: no free grid point within {MAX_NUDGE_STEPS} steps keeps it apart from vertex {first}"));
+                return Err(format!(
+                    "level 0 vertex {v}: no free grid point within {MAX_NUDGE_STEPS} steps keeps it apart from vertex {first}"
+                ));
             };
             holder.insert(key(p), v as u32);
             q.points[v] = g;
@@ -125,7 +127,8 @@ mod tests {
         let grid = Grid::fit(lo, hi, GRID_BITS);
         let plain = Quantized::new(&grid, &mesh);
         let q = Quantized::distinct(&grid, &mesh).unwrap();
-        let keys = |q: &Quantized| q.positions.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<std::collections::HashSet<_>>().len();
+        let keys =
+            |q: &Quantized| q.positions.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<std::collections::HashSet<_>>().len();
         assert!(keys(&plain) < mesh.vertex_count(), "the fixture crowds vertices");
         assert_eq!(keys(&q), mesh.vertex_count());
         assert!(!q.moved.is_empty());

@@ -147,11 +147,8 @@ impl Image {
             .map(|p| if p.normals.len() == p.positions.len() { p.normals.iter().map(|&n| lit(n, light)).collect() } else { Vec::new() })
             .collect();
         let (width, height) = (self.width, self.height);
-        let work: Vec<(usize, usize)> = parts
-            .iter()
-            .enumerate()
-            .flat_map(|(k, p)| (0..(p.indices.len() / 3).div_ceil(SETUP_CHUNK)).map(move |c| (k, c)))
-            .collect();
+        let work: Vec<(usize, usize)> =
+            parts.iter().enumerate().flat_map(|(k, p)| (0..(p.indices.len() / 3).div_ceil(SETUP_CHUNK)).map(move |c| (k, c))).collect();
         let chunks: Vec<(Vec<Setup>, usize)> = work
             .par_iter()
             .map_init(Clip::default, |clip, &(k, c)| {
@@ -194,18 +191,15 @@ impl Image {
             }
         }
         let row_pixels = width as usize * BAND_ROWS as usize;
-        self.rgba
-            .par_chunks_mut(4 * row_pixels)
-            .zip(self.depth.par_chunks_mut(row_pixels))
-            .zip(binned.par_iter())
-            .enumerate()
-            .for_each(|(band, ((rgba, depth), list))| {
+        self.rgba.par_chunks_mut(4 * row_pixels).zip(self.depth.par_chunks_mut(row_pixels)).zip(binned.par_iter()).enumerate().for_each(
+            |(band, ((rgba, depth), list))| {
                 let first_row = band as u32 * BAND_ROWS;
                 let last_row = (first_row + BAND_ROWS).min(height) - 1;
                 for &i in list {
                     fill(&faces[i as usize], width, first_row, last_row, rgba, depth);
                 }
-            });
+            },
+        );
         drawn
     }
 
@@ -853,7 +847,8 @@ mod tests {
     fn strips_draw_what_the_whole_image_draws() {
         let (positions, indices) = sphere(0.7);
         let shifted = |d: Vec3| positions.iter().map(|p| *p + d).collect::<Vec<Vec3>>();
-        let (left, right, far) = (shifted(Vec3::new(-0.4, 0.1, 0.0)), shifted(Vec3::new(0.4, -0.2, 0.3)), shifted(Vec3::new(0.0, 0.0, -2.0)));
+        let (left, right, far) =
+            (shifted(Vec3::new(-0.4, 0.1, 0.0)), shifted(Vec3::new(0.4, -0.2, 0.3)), shifted(Vec3::new(0.0, 0.0, -2.0)));
         let normals: Vec<Vec3> = positions.iter().map(|p| p.normalize()).collect();
         let mut bad = indices.clone();
         bad.extend([0, 1, u32::MAX, 5]);

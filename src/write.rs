@@ -57,7 +57,14 @@ pub fn write_to<W: Write>(w: &mut W, h: &Hierarchy, lv: &LevelMeshes, opts: &Wri
     write_named(w, Path::new("<output>"), h, lv, opts, None)
 }
 
-fn write_named<W: Write>(w: W, path: &Path, h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions, spill: Option<&Path>) -> Result<WriteSummary> {
+fn write_named<W: Write>(
+    w: W,
+    path: &Path,
+    h: &Hierarchy,
+    lv: &LevelMeshes,
+    opts: &WriteOptions,
+    spill: Option<&Path>,
+) -> Result<WriteSummary> {
     let bad = |msg: String| Error::invalid(path, None, msg);
     let attributes = check_inputs(h, lv, opts).map_err(bad)?;
     let grid = model_grid(lv);
@@ -244,7 +251,11 @@ fn node_geometry(
 
     let mut first = 0u32;
     for run in order.chunk_by(|&a, &b| material_of(mesh, a as usize) == material_of(mesh, b as usize)) {
-        out.material_ranges.push(MaterialRange { material: material_of(mesh, run[0] as usize), first_index: 3 * first, index_count: 3 * run.len() as u32 });
+        out.material_ranges.push(MaterialRange {
+            material: material_of(mesh, run[0] as usize),
+            first_index: 3 * first,
+            index_count: 3 * run.len() as u32,
+        });
         first += run.len() as u32;
     }
 

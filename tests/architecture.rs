@@ -60,7 +60,11 @@ fn the_library_compiles_without_the_command_line_crates() {
             }
         }
     }
-    assert!(found.is_empty(), "only the command line (src/main.rs, src/cli/) uses clap, indicatif, ctrlc and anyhow:\n{}", found.join("\n"));
+    assert!(
+        found.is_empty(),
+        "only the command line (src/main.rs, src/cli/) uses clap, indicatif, ctrlc and anyhow:\n{}",
+        found.join("\n")
+    );
 }
 
 #[test]

@@ -153,9 +153,7 @@ fn gltf_strided_sparse_and_index_views_are_refused() {
     let mut bin = triangle_bytes();
     bin.extend([0u16, 9, 1, 9, 2, 9].iter().flat_map(|i| i.to_le_bytes()));
     let views = r#"[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":12,"byteStride":4}]"#;
-    let accessors = format!(
-        r#"[{{"bufferView":0,{POSITIONS}}},{{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}}]"#
-    );
+    let accessors = format!(r#"[{{"bufferView":0,{POSITIONS}}},{{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}}]"#);
     let doc = gltf(&data_uri(&bin), bin.len(), views, &accessors)
         .replace(r#""attributes":{"POSITION":0}"#, r#""attributes":{"POSITION":0},"indices":1"#);
     let path = dir.write("indices.gltf", doc);
@@ -230,10 +228,7 @@ fn huge_coordinates_are_refused_at_import() {
     let (ok, _, stderr) = strata(&["convert", obj.to_str().unwrap(), out.to_str().unwrap(), "-q"]);
     assert!(!ok && stderr.contains("huge.obj") && stderr.contains("exceeds"), "{stderr}");
 
-    let ply = dir.write(
-        "huge.ply",
-        format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0\n0 1 0\n-3e20 -3e20 0\n3 0 1 2\n3 1 3 2\n"),
-    );
+    let ply = dir.write("huge.ply", format!("{ASCII_PLY_HEADER}0 0 0\n1 0 0\n0 1 0\n-3e20 -3e20 0\n3 0 1 2\n3 1 3 2\n"));
     assert_refused(&ply, &[], &["vertex 3", "-3e20", "exceeds"]);
 
     let bin = f32_bytes(&[0., 0., 0., 2e19, 0., 0., 0., 2e19, 0.]);

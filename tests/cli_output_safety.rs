@@ -135,7 +135,10 @@ fn what_a_killed_process_left_is_removed_by_the_next_write() {
     let leftover = dir.join(&left[0]);
     let old = std::time::SystemTime::now() - Duration::from_secs(120);
     std::fs::File::options().write(true).open(&leftover).unwrap().set_modified(old).unwrap();
-    let out = strata().args(["convert", fixture("cube.obj").to_str().unwrap(), dir.join("cube.strata").to_str().unwrap(), "--quiet"]).output().unwrap();
+    let out = strata()
+        .args(["convert", fixture("cube.obj").to_str().unwrap(), dir.join("cube.strata").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("removed") && err.contains(&left[0]), "{err}");

@@ -17,7 +17,8 @@ fn simplify_reaches_its_target_and_measures_the_distance() {
     let o = strata(&["simplify", &fixture("noisy_sphere.ply"), "--ratio", "0.1", "--measure", "--json", "-o", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
-    let (faces_in, faces_out, target) = (v["faces_in"].as_u64().unwrap(), v["faces_out"].as_u64().unwrap(), v["target_faces"].as_u64().unwrap());
+    let (faces_in, faces_out, target) =
+        (v["faces_in"].as_u64().unwrap(), v["faces_out"].as_u64().unwrap(), v["target_faces"].as_u64().unwrap());
     assert_eq!(target, (faces_in as f64 * 0.1).round() as u64);
     assert!(faces_out <= target && faces_out + 2 >= target, "{faces_out} faces for {target}");
     let mean = v["distance"]["mean_over_diagonal"].as_f64().unwrap();

@@ -256,7 +256,8 @@ fn readers_refuse_what_verify_refuses_node_by_node() {
             reseal_all(&mut bytes, &rd);
             let v = format::verify(Cursor::new(&bytes), Path::new("mutated"));
             let node_rules: Vec<String> = v.problems.iter().map(|e| e.to_string()).filter(|p| !whole_file_only(p)).collect();
-            let strict = Reader::open(Cursor::new(&bytes)).and_then(|r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
+            let strict =
+                Reader::open(Cursor::new(&bytes)).and_then(|r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
             match (&strict, node_rules.is_empty()) {
                 (Ok(()), false) => panic!("byte {at} ^ {mask:#x}: verify found {node_rules:?} but the reader accepted the file"),
                 (Err(e), true) => panic!("byte {at} ^ {mask:#x}: the reader refused ({e}) what verify accepts ({:?})", v.problems),

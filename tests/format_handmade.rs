@@ -11,10 +11,10 @@ use glam::Vec3;
 use std::io::Cursor;
 use strata::cone::Cone;
 use strata::format::{self, Reader, MAJOR, MINOR};
-use strata::write::WriteOptions;
 use strata::hierarchy::{GroupInfo, Hierarchy, HierarchyParams, Level, Lists, NO_PARENT};
 use strata::levels::{LevelMesh, LevelMeshes};
 use strata::mesh::{Material, Mesh};
+use strata::write::WriteOptions;
 
 const SPEC: &str = include_str!("../format-spec/strata-v2.md");
 

@@ -8,8 +8,8 @@ use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
 use strata::format::{self, octa, Reader};
-use strata::write::WriteOptions;
 use strata::mesh::Mesh;
+use strata::write::WriteOptions;
 
 /// Per face (keyed by its corner positions): material and corner attributes in key order.
 type Faces = HashMap<[[u32; 3]; 3], (u32, Vec<glam::Vec3>, Vec<glam::Vec2>, Vec<[u8; 4]>)>;

@@ -21,7 +21,8 @@ fn the_reader_agrees_with_every_golden_vector() {
         let expected: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(format!("{name}.json"))).unwrap()).unwrap();
         let verified = format::verify(Cursor::new(&bytes), Path::new(&name));
         if let Some(words) = expected.get("refused") {
-            let read = Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));
+            let read =
+                Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));
             let message = read.expect_err(&name).to_string();
             for w in words.as_array().unwrap() {
                 assert!(message.contains(w.as_str().unwrap()), "{name}: {message} lacks {w}");

@@ -179,10 +179,42 @@ fn chunk_files() -> Vec<Seed> {
 /// Numbers that text formats should refuse or survive (and a few ordinary ones, which keep the
 /// file readable so that the code behind the first checks runs too).
 const NUMBERS: &[&str] = &[
-    "0.5", "2", "-3.25", "1e3", "7",
-    "0", "-0", "-1", "-2", "1e39", "-1e39", "3.4028236e38", "1e-45", "1e308", "1e309", "NaN", "nan", "-nan", "inf", "-inf",
-    "infinity", "65535", "65536", "2147483647", "2147483648", "-2147483649", "4294967295", "4294967296",
-    "18446744073709551616", "99999999999999999999999999", "0x10", "1.", ".", "-", "1e", "",
+    "0.5",
+    "2",
+    "-3.25",
+    "1e3",
+    "7",
+    "0",
+    "-0",
+    "-1",
+    "-2",
+    "1e39",
+    "-1e39",
+    "3.4028236e38",
+    "1e-45",
+    "1e308",
+    "1e309",
+    "NaN",
+    "nan",
+    "-nan",
+    "inf",
+    "-inf",
+    "infinity",
+    "65535",
+    "65536",
+    "2147483647",
+    "2147483648",
+    "-2147483649",
+    "4294967295",
+    "4294967296",
+    "18446744073709551616",
+    "99999999999999999999999999",
+    "0x10",
+    "1.",
+    ".",
+    "-",
+    "1e",
+    "",
 ];
 
 /// A byte position: within the first KiB (headers, the chunk file's skeleton) or anywhere.
@@ -204,15 +236,37 @@ fn pos() -> impl Strategy<Value = Pos> {
 
 #[derive(Clone, Debug)]
 enum Mutation {
-    FlipBit { at: Pos, bit: u8 },
-    Set { at: Pos, value: u8 },
-    Truncate { at: Pos },
-    Duplicate { at: Pos, len: usize, to: Pos },
-    Delete { at: Pos, len: usize },
+    FlipBit {
+        at: Pos,
+        bit: u8,
+    },
+    Set {
+        at: Pos,
+        value: u8,
+    },
+    Truncate {
+        at: Pos,
+    },
+    Duplicate {
+        at: Pos,
+        len: usize,
+        to: Pos,
+    },
+    Delete {
+        at: Pos,
+        len: usize,
+    },
     /// This seed up to `at`, then another seed of the same code path from `from` on.
-    Splice { other: Index, at: Pos, from: Pos },
+    Splice {
+        other: Index,
+        at: Pos,
+        from: Pos,
+    },
     /// The `nth` number of the text replaced.
-    Number { nth: Index, to: &'static str },
+    Number {
+        nth: Index,
+        to: &'static str,
+    },
 }
 
 fn mutation() -> impl Strategy<Value = Mutation> {
@@ -238,8 +292,11 @@ struct Case {
 }
 
 fn case() -> impl Strategy<Value = Case> {
-    (any::<Index>(), prop::collection::vec(mutation(), 1..4), any::<bool>())
-        .prop_map(|(seed, mutations, reseal)| Case { seed, mutations, reseal })
+    (any::<Index>(), prop::collection::vec(mutation(), 1..4), any::<bool>()).prop_map(|(seed, mutations, reseal)| Case {
+        seed,
+        mutations,
+        reseal,
+    })
 }
 
 /// Byte ranges of the numbers in `bytes` (runs of digits, signs, dots and exponents that hold a
@@ -473,9 +530,9 @@ fn seeds_are_read_whole() {
         assert!(!rd.nodes().is_empty());
         assert!(strata::format::verify(std::io::Cursor::new(bytes), Path::new(name)).is_sound(), "{name}");
     }
-    assert!(seeds(Target::Reader).iter().any(|(_, b)| {
-        strata::format::Reader::open(std::io::Cursor::new(b)).is_ok_and(|rd| rd.levels().len() >= 3)
-    }));
+    assert!(seeds(Target::Reader)
+        .iter()
+        .any(|(_, b)| { strata::format::Reader::open(std::io::Cursor::new(b)).is_ok_and(|rd| rd.levels().len() >= 3) }));
     for (target, ext) in [(Target::Obj, "obj"), (Target::Ply, "ply")] {
         for (name, bytes) in seeds(target) {
             dir.import(bytes, ext).unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -509,9 +566,8 @@ fn mutated_gltf_files() {
 /// Files in `fuzz/regressions/<target>/<sub>`.
 fn regressions(target: Target, sub: &str) -> Vec<PathBuf> {
     let dir = root().join("fuzz/regressions").join(target.name()).join(sub);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .map(|d| d.flatten().map(|e| e.path()).filter(|p| p.is_file()).collect())
-        .unwrap_or_default();
+    let mut files: Vec<PathBuf> =
+        std::fs::read_dir(&dir).map(|d| d.flatten().map(|e| e.path()).filter(|p| p.is_file()).collect()).unwrap_or_default();
     files.sort();
     files
 }

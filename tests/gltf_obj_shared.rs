@@ -54,8 +54,7 @@ fn catalog(meshes: &Path) -> Vec<(String, Expected)> {
         if !(file.ends_with(".obj") || file.ends_with(".gltf") || file.ends_with(".glb")) {
             continue;
         }
-        let column =
-            |prefix: &str| header.iter().position(|h| h.starts_with(prefix)).and_then(|i| cells.get(i)).copied();
+        let column = |prefix: &str| header.iter().position(|h| h.starts_with(prefix)).and_then(|i| cells.get(i)).copied();
         let expected = if file.ends_with(".obj") {
             Expected::Faces(leading_number(column("triangles").expect("triangles column")).expect("OBJ triangle count"))
         } else {
@@ -93,10 +92,7 @@ fn shared_obj_and_gltf_files_import_with_catalog_counts() {
     let Some(meshes) = shared_meshes() else { return };
     let catalog = catalog(&meshes);
     assert!(catalog.iter().filter(|(f, _)| f.ends_with(".obj")).count() >= 5, "catalog parsing found too few OBJ rows");
-    assert!(
-        catalog.iter().filter(|(f, _)| !f.ends_with(".obj")).count() >= 30,
-        "catalog parsing found too few glTF rows"
-    );
+    assert!(catalog.iter().filter(|(f, _)| !f.ends_with(".obj")).count() >= 30, "catalog parsing found too few glTF rows");
 
     let mut all = Vec::new();
     files(&meshes, &meshes.join("scans"), &["obj"], &mut all);
@@ -138,50 +134,35 @@ fn flipped_faces(mesh: &strata::Mesh) -> usize {
 #[test]
 fn gltf_transforms_keep_normals_and_winding_consistent() {
     let Some(meshes) = shared_meshes() else { return };
-    for file in [
-        "NegativeScaleTest/glTF/NegativeScaleTest.gltf",
-        "Duck/glTF-Quantized/Duck.gltf",
-        "CesiumMilkTruck/glTF/CesiumMilkTruck.gltf",
-    ] {
+    for file in
+        ["NegativeScaleTest/glTF/NegativeScaleTest.gltf", "Duck/glTF-Quantized/Duck.gltf", "CesiumMilkTruck/glTF/CesiumMilkTruck.gltf"]
+    {
         let mesh = import(&meshes.join("gltf/khronos").join(file), None).unwrap().mesh;
         assert!(!mesh.normals.is_empty(), "{file}");
         let flipped = flipped_faces(&mesh);
-        assert!(
-            flipped * 100 < mesh.face_count(),
-            "{file}: {flipped} of {} faces disagree with their normals",
-            mesh.face_count()
-        );
+        assert!(flipped * 100 < mesh.face_count(), "{file}: {flipped} of {} faces disagree with their normals", mesh.face_count());
     }
 }
 
 #[test]
 fn quantized_duck_matches_the_float_duck() {
     let Some(meshes) = shared_meshes() else { return };
-    let duck =
-        |variant: &str| import(&meshes.join(format!("gltf/khronos/Duck/{variant}/Duck.gltf")), None).unwrap().mesh;
+    let duck = |variant: &str| import(&meshes.join(format!("gltf/khronos/Duck/{variant}/Duck.gltf")), None).unwrap().mesh;
     let (plain, quantized) = (duck("glTF"), duck("glTF-Quantized"));
     let (lo, hi) = plain.bounds().unwrap();
     let (qlo, qhi) = quantized.bounds().unwrap();
     let tolerance = 1e-3 * plain.diagonal();
-    assert!(
-        (lo - qlo).abs().max_element() < tolerance && (hi - qhi).abs().max_element() < tolerance,
-        "{lo} {hi} vs {qlo} {qhi}"
-    );
-    let uv_bounds =
-        |m: &strata::Mesh| m.uvs.iter().fold((glam::Vec2::MAX, glam::Vec2::MIN), |(a, b), &uv| (a.min(uv), b.max(uv)));
+    assert!((lo - qlo).abs().max_element() < tolerance && (hi - qhi).abs().max_element() < tolerance, "{lo} {hi} vs {qlo} {qhi}");
+    let uv_bounds = |m: &strata::Mesh| m.uvs.iter().fold((glam::Vec2::MAX, glam::Vec2::MIN), |(a, b), &uv| (a.min(uv), b.max(uv)));
     let ((ulo, uhi), (qulo, quhi)) = (uv_bounds(&plain), uv_bounds(&quantized));
-    assert!(
-        (ulo - qulo).abs().max_element() < 1e-3 && (uhi - quhi).abs().max_element() < 1e-3,
-        "{ulo} {uhi} vs {qulo} {quhi}"
-    );
+    assert!((ulo - qulo).abs().max_element() < 1e-3 && (uhi - quhi).abs().max_element() < 1e-3, "{ulo} {uhi} vs {qulo} {quhi}");
     assert!(quantized.normals.iter().all(|n| (n.length() - 1.0).abs() < 1e-3));
 }
 
 #[test]
 fn sparse_accessor_values_are_applied() {
     let Some(meshes) = shared_meshes() else { return };
-    let mesh =
-        import(&meshes.join("gltf/khronos/SimpleSparseAccessor/glTF/SimpleSparseAccessor.gltf"), None).unwrap().mesh;
+    let mesh = import(&meshes.join("gltf/khronos/SimpleSparseAccessor/glTF/SimpleSparseAccessor.gltf"), None).unwrap().mesh;
     // The base positions reach y = 1; the three sparse substitutes lift vertices to y = 2, 3 and 4.
     assert_eq!(mesh.bounds().unwrap().1.y, 4.0);
 }

@@ -48,10 +48,8 @@ fn shared_ply_files_match_the_catalog() {
     assert!(files.len() >= 12, "expected the catalog's PLY files, found {files:?}");
     for path in files {
         let name = path.strip_prefix(&meshes).unwrap().to_string_lossy().replace('\\', "/");
-        let (_, vertices, triangles, attributes) = rows
-            .iter()
-            .find(|r| r.0 == name)
-            .unwrap_or_else(|| panic!("{name} is not in CATALOG.md"));
+        let (_, vertices, triangles, attributes) =
+            rows.iter().find(|r| r.0 == name).unwrap_or_else(|| panic!("{name} is not in CATALOG.md"));
         let mut warnings = Vec::new();
         let result = ply::read(&path, &Default::default(), &mut warnings).map(|raw| raw.mesh);
         if *triangles == 0 {

@@ -27,12 +27,26 @@ fn orbit_prints_json_lines_within_budget_and_writes_frames_and_cut() {
     let file = converted(&dir);
     let (frames, cut) = (dir.join("frames"), dir.join("cut.obj"));
     let o = strata(&[
-        "stream", file.to_str().unwrap(), "--orbit", "8", "--json", "--budget-faces", "900", "--pixel-error", "0.5",
-        "--width", "96", "--height", "72", "--frames-dir", frames.to_str().unwrap(), "--export-cut", cut.to_str().unwrap(),
+        "stream",
+        file.to_str().unwrap(),
+        "--orbit",
+        "8",
+        "--json",
+        "--budget-faces",
+        "900",
+        "--pixel-error",
+        "0.5",
+        "--width",
+        "96",
+        "--height",
+        "72",
+        "--frames-dir",
+        frames.to_str().unwrap(),
+        "--export-cut",
+        cut.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let lines: Vec<serde_json::Value> =
-        String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.len(), 8);
     let mut read = 0;
     for (k, v) in lines.iter().enumerate() {

@@ -40,7 +40,8 @@ pub enum NormalsArg {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let opts = strata::pipeline::ConvertOptions { hierarchy: a.grouping.params(),
+    let opts = strata::pipeline::ConvertOptions {
+        hierarchy: a.grouping.params(),
         levels: a.levels.params(),
         normals: match a.normals {
             NormalsArg::Auto => Normals::Auto { crease_angle: a.crease_angle.to_radians() },
@@ -60,7 +61,14 @@ pub fn run(a: Args) -> Result<()> {
         return Ok(());
     }
     println!("wrote {} ({} bytes, {:.1} bytes per input face)", a.output.display(), s.file_bytes, s.bytes_per_face());
-    println!("{} input faces, {} levels, {} nodes, {} clusters, skeleton {} bytes", s.input_faces, s.levels.len(), s.nodes, s.clusters, s.skeleton_bytes);
+    println!(
+        "{} input faces, {} levels, {} nodes, {} clusters, skeleton {} bytes",
+        s.input_faces,
+        s.levels.len(),
+        s.nodes,
+        s.clusters,
+        s.skeleton_bytes
+    );
     println!("{:>6} {:>7} {:>9} {:>11}", "level", "nodes", "faces", "bytes");
     for l in s.levels.iter().rev() {
         println!("{:>6} {:>7} {:>9} {:>11}", l.level, l.nodes, l.faces, l.bytes);
@@ -100,11 +108,17 @@ impl strata::pipeline::Progress for Bars {
         }
         let bar = if steps > 0 {
             let b = indicatif::ProgressBar::new(steps);
-            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {elapsed}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
             b
         } else {
             let b = indicatif::ProgressBar::new_spinner();
-            b.set_style(indicatif::ProgressStyle::with_template("{prefix:>9} {spinner} {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()));
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{prefix:>9} {spinner} {elapsed}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+            );
             b.enable_steady_tick(std::time::Duration::from_millis(100));
             b
         };

@@ -46,15 +46,28 @@ pub fn run(a: Args) -> Result<()> {
     for l in v.levels.iter().rev() {
         println!("  GEOM x{} level {} at {}..{} ({} bytes)", l.nodes, l.level, l.start, l.end, l.bytes);
     }
-    println!("{:>5} {:>6} {:>10} {:>10} {:>11} {:>10} {:>9} {:>10}", "level", "nodes", "faces", "vertices", "bytes", "bytes/face", "cone max", "error max");
+    println!(
+        "{:>5} {:>6} {:>10} {:>10} {:>11} {:>10} {:>9} {:>10}",
+        "level", "nodes", "faces", "vertices", "bytes", "bytes/face", "cone max", "error max"
+    );
     for l in v.levels.iter().rev() {
         println!(
             "{:>5} {:>6} {:>10} {:>10} {:>11} {:>10.2} {:>8.1}° {:>10.4}",
-            l.level, l.nodes, l.faces, l.vertices, l.bytes, l.bytes as f64 / l.faces.max(1) as f64, l.cone_deg_max, l.error_max
+            l.level,
+            l.nodes,
+            l.faces,
+            l.vertices,
+            l.bytes,
+            l.bytes as f64 / l.faces.max(1) as f64,
+            l.cone_deg_max,
+            l.error_max
         );
     }
     if !v.nodes.is_empty() {
-        println!("{:>7} {:>5} {:>7} {:>7} {:>8} {:>7} {:>10} {:>9} children", "node", "level", "parent", "faces", "vertices", "cone", "error", "bytes");
+        println!(
+            "{:>7} {:>5} {:>7} {:>7} {:>8} {:>7} {:>10} {:>9} children",
+            "node", "level", "parent", "faces", "vertices", "cone", "error", "bytes"
+        );
     }
     for n in &v.nodes {
         let parent = n.parent.map_or("-".to_string(), |p| p.to_string());
@@ -64,7 +77,15 @@ pub fn run(a: Args) -> Result<()> {
         };
         println!(
             "{}{:>7} {:>5} {:>7} {:>7} {:>8} {:>6.1}° {:>10.4} {:>9} {children}",
-            "  ".repeat(n.depth as usize), n.node, n.level, parent, n.faces, n.vertices, n.cone_deg, n.error, n.bytes
+            "  ".repeat(n.depth as usize),
+            n.node,
+            n.level,
+            parent,
+            n.faces,
+            n.vertices,
+            n.cone_deg,
+            n.error,
+            n.bytes
         );
         for c in &n.chunks {
             println!("    {}{} at {} ({} bytes, flags {})", "  ".repeat(c.depth as usize), c.id, c.offset, c.size, c.flags);

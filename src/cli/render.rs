@@ -92,7 +92,10 @@ pub fn run(a: Args) -> Result<()> {
 
 /// Three comma-separated numbers.
 fn parse_vec3(s: &str, what: &str) -> Result<glam::Vec3> {
-    let v: Vec<f32> = s.split(',').map(|x| x.trim().parse::<f32>()).collect::<std::result::Result<_, _>>()
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<std::result::Result<_, _>>()
         .with_context(|| format!("{what}: {s:?} is not three comma-separated numbers"))?;
     anyhow::ensure!(v.len() == 3 && v.iter().all(|x| x.is_finite()), "{what}: {s:?} is not three comma-separated numbers");
     Ok(glam::Vec3::new(v[0], v[1], v[2]))

@@ -79,7 +79,10 @@ pub fn run(a: Args) -> Result<()> {
     println!("error estimate {:.6} ({:.6} of the diagonal)", out.error, out.error / diagonal.max(f32::MIN_POSITIVE));
     if out.mesh.face_count() > opts.target_faces && opts.max_error.is_none() {
         let hint = if a.topology { "" } else { "; --topology lets handles and small components go" };
-        println!("stopped above the target of {} faces: no legal collapse is left (corners, handles, small components){hint}", opts.target_faces);
+        println!(
+            "stopped above the target of {} faces: no legal collapse is left (corners, handles, small components){hint}",
+            opts.target_faces
+        );
     }
     if let Some(d) = distance {
         println!(

@@ -146,11 +146,8 @@ fn textures(mesh: &Mesh) -> (Vec<Texture>, Vec<Image>, Vec<Sampler>, Vec<Option<
         })
         .collect();
     let textures = (0..images.len() as u32).map(|source| Texture { sampler: 0, source }).collect();
-    let samplers = if images.is_empty() {
-        Vec::new()
-    } else {
-        vec![Sampler { mag_filter: 9729, min_filter: 9987, wrap_s: 10497, wrap_t: 10497 }]
-    };
+    let samplers =
+        if images.is_empty() { Vec::new() } else { vec![Sampler { mag_filter: 9729, min_filter: 9987, wrap_s: 10497, wrap_t: 10497 }] };
     (textures, images, samplers, texture_of)
 }
 
@@ -162,8 +159,8 @@ fn uri_reference(path: &str) -> String {
         match b {
             b'\\' => uri.push('/'),
             b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' => uri.push(b as char),
-            b'-' | b'.' | b'_' | b'~' | b':' | b'/' | b'?' | b'#' | b'[' | b']' | b'@' | b'!' | b'$' | b'&' | b'\''
-            | b'(' | b')' | b'*' | b'+' | b',' | b';' | b'=' | b'%' => uri.push(b as char),
+            b'-' | b'.' | b'_' | b'~' | b':' | b'/' | b'?' | b'#' | b'[' | b']' | b'@' | b'!' | b'$' | b'&' | b'\'' | b'(' | b')'
+            | b'*' | b'+' | b',' | b';' | b'=' | b'%' => uri.push(b as char),
             _ => uri.push_str(&format!("%{b:02X}")),
         }
     }
@@ -180,7 +177,15 @@ struct Bin {
 
 impl Bin {
     /// Append `bytes` as a new buffer view and accessor; returns the accessor index.
-    fn push(&mut self, bytes: &[u8], target: u32, component_type: u32, count: usize, kind: &'static str, bounds: Option<([f32; 3], [f32; 3])>) -> u32 {
+    fn push(
+        &mut self,
+        bytes: &[u8],
+        target: u32,
+        component_type: u32,
+        count: usize,
+        kind: &'static str,
+        bounds: Option<([f32; 3], [f32; 3])>,
+    ) -> u32 {
         while self.data.len() % 4 != 0 {
             self.data.push(0);
         }
@@ -415,7 +420,10 @@ mod tests {
         let (json, bin) = parse(&bytes);
         let p = &json["meshes"][0]["primitives"][0];
         let color = &json["accessors"][p["attributes"]["COLOR_0"].as_u64().unwrap() as usize];
-        assert_eq!((color["componentType"].as_u64(), color["normalized"].as_bool(), color["type"].as_str()), (Some(5121), Some(true), Some("VEC4")));
+        assert_eq!(
+            (color["componentType"].as_u64(), color["normalized"].as_bool(), color["type"].as_str()),
+            (Some(5121), Some(true), Some("VEC4"))
+        );
         let (_, pos) = accessor(&json, bin, &p["attributes"]["POSITION"], 12);
         let (_, colors) = accessor(&json, bin, &p["attributes"]["COLOR_0"], 4);
         let (ni, idx) = accessor(&json, bin, &p["indices"], 4);

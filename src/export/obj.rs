@@ -204,9 +204,12 @@ mod tests {
     fn faces_index_what_they_should() {
         let m = fixtures::two_material_box();
         let text = obj_text(&m, None);
-        let v: Vec<Vec<f32>> = lines(&text, "v").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
-        let vt: Vec<Vec<f32>> = lines(&text, "vt").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
-        let vn: Vec<Vec<f32>> = lines(&text, "vn").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        let v: Vec<Vec<f32>> =
+            lines(&text, "v").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        let vt: Vec<Vec<f32>> =
+            lines(&text, "vt").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
+        let vn: Vec<Vec<f32>> =
+            lines(&text, "vn").iter().map(|l| l.split_whitespace().skip(1).map(|s| s.parse().unwrap()).collect()).collect();
         assert_eq!(vt.len(), 4, "the box maps every face to the unit square");
         for (f, line) in lines(&text, "f").iter().enumerate() {
             for (k, corner) in line.split_whitespace().skip(1).enumerate() {

@@ -30,9 +30,7 @@ pub fn padding(end: u64) -> u64 {
 
 /// A chunk ID as text, non-printable bytes escaped.
 pub fn id_str(id: &[u8; 4]) -> String {
-    id.iter()
-        .map(|&b| if b.is_ascii_graphic() || b == b' ' { (b as char).to_string() } else { format!("\\x{b:02x}") })
-        .collect()
+    id.iter().map(|&b| if b.is_ascii_graphic() || b == b' ' { (b as char).to_string() } else { format!("\\x{b:02x}") }).collect()
 }
 
 /// The 16 bytes before a payload.
@@ -112,10 +110,7 @@ pub fn subs(path: &Path, parent: &[u8; 4], parent_offset: u64, payload: &[u8], b
         let frame = Frame::parse(&head);
         let room = rest as u64 - HEADER_BYTES - TRAILER_BYTES;
         if frame.size > room {
-            return Err(err(
-                at + 8,
-                format!("{} says {} bytes but its parent has {room} left", name(&frame.id, at), frame.size),
-            ));
+            return Err(err(at + 8, format!("{} says {} bytes but its parent has {room} left", name(&frame.id, at), frame.size)));
         }
         let start = pos + 16;
         let end = start + frame.size as usize;

@@ -245,7 +245,11 @@ impl<S: ByteSource> Reader<S> {
     pub fn read_at(&self, offset: u64, len: u64) -> Result<Vec<u8>> {
         let end = offset.checked_add(len).filter(|&e| e <= self.len);
         if end.is_none() {
-            return Err(Error::at_byte(&self.path, offset, format!("{len} bytes at offset {offset} run past the end of the file ({} bytes)", self.len)));
+            return Err(Error::at_byte(
+                &self.path,
+                offset,
+                format!("{len} bytes at offset {offset} run past the end of the file ({} bytes)", self.len),
+            ));
         }
         let mut buf = vec![0u8; len as usize];
         self.source.read_exact_at(offset, &mut buf).map_err(|e| Error::io(&self.path, e))?;
@@ -275,7 +279,11 @@ impl<S: ByteSource> Reader<S> {
             ));
         }
         if major < MAJOR {
-            return Err(Error::at_byte(&self.path, 8, format!("format version {major}.{minor} is not supported (this reader reads {MAJOR}.x)")));
+            return Err(Error::at_byte(
+                &self.path,
+                8,
+                format!("format version {major}.{minor} is not supported (this reader reads {MAJOR}.x)"),
+            ));
         }
         let (stored, actual) = (LE::read_u32(&p[12..16]), chunk::crc32(&p[..12]));
         if stored != actual {
@@ -287,7 +295,11 @@ impl<S: ByteSource> Reader<S> {
     /// The frame at `pos`; there must be room for it and a CRC.
     fn frame_at(&self, pos: u64) -> Result<Frame> {
         if pos.checked_add(HEADER_BYTES + TRAILER_BYTES).is_none_or(|e| e > self.len) {
-            return Err(Error::at_byte(&self.path, pos, format!("a chunk at offset {pos} runs past the end of the file ({} bytes)", self.len)));
+            return Err(Error::at_byte(
+                &self.path,
+                pos,
+                format!("a chunk at offset {pos} runs past the end of the file ({} bytes)", self.len),
+            ));
         }
         let b = self.read_at(pos, HEADER_BYTES)?;
         let mut head = [0u8; 16];

@@ -209,4 +209,3 @@ impl NodeGeometry {
         self.indices.len() / 3
     }
 }
-

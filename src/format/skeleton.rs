@@ -65,7 +65,9 @@ impl Skeleton {
 
     /// Same-level neighbours of node `i`.
     pub fn neighbors(&self, i: u32) -> &[u32] {
-        self.nodes.get(i as usize).map_or(&[], |n| &self.neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize])
+        self.nodes
+            .get(i as usize)
+            .map_or(&[], |n| &self.neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize])
     }
 
     /// Node `i`'s bounding box (min, max).
@@ -222,7 +224,10 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     for (l, rec) in levels.iter().enumerate().rev() {
         if rec.first_node as u64 != expect || rec.nodes == 0 {
             let at = levl.payload_offset() + l as u64 * LEVEL_RECORD_BYTES;
-            return Err(f.error_at(at, format!("level {l} has nodes {}..+{}; expected a non-empty range from {expect}", rec.first_node, rec.nodes)));
+            return Err(f.error_at(
+                at,
+                format!("level {l} has nodes {}..+{}; expected a non-empty range from {expect}", rec.first_node, rec.nodes),
+            ));
         }
         expect += rec.nodes as u64;
     }
@@ -239,7 +244,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     if nbrs.frame.size % width != 0 {
         return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
     }
-    let mut neighbors: Vec<u32> = payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
+    let mut neighbors: Vec<u32> =
+        payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
 
     // NODE
     let mut f = fields(node);
@@ -297,7 +303,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
             let padded = size as u64 + chunk::padding(end);
             let total = &mut totals[l];
             *total = (total.0 + faces as u64, total.1 + vertices as u64, total.2 + padded);
-            let in_file = size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
+            let in_file =
+                size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
             if !in_file {
                 return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
             }
@@ -337,7 +344,10 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
             let at = levl.payload_offset() + l as u64 * LEVEL_RECORD_BYTES;
             return Err(fields(levl).error_at(
                 at,
-                format!("level {l}: LEVL says {} faces, {} vertices, {} bytes; the nodes hold {}, {}, {}", rec.faces, rec.vertices, rec.bytes, t.0, t.1, t.2),
+                format!(
+                    "level {l}: LEVL says {} faces, {} vertices, {} bytes; the nodes hold {}, {}, {}",
+                    rec.faces, rec.vertices, rec.bytes, t.0, t.1, t.2
+                ),
             ));
         }
     }
@@ -365,11 +375,14 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     for m in 0..h.materials {
         let at = f.offset();
         let len = f.u32()?;
-        let name = f.string(len).map_err(|_| f.error_at(at, format!("material {m}: name of {len} bytes runs past the chunk or is not UTF-8")))?;
+        let name =
+            f.string(len).map_err(|_| f.error_at(at, format!("material {m}: name of {len} bytes runs past the chunk or is not UTF-8")))?;
         let base_color = [f.f32()?, f.f32()?, f.f32()?, f.f32()?];
         let at = f.offset();
         let len = f.u32()?;
-        let tex = f.string(len).map_err(|_| f.error_at(at, format!("material {m}: texture of {len} bytes runs past the chunk or is not UTF-8")))?;
+        let tex = f
+            .string(len)
+            .map_err(|_| f.error_at(at, format!("material {m}: texture of {len} bytes runs past the chunk or is not UTF-8")))?;
         materials.push(Material { name, base_color, texture: (!tex.is_empty()).then_some(tex) });
     }
     if f.remaining() > 0 && h.minor.cmp(&MINOR).is_le() {
@@ -378,7 +391,6 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
 
     Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes }, infos))
 }
-
 
 /// The `HEAD` chunk.
 pub fn encode_head(h: &Header) -> Vec<u8> {
@@ -418,7 +430,13 @@ pub fn encode_head(h: &Header) -> Vec<u8> {
 }
 
 /// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`.
-pub fn encode_skel(levels: &[LevelRecord], records: &[NodeRecord], codes: &[NodeCodes], neighbors: &[u32], materials: &[Material]) -> Vec<u8> {
+pub fn encode_skel(
+    levels: &[LevelRecord],
+    records: &[NodeRecord],
+    codes: &[NodeCodes],
+    neighbors: &[u32],
+    materials: &[Material],
+) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
     for l in levels {
@@ -475,4 +493,3 @@ pub fn encode_skel(levels: &[LevelRecord], records: &[NodeRecord], codes: &[Node
     chunk::put(&mut out, id::SKEL, 0, &payload);
     out
 }
-

@@ -23,7 +23,10 @@ fn slice_at(data: &[u8], offset: u64, buf: &mut [u8]) -> io::Result<()> {
             buf.copy_from_slice(&data[r]);
             Ok(())
         }
-        None => Err(io::Error::new(io::ErrorKind::UnexpectedEof, format!("{} bytes at offset {offset} run past the end ({} bytes)", buf.len(), data.len()))),
+        None => Err(io::Error::new(
+            io::ErrorKind::UnexpectedEof,
+            format!("{} bytes at offset {offset} run past the end ({} bytes)", buf.len(), data.len()),
+        )),
     }
 }
 

@@ -13,8 +13,8 @@ use super::chunk;
 use super::geom::v2::{self, GeometryCodes};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
 use super::{
-    id, Attributes, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, ByteSource, angle_decode, MAGIC, MAJOR, MAX_TOOL_BYTES,
-    MINOR, NO_PARENT,
+    angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC, MAJOR,
+    MAX_TOOL_BYTES, MINOR, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -98,7 +98,10 @@ impl WriteSummary {
 enum Spill {
     Memory(Vec<u8>),
     /// An unlinked temporary file: nothing is left behind, whatever ends the process.
-    File { file: File, len: u64 },
+    File {
+        file: File,
+        len: u64,
+    },
 }
 
 impl Spill {
@@ -185,8 +188,12 @@ impl<W: Write> Writer<W> {
         let (faces, vertices) = (g.indices.len() / 3, g.points.len());
         let a = self.opts.attributes;
         let sized = |present: bool, len: usize| if present { len == vertices } else { len == 0 };
-        if !(sized(a.normals, g.normals.len()) && sized(a.uvs, g.uvs.len()) && sized(a.colors, g.colors.len())) || g.indices.len() % 3 != 0 {
-            return Err(bad(format!("level {l} node {}: attributes or indices do not match {vertices} vertices and the file's {a:?}", node.key)));
+        if !(sized(a.normals, g.normals.len()) && sized(a.uvs, g.uvs.len()) && sized(a.colors, g.colors.len())) || g.indices.len() % 3 != 0
+        {
+            return Err(bad(format!(
+                "level {l} node {}: attributes or indices do not match {vertices} vertices and the file's {a:?}",
+                node.key
+            )));
         }
         if (l == 0) != g.clusters.is_some() {
             return Err(bad(format!("level {l} node {}: level-0 nodes carry clusters, others none", node.key)));
@@ -241,7 +248,9 @@ impl<W: Write> Writer<W> {
                     }
                     0
                 } else {
-                    *node_of[l + 1].get(&p.parent).ok_or_else(|| bad(format!("level {l} node {}: no parent {} in level {}", p.key, p.parent, l + 1)))?
+                    *node_of[l + 1]
+                        .get(&p.parent)
+                        .ok_or_else(|| bad(format!("level {l} node {}: no parent {} in level {}", p.key, p.parent, l + 1)))?
                 };
                 parent_node.push(parent);
             }
@@ -272,7 +281,14 @@ impl<W: Write> Writer<W> {
             for &k in &order[l] {
                 let p = &self.levels[l][k];
                 let start = neighbors.len();
-                neighbors.extend(p.neighbors.iter().filter(|&&x| x != p.key).map(|x| node_of[l].get(x).copied().ok_or(*x)).collect::<std::result::Result<Vec<_>, _>>().map_err(|x| bad(format!("level {l} node {}: no neighbour {x}", p.key)))?);
+                neighbors.extend(
+                    p.neighbors
+                        .iter()
+                        .filter(|&&x| x != p.key)
+                        .map(|x| node_of[l].get(x).copied().ok_or(*x))
+                        .collect::<std::result::Result<Vec<_>, _>>()
+                        .map_err(|x| bad(format!("level {l} node {}: no neighbour {x}", p.key)))?,
+                );
                 neighbors[start..].sort_unstable();
                 let mut kept = start;
                 for i in start..neighbors.len() {
@@ -319,7 +335,13 @@ impl<W: Write> Writer<W> {
             }
         }
         if let Some(r) = records.iter().find(|r| r.child_count > u16::MAX as u32 || r.neighbor_count > u16::MAX as u32) {
-            return Err(bad(format!("a node of level {} has {} children and {} neighbours; at most {} each", r.level, r.child_count, r.neighbor_count, u16::MAX)));
+            return Err(bad(format!(
+                "a node of level {} has {} children and {} neighbours; at most {} each",
+                r.level,
+                r.child_count,
+                r.neighbor_count,
+                u16::MAX
+            )));
         }
 
         let top = level_first[nl - 1] as usize..(level_first[nl - 1] + levels[nl - 1].nodes) as usize;

@@ -195,9 +195,8 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     }
     replace_non_finite_corners(&mut raw, &mut warnings);
     let source_faces = raw.face_count();
-    let (mesh, cleaned) = raw.clean().map_err(|e| {
-        Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite")
-    })?;
+    let (mesh, cleaned) =
+        raw.clean().map_err(|e| Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite"))?;
     if mesh.triangles.is_empty() {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
@@ -270,9 +269,9 @@ mod tests {
         assert_eq!(mesh.normals[4], -glam::Vec3::Z);
         assert_eq!(mesh.normals[5], glam::Vec3::X);
         assert_eq!(mesh.uvs[1], Vec2::ZERO);
-        assert_eq!(warnings, [
-            "2 corner normals were NaN or infinite and got their face's normal",
-            "1 corner UV was NaN or infinite and got UV (0, 0)",
-        ]);
+        assert_eq!(
+            warnings,
+            ["2 corner normals were NaN or infinite and got their face's normal", "1 corner UV was NaN or infinite and got UV (0, 0)",]
+        );
     }
 }

@@ -39,11 +39,7 @@ fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     }
     let scan = scan(&text).map_err(|(line, what)| Error::at_line(path, line, what))?;
     if scan.faces == 0 {
-        return Err(Error::invalid(
-            path,
-            None,
-            format!("no faces: {} vertices but no `f` line with 3 or more vertices", scan.positions),
-        ));
+        return Err(Error::invalid(path, None, format!("no faces: {} vertices but no `f` line with 3 or more vertices", scan.positions)));
     }
     scan.warn(warnings);
 
@@ -62,11 +58,8 @@ fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
         }
         let full = dir.join(lib);
         // Only a regular file: tobj reads a device such as /dev/zero without end.
-        let result = if std::fs::metadata(&full).is_ok_and(|m| !m.is_file()) {
-            Err(tobj::LoadError::OpenFileFailed)
-        } else {
-            tobj::load_mtl(&full)
-        };
+        let result =
+            if std::fs::metadata(&full).is_ok_and(|m| !m.is_file()) { Err(tobj::LoadError::OpenFileFailed) } else { tobj::load_mtl(&full) };
         if let Err(e) = &result {
             let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
             let mut ws = mtl_warnings.borrow_mut();
@@ -140,22 +133,14 @@ impl Scan {
             warnings.push(format!("{} line elements (`l`) skipped", self.lines));
         }
         if self.colored > 0 && self.colored < self.positions {
-            warnings.push(format!(
-                "only {} of {} vertices have colors; vertex colors ignored",
-                self.colored, self.positions
-            ));
+            warnings.push(format!("only {} of {} vertices have colors; vertex colors ignored", self.colored, self.positions));
         }
         if self.texcoords > 0 && self.corners_without_uv > 0 {
-            warnings.push(format!(
-                "{} face corners have no texture index and reuse the previous corner's UV",
-                self.corners_without_uv
-            ));
+            warnings.push(format!("{} face corners have no texture index and reuse the previous corner's UV", self.corners_without_uv));
         }
         if self.normals > 0 && self.corners_without_normal > 0 {
-            warnings.push(format!(
-                "{} face corners have no normal index and reuse the previous corner's normal",
-                self.corners_without_normal
-            ));
+            warnings
+                .push(format!("{} face corners have no normal index and reuse the previous corner's normal", self.corners_without_normal));
         }
     }
 }
@@ -236,19 +221,12 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
                     for (kind, part) in parts.iter().enumerate() {
                         let Some(part) = part.filter(|p| !p.is_empty()) else { continue };
                         let what = KIND_NAMES[kind];
-                        let index: i64 =
-                            part.parse().map_err(|_| (n, format!("face {what} index '{part}' is not an integer")))?;
+                        let index: i64 = part.parse().map_err(|_| (n, format!("face {what} index '{part}' is not an integer")))?;
                         if index == 0 {
                             return Err((n, format!("face {what} index 0 (OBJ indices start at 1)")));
                         }
                         if index < 0 && index.unsigned_abs() > counts[kind] as u64 {
-                            return Err((
-                                n,
-                                format!(
-                                    "relative {what} index {index} reaches before the first of {} so far",
-                                    counts[kind]
-                                ),
-                            ));
+                            return Err((n, format!("relative {what} index {index} reaches before the first of {} so far", counts[kind])));
                         }
                         if index > 0 && index as u64 > counts[kind] as u64 {
                             forward.push(ForwardRef { line: n, kind, index: index as usize });
@@ -296,16 +274,9 @@ fn number<T: std::str::FromStr>(word: Option<&str>, element: &str, expected: &st
 }
 
 /// Concatenate tobj's models into one mesh, checking every index tobj produced.
-fn build_mesh(
-    path: &Path,
-    scan: &Scan,
-    models: &[tobj::Model],
-    materials: &[tobj::Material],
-    warnings: &mut Vec<String>,
-) -> Result<Mesh> {
-    let bad = |model: &str, what: &str| {
-        Error::at_element(path, format!("object '{model}'"), format!("inconsistent {what} from the OBJ parser"))
-    };
+fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tobj::Material], warnings: &mut Vec<String>) -> Result<Mesh> {
+    let bad =
+        |model: &str, what: &str| Error::at_element(path, format!("object '{model}'"), format!("inconsistent {what} from the OBJ parser"));
     let faces: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
     let with_normals = scan.normals > 0;
     let with_uvs = scan.texcoords > 0;
@@ -390,11 +361,7 @@ fn build_mesh(
 fn material_from(t: &tobj::Material) -> Material {
     let default = Material::default();
     let [r, g, b] = t.diffuse.unwrap_or([default.base_color[0], default.base_color[1], default.base_color[2]]);
-    Material {
-        name: t.name.clone(),
-        base_color: [r, g, b, t.dissolve.unwrap_or(1.0)],
-        texture: t.diffuse_texture.clone(),
-    }
+    Material { name: t.name.clone(), base_color: [r, g, b, t.dissolve.unwrap_or(1.0)], texture: t.diffuse_texture.clone() }
 }
 
 fn unit_to_u8(c: f32) -> u8 {
@@ -414,11 +381,7 @@ mod tests {
     impl TempDir {
         fn with(files: &[(&str, &str)]) -> Self {
             static NEXT: AtomicUsize = AtomicUsize::new(0);
-            let dir = std::env::temp_dir().join(format!(
-                "strata-obj-test-{}-{}",
-                std::process::id(),
-                NEXT.fetch_add(1, Ordering::Relaxed)
-            ));
+            let dir = std::env::temp_dir().join(format!("strata-obj-test-{}-{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed)));
             std::fs::create_dir_all(&dir).unwrap();
             for (name, text) in files {
                 std::fs::write(dir.join(name), text).unwrap();
@@ -473,8 +436,7 @@ mod tests {
             let v: Vec<f32> = SQUARE.lines().nth(i - 1).unwrap()[2..].split(' ').map(|x| x.parse().unwrap()).collect();
             [v[0], v[1], v[2]]
         };
-        let expected =
-            vec![[p(1), p(2), p(3)], [p(1), p(3), p(4)], [p(1), p(2), p(3)], [p(1), p(3), p(5)], [p(1), p(5), p(4)]];
+        let expected = vec![[p(1), p(2), p(3)], [p(1), p(3), p(4)], [p(1), p(2), p(3)], [p(1), p(3), p(5)], [p(1), p(5), p(4)]];
         assert_eq!(corners(&mesh), expected);
         assert!(mesh.normals.is_empty() && mesh.uvs.is_empty() && mesh.colors.is_empty());
     }
@@ -526,8 +488,7 @@ mod tests {
     #[test]
     fn usemtl_with_mtl_gives_colors_and_textures() {
         let mtl = "newmtl red\nKd 1 0 0\nmap_Kd tex/red skin.png\nnewmtl blue\nKd 0 0 1\nd 0.5\n";
-        let obj =
-            format!("mtllib m.mtl\n{SQUARE}f 1 2 3\nusemtl red\nf 1 3 4\nusemtl blue\nf 2 3 5\nusemtl red\nf 1 2 5\n");
+        let obj = format!("mtllib m.mtl\n{SQUARE}f 1 2 3\nusemtl red\nf 1 3 4\nusemtl blue\nf 2 3 5\nusemtl red\nf 1 2 5\n");
         let (mesh, warnings) = TempDir::with(&[("m.obj", &obj), ("m.mtl", mtl)]).read("m.obj");
         let mesh = mesh.unwrap();
         mesh.validate().unwrap();
@@ -543,12 +504,10 @@ mod tests {
     #[test]
     fn usemtl_without_mtl_keeps_materials_apart_and_warns() {
         for header in ["mtllib missing.mtl\n", ""] {
-            let (mesh, warnings) =
-                read_str(&format!("{header}{SQUARE}usemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\nusemtl a\nf 2 3 5\n"));
+            let (mesh, warnings) = read_str(&format!("{header}{SQUARE}usemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\nusemtl a\nf 2 3 5\n"));
             let mesh = mesh.unwrap();
             mesh.validate().unwrap();
-            let names: Vec<&str> =
-                mesh.face_materials.iter().map(|&m| mesh.materials[m as usize].name.as_str()).collect();
+            let names: Vec<&str> = mesh.face_materials.iter().map(|&m| mesh.materials[m as usize].name.as_str()).collect();
             assert_eq!(names, ["a", "b", "a"]);
             assert!(warnings.iter().any(|w| w.contains("a, b")), "{warnings:?}");
             if !header.is_empty() {

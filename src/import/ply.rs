@@ -176,15 +176,13 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
                     [name, count] => (name, count),
                     _ => return Err(Error::at_line(path, line, "expected 'element <name> <count>'")),
                 };
-                let count = count.parse::<u64>().map_err(|_| {
-                    Error::at_line(path, line, format!("element count '{count}' is not a non-negative integer"))
-                })?;
+                let count = count
+                    .parse::<u64>()
+                    .map_err(|_| Error::at_line(path, line, format!("element count '{count}' is not a non-negative integer")))?;
                 elements.push(Element { name: name.to_string(), count, props: Vec::new(), line });
             }
             Some("property") => {
-                let element = elements
-                    .last_mut()
-                    .ok_or_else(|| Error::at_line(path, line, "property before any element"))?;
+                let element = elements.last_mut().ok_or_else(|| Error::at_line(path, line, "property before any element"))?;
                 let prop = parse_property(&words).map_err(|m| Error::at_line(path, line, m))?;
                 element.props.push(prop);
             }
@@ -1075,7 +1073,20 @@ mod tests {
             "property list uchar int vertex_indices",
         ];
         let vertex = |x: f64, y: f64, c: u8| {
-            vec![V::D(x), V::D(y), V::D(0.5), V::F(0.25), V::F(0.0), V::F(0.0), V::F(1.0), V::Uc(c), V::Uc(2 * c), V::Uc(255), V::F(x as f32), V::F(y as f32)]
+            vec![
+                V::D(x),
+                V::D(y),
+                V::D(0.5),
+                V::F(0.25),
+                V::F(0.0),
+                V::F(0.0),
+                V::F(1.0),
+                V::Uc(c),
+                V::Uc(2 * c),
+                V::Uc(255),
+                V::F(x as f32),
+                V::F(y as f32),
+            ]
         };
         let records = [
             vec![V::Uc(3), V::F(0.1), V::F(0.2), V::F(0.3), V::I(7)],
@@ -1119,7 +1130,12 @@ mod tests {
             "property list uchar uint vertex_indices",
         ];
         let v = |x: f32, r: f32, g: f32, b: f32, a: f64| vec![V::F(x), V::F(x * x), V::F(0.0), V::F(r), V::F(g), V::F(b), V::D(a)];
-        let records = [v(0., 0.5, 1.5, -0.2, 1.0), v(1., 0.0, 1.0, 0.1, 0.0), v(2., 0.999, 0.002, 0.5, 0.5), vec![V::Uc(3), V::Ui(0), V::Ui(1), V::Ui(2)]];
+        let records = [
+            v(0., 0.5, 1.5, -0.2, 1.0),
+            v(1., 0.0, 1.0, 0.1, 0.0),
+            v(2., 0.999, 0.002, 0.5, 0.5),
+            vec![V::Uc(3), V::Ui(0), V::Ui(1), V::Ui(2)],
+        ];
         for encoding in ALL {
             let m = ok(&file(encoding, &header, &records));
             assert_eq!(m.colors, vec![[128, 255, 0, 255], [0, 255, 26, 0], [255, 1, 128, 128]], "{encoding:?}");
@@ -1185,7 +1201,14 @@ mod tests {
 
     #[test]
     fn reads_tristrips_with_restarts_and_degenerates() {
-        let header = ["element vertex 7", "property float x", "property float y", "property float z", "element tristrips 1", "property list int int vertex_indices"];
+        let header = [
+            "element vertex 7",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element tristrips 1",
+            "property list int int vertex_indices",
+        ];
         let mut records: Vec<Vec<V>> = (0..7).map(|k| vec![V::F(k as f32), V::F((k % 2) as f32), V::F(0.0)]).collect();
         let strip = [0, 1, 2, 3, -1, 4, 5, 6, -1, 0, 1, 1, 2, -1];
         records.push(std::iter::once(V::I(strip.len() as i32)).chain(strip.iter().map(|&v| V::I(v))).collect());
@@ -1225,7 +1248,14 @@ mod tests {
 
     #[test]
     fn short_faces_are_skipped_with_a_warning() {
-        let header = ["element vertex 3", "property float x", "property float y", "property float z", "element face 3", "property list uchar int vertex_indices"];
+        let header = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element face 3",
+            "property list uchar int vertex_indices",
+        ];
         let v = |x: f32| vec![V::F(x), V::F(x * x), V::F(0.)];
         let records = [v(0.), v(1.), v(2.), vec![V::Uc(2), V::I(0), V::I(1)], vec![V::Uc(3), V::I(0), V::I(1), V::I(2)], vec![V::Uc(0)]];
         for encoding in ALL {
@@ -1255,9 +1285,20 @@ mod tests {
     }
 
     fn triangle_file(encoding: Encoding) -> Vec<u8> {
-        let header = ["element vertex 3", "property float x", "property float y", "property float z", "element face 2", "property list uchar int vertex_indices"];
+        let header = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element face 2",
+            "property list uchar int vertex_indices",
+        ];
         let v = |x: f32| vec![V::F(x), V::F(x * x), V::F(0.)];
-        file(encoding, &header, &[v(0.), v(1.), v(2.), vec![V::Uc(3), V::I(0), V::I(1), V::I(2)], vec![V::Uc(3), V::I(2), V::I(1), V::I(0)]])
+        file(
+            encoding,
+            &header,
+            &[v(0.), v(1.), v(2.), vec![V::Uc(3), V::I(0), V::I(1), V::I(2)], vec![V::Uc(3), V::I(2), V::I(1), V::I(0)]],
+        )
     }
 
     #[test]
@@ -1326,7 +1367,15 @@ mod tests {
         assert_eq!(at_byte(&e), (good.len() - 13) as u64, "{e}");
         assert!(e.to_string().contains("list length 3 in face 1 (property vertex_indices) runs past the end"), "{e}");
         // Cut inside a value after a list.
-        let header = ["element vertex 3", "property float x", "property float y", "property float z", "element face 2", "property list uchar int vertex_indices", "property int flags"];
+        let header = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element face 2",
+            "property list uchar int vertex_indices",
+            "property int flags",
+        ];
         let v = |x: f32| vec![V::F(x), V::F(x * x), V::F(0.)];
         let face = vec![V::Uc(3), V::I(0), V::I(1), V::I(2), V::I(-1)];
         let bytes = file(Encoding::Little, &header, &[v(0.), v(1.), v(2.), face.clone(), face]);
@@ -1375,7 +1424,14 @@ mod tests {
 
     #[test]
     fn bad_list_lengths_name_the_byte() {
-        let header = ["element vertex 3", "property float x", "property float y", "property float z", "element face 1", "property list int int vertex_indices"];
+        let header = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element face 1",
+            "property list int int vertex_indices",
+        ];
         let v = |x: f32| vec![V::F(x), V::F(x * x), V::F(0.)];
         for n in [-5, 1_000_000, i32::MAX] {
             let bytes = file(Encoding::Little, &header, &[v(0.), v(1.), v(2.), vec![V::I(n), V::I(0), V::I(1), V::I(2)]]);
@@ -1387,7 +1443,14 @@ mod tests {
 
     #[test]
     fn bad_indices_and_coordinates_name_the_element() {
-        let header = ["element vertex 3", "property float x", "property float y", "property double z", "element face 2", "property list uchar int vertex_indices"];
+        let header = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property double z",
+            "element face 2",
+            "property list uchar int vertex_indices",
+        ];
         let v = |z: f64| vec![V::F(0.), V::F(1.), V::D(z)];
         let tri = |a: i32| vec![V::Uc(3), V::I(0), V::I(1), V::I(a)];
         for encoding in ALL {
@@ -1406,7 +1469,14 @@ mod tests {
         }
         let e = err(&quad(Encoding::Ascii).iter().map(|&b| if b == b'0' { b'x' } else { b }).collect::<Vec<u8>>());
         assert!(matches!(e.location(), Some(Location::Line(_))), "{e}");
-        let strips = ["element vertex 3", "property float x", "property float y", "property float z", "element tristrips 1", "property list int int vertex_indices"];
+        let strips = [
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element tristrips 1",
+            "property list int int vertex_indices",
+        ];
         let w = |x: f32| vec![V::F(x), V::F(1.), V::F(0.)];
         let e = err(&file(Encoding::Ascii, &strips, &[w(0.), w(1.), w(2.), vec![V::I(4), V::I(0), V::I(1), V::I(-2), V::I(2)]]));
         assert_eq!(at_element(&e), "tristrips 0", "{e}");
@@ -1414,7 +1484,11 @@ mod tests {
 
     #[test]
     fn point_clouds_are_rejected_clearly() {
-        let cloud = file(Encoding::Ascii, &["element vertex 2", "property float x", "property float y", "property float z"], &[vec![V::F(0.); 3], vec![V::F(1.); 3]]);
+        let cloud = file(
+            Encoding::Ascii,
+            &["element vertex 2", "property float x", "property float y", "property float z"],
+            &[vec![V::F(0.); 3], vec![V::F(1.); 3]],
+        );
         let e = err(&cloud);
         assert!(e.to_string().contains("point cloud: 2 vertices and no faces"), "{e}");
         let empty_faces = String::from_utf8(triangle_file(Encoding::Ascii)).unwrap().replacen("element face 2", "element face 0", 1);
@@ -1424,7 +1498,16 @@ mod tests {
 
     #[test]
     fn elements_after_the_mesh_are_not_needed_and_order_is_free() {
-        let header = ["element face 1", "property list uchar int vertex_indices", "element vertex 3", "property float x", "property float y", "property float z", "element edge 1", "property int a"];
+        let header = [
+            "element face 1",
+            "property list uchar int vertex_indices",
+            "element vertex 3",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element edge 1",
+            "property int a",
+        ];
         let v = |x: f32| vec![V::F(x), V::F(x * x), V::F(0.)];
         for encoding in ALL {
             let m = ok(&file(encoding, &header, &[vec![V::Uc(3), V::I(2), V::I(0), V::I(1)], v(0.), v(1.), v(2.), vec![V::I(9)]]));

@@ -30,7 +30,10 @@ pub(super) enum Allowed {
     /// Both ends free: anywhere, attributes interpolated.
     Anywhere,
     /// Onto one end or the other.
-    Ends { u_into_v: bool, v_into_u: bool },
+    Ends {
+        u_into_v: bool,
+        v_into_u: bool,
+    },
 }
 
 /// The legal candidates of an edge, cheapest first.
@@ -163,7 +166,8 @@ impl State {
             return false;
         }
         if e.n == 2 {
-            let spans = |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
+            let spans =
+                |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
             if spans(u) && spans(v) {
                 return false;
             }
@@ -196,7 +200,13 @@ impl State {
         for &f in self.faces_of(w) {
             if !e.f.contains(&f) {
                 let t = self.tri(f);
-                let moved = if t[0] == w { 0 } else if t[1] == w { 1 } else { 2 };
+                let moved = if t[0] == w {
+                    0
+                } else if t[1] == w {
+                    1
+                } else {
+                    2
+                };
                 out.push(Around { p: t.map(|y| self.pos(y)), moved, normal: self.faces[f as usize].normal });
             }
         }
@@ -223,7 +233,11 @@ impl State {
         let len_new = n_new.length();
         let quality = |p: &[DVec3; 3], len: f64| {
             let l2 = (p[1] - p[0]).length_squared() + (p[2] - p[1]).length_squared() + (p[0] - p[2]).length_squared();
-            if l2 > 0.0 { 2.0 * 3f64.sqrt() * len / l2 } else { 0.0 }
+            if l2 > 0.0 {
+                2.0 * 3f64.sqrt() * len / l2
+            } else {
+                0.0
+            }
         };
         let q_new = quality(&new, len_new);
         if q_new <= 1e-6 || (q_new < self.min_quality && q_new < quality(&old, n_old.length())) {

@@ -74,7 +74,13 @@ impl State {
         ends.clear();
         for &f in self.faces_of(v) {
             let t = self.tri(f);
-            let i = if t[0] == v { 0 } else if t[1] == v { 1 } else { 2 };
+            let i = if t[0] == v {
+                0
+            } else if t[1] == v {
+                1
+            } else {
+                2
+            };
             ends.push((t[(i + 1) % 3], t[(i + 2) % 3], f));
         }
         for &(next, prev, f) in ends.iter() {

@@ -96,15 +96,10 @@ impl State {
             .positions
             .iter()
             .zip(lists.offsets.windows(2))
-            .map(|(&pos, w)| Vertex {
-                pos,
-                start: w[0],
-                len: w[1] - w[0],
-                kind: Kind::Unknown,
-                locked: false,
-            })
+            .map(|(&pos, w)| Vertex { pos, start: w[0], len: w[1] - w[0], kind: Kind::Unknown, locked: false })
             .collect();
-        let faces = mesh.triangles.iter().enumerate().map(|(f, &v)| Face { v, group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }).collect();
+        let faces =
+            mesh.triangles.iter().enumerate().map(|(f, &v)| Face { v, group: groups.map_or(0, |g| g[f]), normal: Vec3::ZERO }).collect();
         let wedges = (0..3 * nf as u32).step_by(3).map(|c| [c, c + 1, c + 2]).collect();
         State {
             // Filled by `init`.
@@ -155,7 +150,14 @@ impl State {
     /// Corner index of vertex `v` in face `f`.
     pub(super) fn corner(&self, f: u32, v: u32) -> usize {
         let t = self.tri(f);
-        3 * f as usize + if t[0] == v { 0 } else if t[1] == v { 1 } else { 2 }
+        3 * f as usize
+            + if t[0] == v {
+                0
+            } else if t[1] == v {
+                1
+            } else {
+                2
+            }
     }
 
     pub(super) fn wedge(&self, c: usize) -> u32 {
@@ -271,7 +273,14 @@ impl State {
     /// `init` for one vertex: whether it is locked and its kind; pushes to `events` its border
     /// and seam planes towards higher ids `(v, other, face, weight)` and the ends of its
     /// non-manifold edges to lock `(v, other, DEAD, 0)`. `around` and `parent` are scratch.
-    fn classify(&self, v: u32, opts: &SimplifyOptions, around: &mut Vec<u64>, parent: &mut Vec<u32>, events: &mut Vec<(u32, u32, u32, f32)>) -> (bool, Kind) {
+    fn classify(
+        &self,
+        v: u32,
+        opts: &SimplifyOptions,
+        around: &mut Vec<u64>,
+        parent: &mut Vec<u32>,
+        events: &mut Vec<(u32, u32, u32, f32)>,
+    ) -> (bool, Kind) {
         let deg = self.verts[v as usize].len as usize;
         if deg == 0 {
             return (true, Kind::Unknown);
@@ -345,7 +354,13 @@ impl State {
         out.clear();
         for (local, &f) in self.faces_of(v).iter().enumerate() {
             let t = self.tri(f);
-            let i = if t[0] == v { 0 } else if t[1] == v { 1 } else { 2 };
+            let i = if t[0] == v {
+                0
+            } else if t[1] == v {
+                1
+            } else {
+                2
+            };
             let low = (local as u64) << 2 | i as u64;
             out.push(u64::from(t[(i + 1) % 3]) << 32 | low);
             out.push(u64::from(t[(i + 2) % 3]) << 32 | low);
@@ -466,7 +481,11 @@ impl State {
             normals: corners(&self.normals, &alive),
             uvs: corners(&self.uvs, &alive),
             colors: corners(&self.colors, &alive),
-            face_materials: if mesh.face_materials.is_empty() { Vec::new() } else { alive.iter().map(|&f| self.face_materials[f]).collect() },
+            face_materials: if mesh.face_materials.is_empty() {
+                Vec::new()
+            } else {
+                alive.iter().map(|&f| self.face_materials[f]).collect()
+            },
             materials: mesh.materials.clone(),
             face_normals: Vec::new(),
             face_areas: Vec::new(),
@@ -485,7 +504,8 @@ impl State {
         } else {
             (Vec::new(), Vec::new())
         };
-        let source_faces = alive.iter().map(|&f| if f < self.input_faces { f as u32 } else { self.cap_source[f - self.input_faces] }).collect();
+        let source_faces =
+            alive.iter().map(|&f| if f < self.input_faces { f as u32 } else { self.cap_source[f - self.input_faces] }).collect();
         Simplified { mesh: out, source_faces, face_groups, group_error, error: self.error_sq.sqrt() as f32 }
     }
 }

@@ -173,7 +173,15 @@ fn check(input: &Mesh, out: &Simplified) {
 fn check_manifold(input: &Mesh, out: &Simplified) {
     let m = &out.mesh;
     assert_eq!(m.validate(), Ok(()));
-    let mut keys: Vec<[u32; 3]> = m.triangles.iter().map(|t| { let mut k = *t; k.sort_unstable(); k }).collect();
+    let mut keys: Vec<[u32; 3]> = m
+        .triangles
+        .iter()
+        .map(|t| {
+            let mut k = *t;
+            k.sort_unstable();
+            k
+        })
+        .collect();
     assert!(keys.iter().all(|k| k[0] != k[1] && k[1] != k[2]), "face with a repeated vertex");
     keys.sort_unstable();
     keys.dedup();
@@ -242,7 +250,10 @@ fn borders_stay_in_place() {
                 let (p, q) = (out.mesh.positions[t[k] as usize], out.mesh.positions[t[(k + 1) % 3] as usize]);
                 assert!(on_input_border(p) && input_positions.contains(&p.to_array().map(f32::to_bits)), "border vertex moved to {p}");
                 // Both ends on the same side of the square.
-                assert!(p.x == q.x && (p.x == 0.0 || p.x == 1.0) || p.y == q.y && (p.y == 0.0 || p.y == 1.0), "border edge {p} {q} cuts a corner");
+                assert!(
+                    p.x == q.x && (p.x == 0.0 || p.x == 1.0) || p.y == q.y && (p.y == 0.0 || p.y == 1.0),
+                    "border edge {p} {q} cuts a corner"
+                );
             }
         }
     }
@@ -303,7 +314,8 @@ fn seams_and_material_borders_keep_their_topology() {
             }
             let mut jump = false;
             for v in [t[k], t[(k + 1) % 3]] {
-                let (c0, c1) = (3 * f + (0..3).position(|i| t[i] == v).unwrap(), 3 * nb + (0..3).position(|i| o.triangles[nb][i] == v).unwrap());
+                let (c0, c1) =
+                    (3 * f + (0..3).position(|i| t[i] == v).unwrap(), 3 * nb + (0..3).position(|i| o.triangles[nb][i] == v).unwrap());
                 assert_eq!(o.normals[c0], o.normals[c1]);
                 let d = o.uvs[c0] - o.uvs[c1];
                 assert!(d.y == 0.0 && (d.x == 0.0 || (d.x.abs() - 1.0).abs() < 1e-6), "uv torn: {d}");

@@ -22,9 +22,11 @@ impl State {
         // A third common neighbour y of u and v: (u, v, y) is a cycle of edges but no face.
         let mut around_u: Vec<u32> = self.faces_of(u).iter().flat_map(|&f| self.tri(f)).collect();
         around_u.sort_unstable();
-        let third = self.faces_of(v).iter().flat_map(|&f| self.tri(f)).find(|&y| {
-            y != u && y != v && y != e.x[0] && y != e.x[1] && around_u.binary_search(&y).is_ok()
-        });
+        let third = self
+            .faces_of(v)
+            .iter()
+            .flat_map(|&f| self.tri(f))
+            .find(|&y| y != u && y != v && y != e.x[0] && y != e.x[1] && around_u.binary_search(&y).is_ok());
         third.is_some_and(|y| self.spread_sq(&[u, v, y]) <= limit && self.cut([u, v, y], out))
     }
 
@@ -122,7 +124,11 @@ impl State {
             self.faces.push(Face { v: cap, group: 0, normal });
             self.wedges.push([0; 3]);
             self.face_materials.push(self.face_materials[source as usize]);
-            self.cap_source.push(if (source as usize) < self.input_faces { source } else { self.cap_source[source as usize - self.input_faces] });
+            self.cap_source.push(if (source as usize) < self.input_faces {
+                source
+            } else {
+                self.cap_source[source as usize - self.input_faces]
+            });
             // Corner attributes, copied below from the fans' corners.
             if !self.normals.is_empty() {
                 self.normals.extend([Vec3::ZERO; 3]);

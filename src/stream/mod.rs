@@ -20,12 +20,12 @@ mod tests;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh};
 use crate::format::{ByteSource, NodeGeometry, NodeRecord, Reader};
+use crate::mesh::{Material, Mesh};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
-use refine::{Limits, Mark, Refiner};
 pub use refine::Priority;
+use refine::{Limits, Mark, Refiner};
 use serde::Serialize;
 use std::time::Instant;
 

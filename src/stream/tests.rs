@@ -4,8 +4,8 @@ use super::refine::sees;
 use super::session::orbit;
 use super::*;
 use crate::camera::Projection;
-use crate::format::NO_PARENT;
 use crate::cone::{facing_perspective, Facing};
+use crate::format::NO_PARENT;
 use crate::hierarchy::HierarchyParams;
 use crate::pipeline::{convert, ConvertOptions, Silent};
 use glam::Vec3;
@@ -284,7 +284,12 @@ fn a_model_coming_into_view_is_drawn_coarse_first_then_refined_as_predicted() {
     };
     let (reactive, _) = run(false);
     assert_eq!(reactive[1].stats.faces, 0, "looking away shows nothing");
-    assert!(reactive[2].stats.faces as f32 > 1.5 * reactive[0].stats.faces as f32, "{} vs {}", reactive[2].stats.faces, reactive[0].stats.faces);
+    assert!(
+        reactive[2].stats.faces as f32 > 1.5 * reactive[0].stats.faces as f32,
+        "{} vs {}",
+        reactive[2].stats.faces,
+        reactive[0].stats.faces
+    );
     assert_eq!(reactive[3].stats.pixel_error, 1.0, "in the dead band the reactive controller keeps the threshold");
 
     let (predictive, s) = run(true);

@@ -14,8 +14,10 @@ pub fn icosphere(depth: u32) -> Mesh {
     let mut mesh = strata::fixtures::icosphere(depth);
     let corners: Vec<Vec3> = mesh.triangles.iter().flat_map(|t| t.map(|v| mesh.positions[v as usize])).collect();
     mesh.uvs = corners.iter().map(|p| Vec2::new(p.y.atan2(p.x), p.z.clamp(-1.0, 1.0).acos())).collect();
-    mesh.colors = corners.iter().map(|p| [(p.x * 127.0 + 128.0) as u8, (p.y * 127.0 + 128.0) as u8, (p.z * 127.0 + 128.0) as u8, 255]).collect();
-    mesh.face_materials = mesh.triangles.iter().map(|t| (t.iter().map(|&v| mesh.positions[v as usize].z).sum::<f32>() > 0.0) as u32).collect();
+    mesh.colors =
+        corners.iter().map(|p| [(p.x * 127.0 + 128.0) as u8, (p.y * 127.0 + 128.0) as u8, (p.z * 127.0 + 128.0) as u8, 255]).collect();
+    mesh.face_materials =
+        mesh.triangles.iter().map(|t| (t.iter().map(|&v| mesh.positions[v as usize].z).sum::<f32>() > 0.0) as u32).collect();
     mesh.materials = vec![
         Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()) },
         Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None },

@@ -5,7 +5,9 @@
 use super::NodeContext;
 use crate::error::{Error, Result};
 use crate::format::chunk::{self, Sub};
-use crate::format::{angle_decode, id, octa, radius_decode, Cluster, Cone, MaterialRange, NodeGeometry, CLUSTER_RECORD_BYTES, RANGE_RECORD_BYTES};
+use crate::format::{
+    angle_decode, id, octa, radius_decode, Cluster, Cone, MaterialRange, NodeGeometry, CLUSTER_RECORD_BYTES, RANGE_RECORD_BYTES,
+};
 use byteorder::{ByteOrder, LittleEndian as LE};
 use glam::Vec2;
 
@@ -40,7 +42,8 @@ pub struct ClusterCodes {
 
 /// The node base (component-wise minimum of its grid points) and the largest offset from it.
 pub fn base_and_span(points: &[[u32; 3]]) -> ([u32; 3], u32) {
-    let base = points.iter().fold(if points.is_empty() { [0; 3] } else { [u32::MAX; 3] }, |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].min(p[2])]);
+    let base =
+        points.iter().fold(if points.is_empty() { [0; 3] } else { [u32::MAX; 3] }, |b, p| [b[0].min(p[0]), b[1].min(p[1]), b[2].min(p[2])]);
     let span = points.iter().flat_map(|p| (0..3).map(move |k| p[k] - base[k])).max().unwrap_or(0);
     (base, span)
 }
@@ -128,7 +131,10 @@ pub fn decode(ctx: &NodeContext, payload: &[u8], subs: &[Sub]) -> Result<NodeGeo
     let v = rec.vertices as u64;
     let data = |s: &Sub, per: u64, what: &str| -> Result<&[u8]> {
         if s.frame.size != v * per {
-            return Err(err(s.offset + 8, format!("{} holds {} bytes; {v} vertices need {} for {what}", chunk::id_str(&s.frame.id), s.frame.size, v * per)));
+            return Err(err(
+                s.offset + 8,
+                format!("{} holds {} bytes; {v} vertices need {} for {what}", chunk::id_str(&s.frame.id), s.frame.size, v * per),
+            ));
         }
         Ok(&payload[s.start..s.end])
     };
@@ -139,7 +145,10 @@ pub fn decode(ctx: &NodeContext, payload: &[u8], subs: &[Sub]) -> Result<NodeGeo
             return Err(err(s.offset + 4, format!("position width {width}; must be 2 or 3")));
         }
         if s.frame.size != 12 + v * 3 * width {
-            return Err(err(s.offset + 8, format!("VPOS holds {} bytes; {v} vertices need {} for positions", s.frame.size, 12 + v * 3 * width)));
+            return Err(err(
+                s.offset + 8,
+                format!("VPOS holds {} bytes; {v} vertices need {} for positions", s.frame.size, 12 + v * 3 * width),
+            ));
         }
         let b = &payload[s.start..s.end];
         let base = [LE::read_u32(&b[0..4]), LE::read_u32(&b[4..8]), LE::read_u32(&b[8..12])];
@@ -155,7 +164,8 @@ pub fn decode(ctx: &NodeContext, payload: &[u8], subs: &[Sub]) -> Result<NodeGeo
         }
     }
     if let Some(s) = found[1] {
-        g.normals = data(s, 4, "normals")?.chunks_exact(4).map(|c| octa::decode([LE::read_i16(&c[0..2]), LE::read_i16(&c[2..4])])).collect();
+        g.normals =
+            data(s, 4, "normals")?.chunks_exact(4).map(|c| octa::decode([LE::read_i16(&c[0..2]), LE::read_i16(&c[2..4])])).collect();
     }
     if let Some(s) = found[2] {
         g.uvs = data(s, 8, "UVs")?.chunks_exact(8).map(|c| Vec2::new(LE::read_f32(&c[0..4]), LE::read_f32(&c[4..8]))).collect();
@@ -188,7 +198,11 @@ pub fn decode(ctx: &NodeContext, payload: &[u8], subs: &[Sub]) -> Result<NodeGeo
         }
         let mut next = 0u64;
         for (k, c) in payload[s.start..s.end].chunks_exact(12).enumerate() {
-            let r = MaterialRange { material: LE::read_u32(&c[0..4]), first_index: LE::read_u32(&c[4..8]), index_count: LE::read_u32(&c[8..12]) };
+            let r = MaterialRange {
+                material: LE::read_u32(&c[0..4]),
+                first_index: LE::read_u32(&c[4..8]),
+                index_count: LE::read_u32(&c[8..12]),
+            };
             if r.first_index as u64 != next || r.index_count == 0 || r.index_count % 3 != 0 || r.material >= ctx.header.materials {
                 return Err(err(
                     s.payload_offset() + 12 * k as u64,
