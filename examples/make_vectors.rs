@@ -101,17 +101,6 @@ fn index_past_vertices(good: &[u8]) -> Vec<u8> {
     bytes
 }
 
-/// A camera as JSON.
-fn camera_json(c: &Camera) -> serde_json::Value {
-    let v = |v: glam::Vec3| json!([v.x as f64, v.y as f64, v.z as f64]);
-    let projection = match c.projection {
-        Projection::Perspective { fov_y } => json!({ "perspective": { "fov_y": fov_y as f64 } }),
-        Projection::Orthographic { height } => json!({ "orthographic": { "height": height as f64 } }),
-    };
-    json!({ "eye": v(c.eye), "target": v(c.target), "up": v(c.up), "projection": projection,
-            "width": c.width, "height": c.height, "near": c.near as f64, "far": c.far as f64 })
-}
-
 /// The front of `skeleton` for `camera` and `limits`: shown and culled nodes.
 fn front(skeleton: &Skeleton, camera: &Camera, limits: &Limits) -> (Vec<u32>, Vec<u32>) {
     let attrs = skeleton.header.attributes;
@@ -166,7 +155,7 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
             };
             out.push(json!({
                 "file": file,
-                "camera": camera_json(camera),
+                "camera": camera.to_json(),
                 "limits": { "pixel_error": pixel_error as f64, "max_faces": max_faces, "max_bytes": null, "priority": priority },
                 "held": [],
                 "front": shown,

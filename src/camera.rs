@@ -115,6 +115,43 @@ impl Camera {
         }
     }
 
+    /// The camera as JSON, the form golden fronts and `strata stream --print-front` use:
+    /// `{eye, target, up, projection: {perspective: {fov_y}} | {orthographic: {height}}, width,
+    /// height, near, far}`, each f32 written exactly.
+    pub fn to_json(&self) -> serde_json::Value {
+        let xyz = |p: Vec3| serde_json::json!([p.x as f64, p.y as f64, p.z as f64]);
+        let projection = match self.projection {
+            Projection::Perspective { fov_y } => serde_json::json!({ "perspective": { "fov_y": fov_y as f64 } }),
+            Projection::Orthographic { height } => serde_json::json!({ "orthographic": { "height": height as f64 } }),
+        };
+        serde_json::json!({
+            "eye": xyz(self.eye), "target": xyz(self.target), "up": xyz(self.up), "projection": projection,
+            "width": self.width, "height": self.height, "near": self.near as f64, "far": self.far as f64,
+        })
+    }
+
+    /// The camera [`to_json`](Self::to_json) wrote; `None` if a field is missing or not a number.
+    pub fn from_json(v: &serde_json::Value) -> Option<Camera> {
+        let f = |v: &serde_json::Value| v.as_f64().map(|x| x as f32);
+        let xyz = |v: &serde_json::Value| Some(Vec3::new(f(&v[0])?, f(&v[1])?, f(&v[2])?));
+        let p = &v["projection"];
+        let projection = match (p.get("perspective"), p.get("orthographic")) {
+            (Some(q), _) => Projection::Perspective { fov_y: f(&q["fov_y"])? },
+            (_, Some(q)) => Projection::Orthographic { height: f(&q["height"])? },
+            _ => return None,
+        };
+        Some(Camera {
+            eye: xyz(&v["eye"])?,
+            target: xyz(&v["target"])?,
+            up: xyz(&v["up"])?,
+            projection,
+            width: v["width"].as_u64()? as u32,
+            height: v["height"].as_u64()? as u32,
+            near: f(&v["near"])?,
+            far: f(&v["far"])?,
+        })
+    }
+
     /// The screen-space size in pixels of a model-space `error` for anything inside the sphere
     /// (center, radius): measured at the sphere's nearest point, so it never underestimates.
     pub fn projected_error(&self, error: f32, center: Vec3, radius: f32) -> f32 {

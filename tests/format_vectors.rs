@@ -44,35 +44,17 @@ fn the_reader_agrees_with_every_golden_vector() {
 /// (format-spec/selection.md) gives for their cameras and limits.
 #[test]
 fn front_selection_agrees_with_every_golden_front() {
-    use glam::Vec3;
-    use strata::camera::{Camera, Projection};
+    use strata::camera::Camera;
     use strata::stream::cache::record_bytes;
     use strata::stream::refine::{Limits, Priority, Refiner};
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
     let fronts: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(dir.join("fronts.json")).unwrap()).unwrap();
     assert!(fronts.len() >= 10);
-    let v3 = |v: &serde_json::Value| Vec3::new(v[0].as_f64().unwrap() as f32, v[1].as_f64().unwrap() as f32, v[2].as_f64().unwrap() as f32);
     let mut levels_seen = std::collections::HashSet::new();
     for (k, f) in fronts.iter().enumerate() {
         let bytes = std::fs::read(dir.join(f["file"].as_str().unwrap())).unwrap();
         let rd = Reader::open(Cursor::new(&bytes)).unwrap();
-        let c = &f["camera"];
-        let p = &c["projection"];
-        let projection = if let Some(persp) = p.get("perspective") {
-            Projection::Perspective { fov_y: persp["fov_y"].as_f64().unwrap() as f32 }
-        } else {
-            Projection::Orthographic { height: p["orthographic"]["height"].as_f64().unwrap() as f32 }
-        };
-        let camera = Camera {
-            eye: v3(&c["eye"]),
-            target: v3(&c["target"]),
-            up: v3(&c["up"]),
-            projection,
-            width: c["width"].as_u64().unwrap() as u32,
-            height: c["height"].as_u64().unwrap() as u32,
-            near: c["near"].as_f64().unwrap() as f32,
-            far: c["far"].as_f64().unwrap() as f32,
-        };
+        let camera = Camera::from_json(&f["camera"]).expect("a camera");
         let l = &f["limits"];
         let limits = Limits {
             pixel_error: l["pixel_error"].as_f64().unwrap() as f32,

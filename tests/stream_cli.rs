@@ -81,3 +81,31 @@ fn camera_path_plays_and_a_bad_line_is_named() {
     assert!(!o.status.success() && err.contains("cams.txt") && err.contains("line 2"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--print-front` adds each frame's camera (which reads back exactly), its displayed nodes, whose
+/// faces add up to the frame's count, and the roots of culled subtrees, none shown.
+#[test]
+fn print_front_gives_camera_front_and_culled_roots() {
+    use strata::camera::Camera;
+    let dir = scratch("print-front");
+    let file = converted(&dir);
+    let o = strata(&["stream", file.to_str().unwrap(), "--orbit", "6", "--json", "--print-front", "--width", "96", "--height", "72"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rd = strata::format::Reader::open(std::fs::File::open(&file).unwrap()).unwrap();
+    let ids = |v: &serde_json::Value| v.as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect::<Vec<u32>>();
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 6);
+    for v in &lines {
+        let camera = Camera::from_json(&v["camera"]).expect("a camera");
+        assert_eq!(camera.to_json(), v["camera"]);
+        let (front, culled) = (ids(&v["front"]), ids(&v["culled_roots"]));
+        assert_eq!(front.len() as u64, v["nodes"].as_u64().unwrap());
+        let faces: u64 = front.iter().map(|&i| rd.nodes()[i as usize].faces as u64).sum();
+        assert_eq!(faces, v["faces"].as_u64().unwrap());
+        assert_eq!(culled.len() as u64, v["culled"].as_u64().unwrap());
+        assert!(culled.iter().all(|c| !front.contains(c)));
+    }
+    let o = strata(&["stream", file.to_str().unwrap(), "--orbit", "2", "--print-front"]);
+    assert!(!o.status.success(), "--print-front without --json is refused");
+    std::fs::remove_dir_all(&dir).ok();
+}

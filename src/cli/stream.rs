@@ -48,6 +48,10 @@ pub struct Args {
     /// One JSON object per frame (JSON lines).
     #[arg(long)]
     json: bool,
+    /// With --json, also each frame's camera, the displayed nodes ("front") and the roots of culled
+    /// subtrees ("culled_roots"): golden fronts for another implementation of format-spec/selection.md.
+    #[arg(long, requires = "json")]
+    print_front: bool,
     /// Write each frame as a PNG into this directory (nodes colored by id).
     #[arg(long, value_name = "DIR")]
     frames_dir: Option<PathBuf>,
@@ -115,6 +119,11 @@ pub fn run(a: Args) -> Result<()> {
             if let Some(r) = f.retained {
                 v["retained"] = serde_json::json!(r.shaded);
                 v["coverage_retained"] = serde_json::json!(r.coverage);
+            }
+            if a.print_front {
+                v["camera"] = cameras[rep.frame as usize].to_json();
+                v["front"] = serde_json::json!(rep.front);
+                v["culled_roots"] = serde_json::json!(rep.culled);
             }
             println!("{v}");
         } else {
