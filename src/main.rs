@@ -4,6 +4,7 @@
 mod cli;
 
 use clap::Parser;
+use std::io::Write;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -15,10 +16,11 @@ fn main() -> ExitCode {
     }
     let cli = cli::Cli::parse();
     // On SIGINT, SIGTERM or SIGHUP, remove temporary output files before exiting.
-    let _ = ctrlc::set_handler(|| {
+    let (note, code) = cli.on_interrupt();
+    let _ = ctrlc::set_handler(move || {
         strata::atomic::remove_pending();
-        eprintln!("interrupted: no output written");
-        std::process::exit(130);
+        let _ = writeln!(std::io::stderr(), "{note}");
+        std::process::exit(code);
     });
     let result = cli::run(cli);
     for p in strata::atomic::take_removed_stale() {

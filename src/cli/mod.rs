@@ -7,6 +7,7 @@ mod groups;
 mod info;
 mod inspect;
 mod render;
+mod serve;
 mod simplify;
 mod stream;
 mod verify;
@@ -44,6 +45,19 @@ enum Command {
     Stream(stream::Args),
     /// Draw a mesh, or one level of a strata file, to a PNG with the software rasterizer.
     Render(render::Args),
+    /// Serve strata files and the web viewer over HTTP (byte ranges, CORS) for a browser.
+    Serve(serve::Args),
+}
+
+impl Cli {
+    /// What a signal (Ctrl-C) ending the command prints, and the exit code: the usual end of a
+    /// server, or another command cut short before writing its output.
+    pub fn on_interrupt(&self) -> (&'static str, i32) {
+        match self.command {
+            Command::Serve(_) => ("stopped", 0),
+            _ => ("interrupted: no output written", 130),
+        }
+    }
 }
 
 /// Run the command line's subcommand.
@@ -58,6 +72,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Extract(a) => extract::run(a),
         Command::Stream(a) => stream::run(a),
         Command::Render(a) => render::run(a),
+        Command::Serve(a) => serve::run(a),
     }
 }
 
