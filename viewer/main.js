@@ -1,0 +1,433 @@
+// The viewer page: opens a chunk file (?file=URL, a dropped or chosen file), streams it with
+// stream.js, draws with render.js, and gives orbit, pan, zoom, fit, picking and measuring. Tests
+// drive it through `window.strata` (bottom of this file).
+
+import { Camera, add, cross, dot, length, scale, sub, unit } from './camera.js';
+import { Selector } from './select.js';
+import { FileSource, HttpSource } from './source.js';
+import { Streamer } from './stream.js';
+import { Renderer } from './render.js';
+
+const $ = (id) => document.getElementById(id);
+const canvas = $('view');
+const VIEW_DIR = [0.3, 0.4, 1.0];
+const FOV = (45 * Math.PI) / 180;
+
+let renderer = null;
+let streamer = null;
+let camera = null;
+/** Near and far follow the model unless a caller set the camera exactly. */
+let autoClip = true;
+let colorMode = 'material';
+let dirty = true;
+let frameMs = 0;
+let firstFrameMs = null;
+let firstFrameRequests = null;
+let firstFrameBytes = null;
+let picks = [];
+let measuring = false;
+let opened = null;
+let idleWaiters = [];
+
+function fmtBytes(n) {
+  if (n < 1024) return `${n} B`;
+  if (n < 1024 ** 2) return `${(n / 1024).toFixed(1)} KB`;
+  if (n < 1024 ** 3) return `${(n / 1024 ** 2).toFixed(1)} MB`;
+  return `${(n / 1024 ** 3).toFixed(2)} GB`;
+}
+
+function showMessage(text) {
+  const m = $('message');
+  m.textContent = text;
+  m.hidden = !text;
+}
+
+function showWarning(text) {
+  const w = $('warning');
+  w.textContent = text ?? '';
+  w.hidden = !text;
+}
+
+function fail(e) {
+  console.error(e);
+  showMessage(e instanceof Error ? e.message : String(e));
+  for (const w of idleWaiters) w.reject(e);
+  idleWaiters = [];
+}
+
+function modelSphere() {
+  const h = streamer.skeleton.header;
+  const center = h.min.map((m, k) => (m + h.max[k]) / 2);
+  return { center, radius: Math.max(length(sub(h.max, h.min)) / 2, Number.MIN_VALUE) };
+}
+
+function resize() {
+  const dpr = window.devicePixelRatio || 1;
+  const w = Math.max(1, Math.round(canvas.clientWidth * dpr));
+  const h = Math.max(1, Math.round(canvas.clientHeight * dpr));
+  if (canvas.width !== w || canvas.height !== h) {
+    canvas.width = w;
+    canvas.height = h;
+  }
+  if (camera) {
+    camera.width = w;
+    camera.height = h;
+  }
+  dirty = true;
+}
+
+function fit() {
+  const { center, radius } = modelSphere();
+  camera = Camera.framing(center, radius, VIEW_DIR, FOV, canvas.width, canvas.height);
+  autoClip = true;
+  dirty = true;
+}
+
+function clip() {
+  if (!autoClip) return;
+  const { center, radius } = modelSphere();
+  const d = length(sub(camera.eye, center));
+  camera.far = d + radius;
+  camera.near = Math.max(d - radius, 1e-4 * (d + radius));
+}
+
+function frame() {
+  requestAnimationFrame(frame);
+  if (!streamer) return;
+  if (streamer.error) {
+    if (!$('message').textContent) fail(streamer.error);
+    return;
+  }
+  if (!dirty && streamer.idle()) return;
+  dirty = false;
+  const t0 = performance.now();
+  const before = { requests: streamer.source.requests, bytes: streamer.source.bytes };
+  clip();
+  const drawn = streamer.update(camera);
+  const s = streamer.skeleton;
+  renderer.draw(camera, streamer.localOrigin, drawn.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials);
+  frameMs = performance.now() - t0;
+  if (firstFrameMs === null) {
+    firstFrameMs = performance.now();
+    firstFrameRequests = before.requests;
+    firstFrameBytes = before.bytes;
+  }
+  stats();
+  if (streamer.idle()) {
+    for (const w of idleWaiters) w.resolve();
+    idleWaiters = [];
+  }
+}
+
+function stats() {
+  const s = streamer.skeleton;
+  const levels = new Array(s.levels.length).fill(0);
+  let faces = 0;
+  for (const i of streamer.drawn) {
+    levels[s.level[i]]++;
+    faces += s.faces[i];
+  }
+  $('s-faces').textContent = faces.toLocaleString();
+  $('s-nodes').textContent = `${streamer.drawn.length} / ${streamer.front.length}`;
+  $('s-levels').textContent = levels.join(' ');
+  $('s-read').textContent = `${fmtBytes(streamer.source.bytes)} of ${fmtBytes(streamer.source.length ?? 0)}`;
+  $('s-requests').textContent = `${streamer.source.requests} (${streamer.inFlight})`;
+  $('s-resident').textContent = `${fmtBytes(streamer.residentBytes)} (${fmtBytes(streamer.peakResidentBytes)}) / ${fmtBytes(streamer.budget)}`;
+  $('s-frame').textContent = `${frameMs.toFixed(1)} ms`;
+  $('s-first').textContent = firstFrameMs === null ? '–' : `${firstFrameMs.toFixed(0)} ms, ${firstFrameRequests} requests, ${fmtBytes(firstFrameBytes)}`;
+}
+
+async function open(source) {
+  if (streamer) for (const i of streamer.cache.keys()) renderer.release(streamer.handle(i));
+  streamer = null;
+  showMessage('');
+  showWarning(null);
+  picks = [];
+  $('picked').textContent = '';
+  $('name').textContent = source.name;
+  firstFrameMs = null;
+  try {
+    renderer ??= new Renderer(canvas);
+    const next = await Streamer.open(source, {
+      budget: budgetBytes(),
+      pixelError: pixelError(),
+      onLoad: (i, g) => renderer.upload(g),
+      onEvict: (i, handle) => renderer.release(handle),
+      onChange: () => {
+        dirty = true;
+      },
+    });
+    streamer = next;
+    showWarning(source.warning);
+    resize();
+    fit();
+  } catch (e) {
+    fail(e);
+    throw e;
+  }
+}
+
+const pixelError = () => 2 ** Number($('error').value);
+const budgetBytes = () => Math.round(2 ** Number($('budget').value) * 2 ** 20);
+
+function settings() {
+  $('o-error').textContent = pixelError().toFixed(pixelError() < 1 ? 2 : 1);
+  $('o-budget').textContent = (budgetBytes() / 2 ** 20).toFixed(0);
+  colorMode = $('color').value;
+  if (streamer) {
+    streamer.pixelError = pixelError();
+    streamer.budget = budgetBytes();
+  }
+  dirty = true;
+}
+
+// Camera motion: orbit about the target around the camera's up axis and its right axis.
+function rotate(v, axis, a) {
+  const k = unit(axis);
+  if (!k) return v;
+  const c = Math.cos(a), s = Math.sin(a);
+  return add(add(scale(v, c), scale(cross(k, v), s)), scale(k, dot(k, v) * (1 - c)));
+}
+
+function orbit(dx, dy) {
+  const offset = sub(camera.eye, camera.target);
+  const right = unit(cross(camera.up, offset)) ?? [1, 0, 0];
+  let o = rotate(offset, camera.up, -dx * 0.008);
+  const pitched = rotate(o, right, dy * 0.008);
+  const upness = dot(unit(pitched), unit(camera.up));
+  if (Math.abs(upness) < 0.995) o = pitched;
+  camera.eye = add(camera.target, o);
+  autoClip = true;
+  dirty = true;
+}
+
+function pan(dx, dy) {
+  const d = length(sub(camera.eye, camera.target));
+  const per = (2 * d * Math.tan(FOV / 2)) / canvas.height;
+  const f = camera.forward();
+  const right = unit(cross(f, camera.up)) ?? [1, 0, 0];
+  const up = cross(right, f);
+  const move = add(scale(right, -dx * per * devicePixelRatio), scale(up, dy * per * devicePixelRatio));
+  camera.eye = add(camera.eye, move);
+  camera.target = add(camera.target, move);
+  autoClip = true;
+  dirty = true;
+}
+
+function zoom(factor) {
+  const offset = sub(camera.eye, camera.target);
+  const { radius } = modelSphere();
+  const d = Math.max(length(offset) * factor, radius * 1e-4);
+  camera.eye = add(camera.target, scale(unit(offset) ?? [0, 0, 1], d));
+  autoClip = true;
+  dirty = true;
+}
+
+/** The surface point under canvas pixel (x, y) on the drawn geometry, in model units, or null. */
+function pick(x, y) {
+  if (!streamer) return null;
+  const o = streamer.localOrigin;
+  const f = camera.forward();
+  const right = unit(cross(f, camera.up)) ?? [1, 0, 0];
+  const up = cross(right, f);
+  const h = 2 * Math.tan(camera.projection.perspective?.fov_y / 2 || 0.5);
+  const nx = ((x + 0.5) / camera.width - 0.5) * h * camera.aspect();
+  const ny = (0.5 - (y + 0.5) / camera.height) * h;
+  const dir = unit(add(f, add(scale(right, nx), scale(up, ny))));
+  const eye = sub(camera.eye, o);
+  let best = Infinity;
+  let hit = null;
+  for (const i of streamer.drawn) {
+    const g = streamer.geometry(i);
+    const s = streamer.skeleton;
+    const c = sub([s.center[3 * i], s.center[3 * i + 1], s.center[3 * i + 2]], o);
+    const toC = sub(c, eye);
+    const along = dot(toC, dir);
+    if (dot(toC, toC) - along * along > s.radius[i] ** 2 || along + s.radius[i] < 0) continue;
+    const p = g.local ?? g.positions;
+    const ix = g.indices;
+    for (let t = 0; t < ix.length; t += 3) {
+      const a = 3 * ix[t], b = 3 * ix[t + 1], cc = 3 * ix[t + 2];
+      const e1 = [p[b] - p[a], p[b + 1] - p[a + 1], p[b + 2] - p[a + 2]];
+      const e2 = [p[cc] - p[a], p[cc + 1] - p[a + 1], p[cc + 2] - p[a + 2]];
+      const q = cross(dir, e2);
+      const det = dot(e1, q);
+      if (Math.abs(det) < 1e-30) continue;
+      const sv = [eye[0] - p[a], eye[1] - p[a + 1], eye[2] - p[a + 2]];
+      const u = dot(sv, q) / det;
+      if (u < 0 || u > 1) continue;
+      const r = cross(sv, e1);
+      const v = dot(dir, r) / det;
+      if (v < 0 || u + v > 1) continue;
+      const d = dot(e2, r) / det;
+      if (d > 0 && d < best) {
+        best = d;
+        hit = { node: i, level: s.level[i] };
+      }
+    }
+  }
+  if (!hit) return null;
+  return { ...hit, point: add(add(eye, scale(dir, best)), o), distance: best };
+}
+
+function describePicks() {
+  const units = streamer.skeleton.header.metresPerUnit;
+  const fmt = (p) => p.point.map((v) => v.toPrecision(7)).join(', ');
+  const lines = picks.map((p, k) => `${'AB'[k]}: ${fmt(p)} (level ${p.level})`);
+  if (picks.length === 2) {
+    const d = length(sub(picks[0].point, picks[1].point));
+    lines.push(`distance ${d.toPrecision(6)} units${units > 0 ? ` = ${(d * units).toPrecision(6)} m` : ''}`);
+  }
+  $('picked').textContent = lines.join('\n');
+}
+
+function controls() {
+  let drag = null;
+  canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+  canvas.addEventListener('pointerdown', (e) => {
+    canvas.setPointerCapture(e.pointerId);
+    drag = { x: e.clientX, y: e.clientY, moved: 0, panning: e.button === 2 || e.shiftKey };
+  });
+  canvas.addEventListener('pointermove', (e) => {
+    if (!drag || !camera) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    drag.moved += Math.abs(dx) + Math.abs(dy);
+    drag.x = e.clientX;
+    drag.y = e.clientY;
+    if (drag.panning) pan(dx, dy);
+    else orbit(dx, dy);
+  });
+  canvas.addEventListener('pointerup', (e) => {
+    const click = drag && drag.moved < 4;
+    drag = null;
+    if (!click || !measuring || !streamer) return;
+    const dpr = devicePixelRatio || 1;
+    const p = pick(e.offsetX * dpr, e.offsetY * dpr);
+    if (!p) return;
+    picks = picks.length >= 2 ? [p] : [...picks, p];
+    describePicks();
+  });
+  canvas.addEventListener('dblclick', (e) => {
+    const dpr = devicePixelRatio || 1;
+    const p = camera && pick(e.offsetX * dpr, e.offsetY * dpr);
+    if (!p) return;
+    const move = sub(p.point, camera.target);
+    camera.target = p.point;
+    camera.eye = add(camera.eye, move);
+    dirty = true;
+  });
+  canvas.addEventListener('wheel', (e) => {
+    e.preventDefault();
+    if (camera) zoom(Math.exp(e.deltaY * 0.0015));
+  }, { passive: false });
+  $('fit').addEventListener('click', () => streamer && fit());
+  $('measure').addEventListener('click', () => {
+    measuring = !measuring;
+    $('measure').setAttribute('aria-pressed', String(measuring));
+    picks = [];
+    $('picked').textContent = measuring ? 'click two points on the model' : '';
+  });
+  for (const id of ['error', 'budget', 'color']) $(id).addEventListener('input', settings);
+  $('open').addEventListener('change', (e) => {
+    const f = e.target.files[0];
+    if (f) opened = open(new FileSource(f)).catch(() => {});
+  });
+  let depth = 0;
+  window.addEventListener('dragenter', (e) => {
+    e.preventDefault();
+    depth++;
+    $('drop').hidden = false;
+  });
+  window.addEventListener('dragleave', () => {
+    if (--depth <= 0) $('drop').hidden = true;
+  });
+  window.addEventListener('dragover', (e) => e.preventDefault());
+  window.addEventListener('drop', (e) => {
+    e.preventDefault();
+    depth = 0;
+    $('drop').hidden = true;
+    const f = e.dataTransfer.files[0];
+    if (f) opened = open(new FileSource(f)).catch(() => {});
+  });
+  window.addEventListener('resize', resize);
+}
+
+controls();
+settings();
+resize();
+requestAnimationFrame(frame);
+const file = new URLSearchParams(location.search).get('file');
+if (file) opened = open(new HttpSource(new URL(file, location.href).href)).catch(() => {});
+else showWarning('No model yet: add ?file=URL to the address, or drop a .strata file here.');
+
+/** What tests (and the console) can ask of the page. */
+window.strata = {
+  /** Resolves once the model is open and its top level drawn; rejects with the page's message. */
+  async ready() {
+    await opened;
+    if (!streamer) throw new Error($('message').textContent || 'no model');
+    await this.idle(false);
+  },
+  /** Resolves when the front is fully resident and drawn (or, with `full` false, after one frame). */
+  idle(full = true) {
+    return new Promise((resolve, reject) => {
+      if (streamer?.error) return reject(streamer.error);
+      dirty = true;
+      if (!full) return requestAnimationFrame(() => requestAnimationFrame(resolve));
+      idleWaiters.push({ resolve, reject });
+    });
+  },
+  setCamera(json) {
+    camera = new Camera(json);
+    autoClip = false;
+    dirty = true;
+  },
+  camera: () => camera?.toJSON(),
+  setLimits({ pixelError, budget, maxFaces, priority } = {}) {
+    if (pixelError !== undefined) streamer.pixelError = pixelError;
+    if (budget !== undefined) streamer.budget = budget;
+    if (maxFaces !== undefined) streamer.maxFaces = maxFaces;
+    if (priority !== undefined) streamer.priority = priority;
+    dirty = true;
+  },
+  setColor(mode) {
+    colorMode = mode;
+    dirty = true;
+  },
+  /** The front `strata stream --print-front` would print for this camera and limits (no loading). */
+  select(json, limits) {
+    const cut = new Selector(streamer.skeleton).select(new Camera(json), limits);
+    return { shown: cut.shown, culled: cut.culled, faces: cut.faces };
+  },
+  state() {
+    return {
+      front: streamer?.front ?? [],
+      drawn: streamer?.drawn ?? [],
+      culled: streamer?.culled ?? [],
+      residentBytes: streamer?.residentBytes,
+      peakResidentBytes: streamer?.peakResidentBytes,
+      budget: streamer?.budget,
+      requests: streamer?.source.requests,
+      bytesRead: streamer?.source.bytes,
+      inFlight: streamer?.inFlight,
+      fileLength: streamer?.source.length,
+      skeletonEnd: streamer?.skeleton.skeletonEnd,
+      topEnd: streamer && (() => {
+        const s = streamer.skeleton;
+        const [, t1] = s.levelNodes(s.top());
+        return Math.ceil((s.offset[t1 - 1] + s.size[t1 - 1]) / 8) * 8;
+      })(),
+      openMs: streamer?.openMs,
+      openRequests: streamer?.openRequests,
+      openBytes: streamer?.openBytes,
+      firstFrameMs,
+      firstFrameRequests,
+      firstFrameBytes,
+      frameMs,
+      log: streamer?.source.log ?? [],
+      message: $('message').textContent,
+      warning: $('warning').hidden ? '' : $('warning').textContent,
+    };
+  },
+  pick,
+};
