@@ -1,0 +1,858 @@
+// Tests of the viewer's reader of the strata format (viewer/format.js) against the spec
+// (format-spec/strata-v2.md), the golden vectors (format-spec/vectors/) and, when the release binary
+// is built, files strata itself converts. Run with `node --test tests/js/reader.test.mjs`.
+
+import test from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync, readdirSync, existsSync, mkdtempSync, rmSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { tmpdir } from 'node:os';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode } from '../../viewer/format.js';
+
+const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
+const VECTORS = join(ROOT, 'format-spec', 'vectors');
+const fr = Math.fround;
+const read = (name) => new Uint8Array(readFileSync(join(VECTORS, name)));
+const vectorNames = () => readdirSync(VECTORS).filter((f) => f.endsWith('.strata')).map((f) => f.slice(0, -7)).sort();
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+const nodeBytes = (sk, i, bytes) => bytes.subarray(sk.offset[i], sk.offset[i] + sk.size[i]);
+
+/** Open a whole file in memory and decode every node (throws at the first problem). */
+function decodeAll(bytes, opts) {
+  const sk = decodeSkeleton(bytes, bytes.length);
+  const geoms = [];
+  for (let i = 0; i < sk.nodeCount; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
+  return { sk, geoms };
+}
+
+/** Whether the file is refused (true) or read (false); anything but a FormatError fails the test. */
+function refused(bytes, what) {
+  try {
+    decodeAll(bytes);
+    return false;
+  } catch (e) {
+    if (!(e instanceof FormatError)) {
+      assert.fail(`${what}: threw ${e && e.name}: ${e && e.message}\n${e && e.stack}`);
+    }
+    return true;
+  }
+}
+
+/** The JSON `strata::format::inspect::dump` makes of a file (src/format/inspect.rs). */
+function dump(sk, geoms) {
+  const v3 = (a, o) => [a[o], a[o + 1], a[o + 2]];
+  const rows = (a, k) => Array.from({ length: a ? a.length / k : 0 }, (_, j) => Array.from(a.subarray(k * j, k * j + k)));
+  const h = sk.header;
+  return {
+    version: `${sk.major}.${sk.minor}`,
+    header: {
+      file_size: h.fileSize,
+      metres_per_unit: h.metresPerUnit,
+      min: h.min,
+      max: h.max,
+      attributes: h.attributes,
+      levels: h.levels,
+      nodes: h.nodes,
+      materials: h.materials,
+      input_vertices: h.inputVertices,
+      input_faces: h.inputFaces,
+      clusters: h.clusters,
+      params: h.params,
+      grid: { origin: h.grid.origin, step: h.grid.step, bits: h.grid.bits },
+      level_ratio: h.levelRatio,
+      tool: h.tool,
+    },
+    levels: sk.levels.map((l) => ({ first_node: l.firstNode, nodes: l.nodes, faces: l.faces, vertices: l.vertices, bytes: l.bytes })),
+    materials: sk.materials.map((m) => ({ name: m.name, base_color: m.baseColor, texture: m.texture })),
+    nodes: geoms.map((g, i) => ({
+      level: sk.level[i],
+      parent: sk.parent[i] === 0xffffffff ? null : sk.parent[i],
+      first_child: sk.firstChild[i],
+      child_count: sk.childCount[i],
+      neighbors: Array.from(sk.neighbors(i)),
+      cone: { axis: v3(sk.coneAxis, 3 * i), half_angle: sk.coneHalfAngle[i] },
+      center: v3(sk.center, 3 * i),
+      radius: sk.radius[i],
+      box: { min: v3(sk.boxMin, 3 * i), max: v3(sk.boxMax, 3 * i) },
+      error: sk.error[i],
+      faces: sk.faces[i],
+      vertices: sk.vertices[i],
+      offset: sk.offset[i],
+      size: sk.size[i],
+      crc: sk.crc[i],
+      geometry: {
+        positions: rows(g.positions, 3),
+        normals: rows(g.normals, 3),
+        uvs: rows(g.uvs, 2),
+        colors: rows(g.colors, 4),
+        indices: Array.from(g.indices),
+        material_ranges: g.materialRanges,
+        clusters: g.clusters.map((c) => ({
+          cone: { axis: c.axis, half_angle: c.halfAngle },
+          center: c.center,
+          radius: c.radius,
+          first_face: c.firstFace,
+          face_count: c.faceCount,
+        })),
+      },
+    })),
+  };
+}
+
+// Fields that are f64 in the file: compared exactly. Every other non-integer is an f32, compared as
+// Math.fround of the JSON number against the decoded value, bit for bit (Object.is: -0 ≠ 0).
+const F64_PATHS = [/^header\.metres_per_unit$/, /^header\.grid\.(origin\.\d|step)$/];
+
+/** The first difference between `expected` (JSON) and `actual`, as "path: what", or null. */
+function difference(expected, actual, path = '') {
+  if (typeof expected === 'number') {
+    if (typeof actual !== 'number') return `${path}: expected ${expected}, got ${actual}`;
+    if (Object.is(expected, actual)) return null;
+    const f64 = F64_PATHS.some((r) => r.test(path));
+    if (!f64 && !Number.isInteger(expected) && Object.is(fr(expected), actual)) return null;
+    if (!f64 && Number.isInteger(expected) && Math.abs(expected) < 2 ** 24 && Object.is(fr(expected), actual)) return null;
+    return `${path}: expected ${expected}, got ${actual}`;
+  }
+  if (expected === null || typeof expected !== 'object') {
+    return Object.is(expected, actual) ? null : `${path}: expected ${JSON.stringify(expected)}, got ${JSON.stringify(actual)}`;
+  }
+  if (Array.isArray(expected)) {
+    if (!Array.isArray(actual)) return `${path}: expected an array, got ${typeof actual}`;
+    if (expected.length !== actual.length) return `${path}: expected ${expected.length} items, got ${actual.length}`;
+    for (let k = 0; k < expected.length; k++) {
+      const d = difference(expected[k], actual[k], `${path}.${k}`);
+      if (d) return d;
+    }
+    return null;
+  }
+  if (actual === null || typeof actual !== 'object') return `${path}: expected an object, got ${actual}`;
+  const ek = Object.keys(expected).sort(), ak = Object.keys(actual).sort();
+  if (ek.join() !== ak.join()) return `${path}: keys ${ek} != ${ak}`;
+  for (const k of ek) {
+    const d = difference(expected[k], actual[k], path ? `${path}.${k}` : k);
+    if (d) return d;
+  }
+  return null;
+}
+
+// A chunk tree, to build variants of a file: parse, edit, serialize with checksums (and, on
+// request, the node table's sizes, LEVL totals and HEAD's file size) recomputed.
+
+const le = (b) => new DataView(b.buffer, b.byteOffset, b.byteLength);
+const pad8 = (n) => (8 - (n % 8)) % 8;
+const ascii = (b, o) => String.fromCharCode(b[o], b[o + 1], b[o + 2], b[o + 3]);
+
+function parseChunks(b, start, end) {
+  const out = [];
+  let pos = start;
+  while (pos < end) {
+    const size = Number(le(b).getBigUint64(pos + 8, true));
+    const c = { id: ascii(b, pos), flags: le(b).getUint32(pos + 4, true), at: pos };
+    const payload = b.slice(pos + 16, pos + 16 + size);
+    if (c.id === 'SKEL' || c.id === 'GEOM') c.subs = parseChunks(b, pos + 16, pos + 16 + size).map((s) => ({ ...s, at: s.at }));
+    else c.payload = payload;
+    out.push(c);
+    const e = pos + 20 + size;
+    pos = e + pad8(e);
+  }
+  return out;
+}
+
+function parseTree(bytes) {
+  return { major: le(bytes).getUint16(8, true), minor: le(bytes).getUint16(10, true), chunks: parseChunks(bytes, 16, bytes.length) };
+}
+
+function concat(parts) {
+  const out = new Uint8Array(parts.reduce((n, p) => n + p.length, 0));
+  let o = 0;
+  for (const p of parts) out.set(p, (o += p.length) - p.length);
+  return out;
+}
+
+function chunkBytes(id, flags, payload) {
+  const out = new Uint8Array(20 + payload.length + pad8(20 + payload.length));
+  for (let k = 0; k < 4; k++) out[k] = id.charCodeAt(k);
+  const d = le(out);
+  d.setUint32(4, flags, true);
+  d.setBigUint64(8, BigInt(payload.length), true);
+  out.set(payload, 16);
+  d.setUint32(16 + payload.length, crc32(payload), true);
+  return out;
+}
+
+const subsPayload = (subs) => concat(subs.map((s) => chunkBytes(s.id, s.flags, s.payload)));
+const find = (list, id) => list.find((c) => c.id === id);
+
+/**
+ * The file of `tree`: every CRC recomputed, each node's size and CRC in the node table set to its
+ * GEOM chunk's; with `totals`, also LEVL's faces, vertices and bytes and HEAD's file size.
+ */
+function serialize(tree, { totals = false } = {}) {
+  const geoms = tree.chunks.filter((c) => c.id === 'GEOM').map((c) => subsPayload(c.subs));
+  const skel = find(tree.chunks, 'SKEL');
+  if (skel) {
+    const node = find(skel.subs, 'NODE');
+    if (node) {
+      const d = le(node.payload);
+      geoms.forEach((g, i) => {
+        if (56 * i + 56 > node.payload.length) return;
+        d.setUint32(56 * i + 48, 20 + g.length, true);
+        d.setUint32(56 * i + 52, crc32(g), true);
+      });
+      const levl = find(skel.subs, 'LEVL');
+      if (totals && levl) {
+        const l = le(levl.payload);
+        for (let r = 0; r + 32 <= levl.payload.length; r += 32) {
+          const first = l.getUint32(r, true), count = l.getUint32(r + 4, true);
+          let f = 0, v = 0, by = 0;
+          for (let i = first; i < first + count && 56 * i + 56 <= node.payload.length; i++) {
+            f += d.getUint32(56 * i + 40, true);
+            v += d.getUint32(56 * i + 44, true);
+            const s = d.getUint32(56 * i + 48, true);
+            by += s + pad8(s);
+          }
+          l.setBigUint64(r + 8, BigInt(f), true);
+          l.setBigUint64(r + 16, BigInt(v), true);
+          l.setBigUint64(r + 24, BigInt(by), true);
+        }
+      }
+    }
+  }
+  let g = 0;
+  const parts = tree.chunks.map((c) => chunkBytes(c.id, c.flags, c.subs ? (c.id === 'GEOM' ? geoms[g++] : subsPayload(c.subs)) : c.payload));
+  const total = 16 + parts.reduce((n, p) => n + p.length, 0);
+  const head = tree.chunks.findIndex((c) => c.id === 'HEAD');
+  if (totals && head >= 0) {
+    le(tree.chunks[head].payload).setBigUint64(0, BigInt(total), true);
+    parts[head] = chunkBytes('HEAD', tree.chunks[head].flags, tree.chunks[head].payload);
+  }
+  const pro = new Uint8Array(16);
+  pro.set([0x89, 0x53, 0x54, 0x52, 0x41, 0x54, 0x41, 0x0a]);
+  le(pro).setUint16(8, tree.major, true);
+  le(pro).setUint16(10, tree.minor, true);
+  le(pro).setUint32(12, crc32(pro, 0, 12), true);
+  return concat([pro, ...parts]);
+}
+
+const clone = (tree) => structuredClone(tree);
+
+/** Every leaf payload of a tree (HEAD, SKEL's sub-chunks, GEOM's sub-chunks), with a name. */
+function leaves(tree) {
+  const out = [];
+  tree.chunks.forEach((c, ci) => {
+    if (c.payload) out.push({ name: c.id, get: (t) => t.chunks[ci].payload });
+    else c.subs.forEach((s, si) => out.push({ name: `${c.id}@${c.at}/${s.id}`, get: (t) => t.chunks[ci].subs[si].payload }));
+  });
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// (1) CRC-32
+
+test('crc32 is the ISO-HDLC CRC of zlib and PNG', () => {
+  const ascii9 = new TextEncoder().encode('123456789');
+  assert.equal(crc32(ascii9), 0xcbf43926);
+  assert.equal(crc32(new Uint8Array(0)), 0);
+  // Slice-by-8 agrees with the bytewise definition at every length and start.
+  const data = new Uint8Array(300).map((_, k) => (k * 131 + 7) & 0xff);
+  const slow = (b, s, e) => {
+    let c = 0xffffffff;
+    for (let i = s; i < e; i++) {
+      c ^= b[i];
+      for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+    }
+    return (c ^ 0xffffffff) >>> 0;
+  };
+  for (let s = 0; s < 9; s++) for (let e = s; e <= 300; e += 7) assert.equal(crc32(data, s, e), slow(data, s, e), `${s}..${e}`);
+  assert.equal(crc32(ascii9, 2, 5), slow(ascii9, 2, 5));
+});
+
+// ---------------------------------------------------------------------------------------------
+// (2) Golden vectors: the whole file decodes to <name>.json. (3) Refused vectors are refused.
+
+test('every valid golden vector decodes to its JSON, bit for bit', () => {
+  let valid = 0;
+  for (const name of vectorNames()) {
+    const expected = JSON.parse(readFileSync(join(VECTORS, `${name}.json`), 'utf8'));
+    if (expected.refused) continue;
+    const bytes = read(`${name}.strata`);
+    const { sk, geoms } = decodeAll(bytes);
+    const d = difference(expected, dump(sk, geoms));
+    assert.equal(d, null, `${name}: ${d}`);
+    // The struct of arrays is typed as promised.
+    assert.ok(sk.level instanceof Uint16Array && sk.parent instanceof Uint32Array && sk.offset instanceof Float64Array);
+    assert.ok(sk.coneAxis instanceof Float32Array && sk.coneAxis.length === 3 * sk.nodeCount && sk.neighborList instanceof Uint32Array);
+    assert.equal(sk.top(), sk.levels.length - 1);
+    assert.deepEqual(sk.levelNodes(sk.top()), [0, sk.levels[sk.top()].nodes]);
+    assert.deepEqual(sk.levelNodes(sk.levels.length), [0, 0]);
+    valid++;
+  }
+  assert.ok(valid >= 2, `${valid} valid vectors`);
+});
+
+test('every refused golden vector is refused with a FormatError naming its node and what is wrong', () => {
+  let count = 0;
+  for (const name of vectorNames()) {
+    const expected = JSON.parse(readFileSync(join(VECTORS, `${name}.json`), 'utf8'));
+    if (!expected.refused) continue;
+    const bytes = read(`${name}.strata`);
+    assert.throws(
+      () => decodeAll(bytes),
+      (e) => {
+        assert.ok(e instanceof FormatError, `${name}: ${e}`);
+        for (const w of expected.refused) assert.ok(e.message.includes(w), `${name}: "${e.message}" lacks "${w}"`);
+        assert.ok(/byte offset \d+/.test(e.message) && /chunk [A-Z]{4} at offset \d+/.test(e.message), e.message);
+        assert.equal(typeof e.offset, 'number');
+        return true;
+      },
+    );
+    count++;
+  }
+  assert.ok(count >= 2);
+});
+
+// ---------------------------------------------------------------------------------------------
+// (4) openingRange on every prefix
+
+test('openingRange on every prefix: needs grow, then the true skeleton and top-level ends', () => {
+  for (const name of vectorNames()) {
+    const bytes = read(`${name}.strata`);
+    // The true ends, from the chunk walk: SKEL's end, and the end of the top level's GEOM chunks.
+    const tree = parseTree(bytes);
+    const skel = tree.chunks.findIndex((c) => c.id === 'SKEL');
+    const levl = le(find(tree.chunks[skel].subs, 'LEVL').payload);
+    const L = levl.byteLength / 32;
+    const topNodes = levl.getUint32(32 * (L - 1) + 4, true);
+    const geoms = tree.chunks.filter((c) => c.id === 'GEOM');
+    const sk = { skeletonEnd: geoms[0].at };
+    const topEnd = topNodes < geoms.length ? geoms[topNodes].at : bytes.length;
+    for (const fileLength of [bytes.length, undefined]) {
+      let need = 0, resolvedAt = -1, topAt = -1;
+      for (let p = 0; p <= bytes.length; p++) {
+        const r = openingRange(bytes.subarray(0, p), fileLength);
+        if (r.need !== undefined) {
+          assert.equal(resolvedAt, -1, `${name}: resolved at ${resolvedAt}, asks again at ${p}`);
+          assert.ok(r.need > p && r.need >= need && r.need <= bytes.length, `${name}: prefix ${p} needs ${r.need} after ${need}`);
+          need = r.need;
+          continue;
+        }
+        if (resolvedAt < 0) resolvedAt = p;
+        assert.equal(r.skeletonEnd, sk.skeletonEnd, `${name} prefix ${p}`);
+        if (r.topEnd !== undefined) {
+          if (topAt < 0) topAt = p;
+          assert.equal(r.topEnd, topEnd, `${name} prefix ${p}`);
+        } else {
+          assert.equal(topAt, -1, `${name}: topEnd known at ${topAt}, lost at ${p}`);
+        }
+      }
+      assert.ok(resolvedAt > 0 && resolvedAt <= sk.skeletonEnd && topAt >= resolvedAt && topAt <= sk.skeletonEnd, `${name}: ${resolvedAt} ${topAt}`);
+      // Following the needs from an empty prefix takes a few reads.
+      let p = 0, reads = 0, r;
+      while ((r = openingRange(bytes.subarray(0, p), fileLength)).need !== undefined) [p, reads] = [r.need, reads + 1];
+      assert.ok(reads <= 4 && r.skeletonEnd === sk.skeletonEnd, `${name}: ${reads} reads`);
+    }
+  }
+});
+
+test('openingRange refuses a bad prologue, an unsupported major version and a bad HEAD frame', () => {
+  const bytes = read('sphere.strata');
+  const bad = (edit, words, fileLength = bytes.length) => {
+    const b = bytes.slice();
+    edit(b);
+    assert.throws(() => openingRange(b, fileLength), (e) => e instanceof FormatError && words.every((w) => e.message.includes(w)) || assert.fail(e.message));
+  };
+  bad((b) => (b[0] = 0x88), ['magic']);
+  bad((b) => (b[7] = 0x0d), ['magic']);
+  const version = (major, minor) => (b) => {
+    le(b).setUint16(8, major, true);
+    le(b).setUint16(10, minor, true);
+    le(b).setUint32(12, crc32(b, 0, 12), true);
+  };
+  bad(version(3, 1), ['3.1', `${MAJOR}.${MINOR}`]);
+  bad(version(1, 0), ['1.0', 'not supported']);
+  bad((b) => (b[12] ^= 1), ['CRC']);
+  bad((b) => (b[16] = 0x68), ['HEAD']);
+  bad((b) => le(b).setUint32(24, 65537, true), ['65536']);
+  bad((b) => le(b).setUint32(28, 1, true), ['65536']);
+  bad((b) => le(b).setUint32(24, 100, true), ['160']);
+  bad(() => {}, ['too short'], 10);
+  bad(() => {}, ['past the end'], 100);
+  bad((b) => (b[40] ^= 1), ['CRC']); // in HEAD's payload
+  bad(() => {}, ['truncated or extended'], bytes.length + 8);
+  // A newer minor version opens.
+  const b = bytes.slice();
+  version(2, 7)(b);
+  assert.equal(openingRange(b, b.length).skeletonEnd, decodeSkeleton(bytes, bytes.length).skeletonEnd);
+});
+
+// ---------------------------------------------------------------------------------------------
+// (5) Byte flips
+
+/**
+ * The bytes no check of a reader covers: the flags of top-level chunks of kinds that define none
+ * (ignored, §4.3; a sub-chunk's frame lies inside its parent's CRC), and the padding after each GEOM
+ * chunk (a node is read as its `size` bytes, padding excluded).
+ */
+function uncheckedBytes(bytes) {
+  const out = new Set();
+  for (const c of parseTree(bytes).chunks) {
+    for (let k = 4; k < 8; k++) out.add(c.at + k);
+    if (c.id !== 'GEOM') continue;
+    const e = c.at + 20 + c.subs.reduce((n, s) => n + 20 + s.payload.length + pad8(20 + s.payload.length), 0);
+    for (let k = e; k < e + pad8(e); k++) out.add(k);
+  }
+  return out;
+}
+
+test('every byte of sphere.strata flipped: refused with a FormatError, or read only where no check applies', (t) => {
+  const bytes = read('sphere.strata');
+  const free = uncheckedBytes(bytes);
+  const original = JSON.stringify(dump(...Object.values(decodeAll(bytes))));
+  const accepted = { 0xff: [], 0x01: [] };
+  for (const x of [0xff, 0x01]) {
+    for (let k = 0; k < bytes.length; k++) {
+      const b = bytes.slice();
+      b[k] ^= x;
+      if (!refused(b, `byte ${k} ^ ${x}`)) {
+        accepted[x].push(k);
+        assert.ok(free.has(k), `byte ${k} ^ 0x${x.toString(16)} was read although a check covers it`);
+        const { sk, geoms } = decodeAll(b);
+        assert.equal(JSON.stringify(dump(sk, geoms)), original, `byte ${k}: read, but differently`);
+      }
+    }
+  }
+  for (const x of [0xff, 0x01]) assert.deepEqual(accepted[x], [...free].sort((p, q) => p - q), `^0x${x.toString(16)}: exactly the unchecked bytes are read`);
+  t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, and GEOM padding); every other flip refused`);
+});
+
+test('resealed mutations (every checksum recomputed): a FormatError or a sane decode, never another error', (t) => {
+  const bytes = read('sphere.strata');
+  const tree = parseTree(bytes);
+  const spots = leaves(tree);
+  let tried = 0, accepted = 0;
+  // Each edit is made in place and undone: serialize recomputes the checksums from the payloads.
+  const attempt = (edit, what) => {
+    const payload = edit.spot.get(tree);
+    const saved = payload.slice(edit.k, edit.k + 4);
+    edit(payload);
+    const b = serialize(tree);
+    payload.set(saved, edit.k);
+    tried++;
+    if (!refused(b, what)) {
+      accepted++;
+      const { geoms } = decodeAll(b);
+      for (const g of geoms) {
+        assert.ok(g.positions.every(Number.isFinite) && (!g.uvs || g.uvs.every(Number.isFinite)), what);
+        assert.ok(g.indices.every((x) => x < g.positions.length / 3), what);
+      }
+    }
+  };
+  for (const s of spots) {
+    const n = s.get(tree).length;
+    const at = (k, f) => Object.assign(f, { spot: s, k });
+    for (let k = 0; k < n; k++) {
+      attempt(at(k, (p) => (p[k] ^= 0xff)), `${s.name}[${k}] ^ 0xff`);
+    }
+    for (let k = 0; k + 4 <= n; k += 4) {
+      attempt(at(k, (p) => le(p).setUint32(k, 0xffffffff, true)), `${s.name}[${k}] = u32 max`);
+      attempt(at(k, (p) => le(p).setUint32(k, 0x7fffffff, true)), `${s.name}[${k}] = i32 max`);
+    }
+  }
+  t.diagnostic(`${tried} resealed variants of sphere.strata: ${tried - accepted} refused, ${accepted} read (values a reader cannot tell from honest ones)`);
+});
+
+test('hostile counts fail before anything is allocated with them', () => {
+  const tree = parseTree(read('sphere.strata'));
+  const variant = (edit, totals = true) => {
+    const v = clone(tree);
+    edit(v);
+    return serialize(v, { totals });
+  };
+  const head = (v) => find(v.chunks, 'HEAD').payload;
+  const sub = (v, id) => find(find(v.chunks, 'SKEL').subs, id).payload;
+  const refusedWith = (b, words) =>
+    assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}`));
+  refusedWith(variant((v) => le(head(v)).setUint32(48, 0xfffffffe, true)), ['LEVL', 'HEAD says 4294967294']);
+  refusedWith(variant((v) => le(head(v)).setUint32(48, 0xffffffff, true)), ['HEAD', 'nodes']);
+  refusedWith(variant((v) => le(head(v)).setUint32(44, 0xffffffff, true)), ['HEAD', 'levels']);
+  refusedWith(variant((v) => le(head(v)).setUint32(52, 0xffffffff, true)), ['MATL', 'material 2']);
+  refusedWith(variant((v) => le(head(v)).setBigUint64(56, 1n << 60n, true)), ['2^53']);
+  refusedWith(variant((v) => le(head(v)).setBigUint64(0, 1n << 60n, true), false), ['HEAD says more than 2^53']);
+  refusedWith(variant((v) => le(sub(v, 'LEVL')).setBigUint64(24, 1n << 60n, true), false), ['LEVL', '2^53']);
+  refusedWith(variant((v) => le(head(v)).setUint32(156, 0xffffffff, true)), ['tool string']);
+  refusedWith(variant((v) => le(head(v)).setUint32(156, 100, true)), ['HEAD', 'needs 100 more bytes']);
+  refusedWith(variant((v) => le(sub(v, 'MATL')).setUint32(0, 0xffffffff, true)), ['MATL', 'material 0', 'name']);
+  // Node 0 claims 2^32 − 1 vertices and faces (LEVL agrees): its geometry is refused by size.
+  refusedWith(variant((v) => le(sub(v, 'NODE')).setUint32(44, 0xffffffff, true)), ['node 0', 'VPOS holds']);
+  refusedWith(variant((v) => le(sub(v, 'NODE')).setUint32(40, 0xffffffff, true)), ['node 0', 'INDX holds']);
+  refusedWith(variant((v) => le(sub(v, 'NODE')).setUint16(2, 0xffff, true)), ['node 0', 'neighbours run past']);
+  refusedWith(variant((v) => le(sub(v, 'NODE')).setUint16(0, 0xffff, true)), ['node 0', 'run past level 2']);
+  refusedWith(variant((v) => le(sub(v, 'NODE')).setUint32(12 + 4, 0x80000000, true)), ['node 0', 'off the 20-bit grid']);
+  refusedWith(variant((v) => (find(find(v.chunks, 'SKEL').subs, 'NBRS').flags = 3)), ['NBRS', 'width 3']);
+  refusedWith(variant((v) => (find(v.chunks, 'SKEL').subs = find(v.chunks, 'SKEL').subs.filter((s) => s.id !== 'MATL'))), ['has no MATL']);
+  refusedWith(variant((v) => find(v.chunks, 'SKEL').subs.push({ ...find(find(v.chunks, 'SKEL').subs, 'NBRS') })), ['second NBRS']);
+  const geom0 = (v) => v.chunks.find((c) => c.id === 'GEOM').subs;
+  refusedWith(variant((v) => (find(geom0(v), 'VPOS').flags = 4)), ['node 0', 'position width 4']);
+  refusedWith(variant((v) => (find(geom0(v), 'INDX').flags = 3)), ['node 0', 'index width 3']);
+  refusedWith(variant((v) => le(find(geom0(v), 'MATR').payload).setUint32(0, 9, true)), ['node 0', 'material range 0']);
+  refusedWith(variant((v) => geom0(v).splice(1, 1)), ['node 0', 'lacks a VNRM']);
+  refusedWith(variant((v) => geom0(v).push({ id: 'CLUS', flags: 0, payload: new Uint8Array(0) })), ['node 0', 'should not have a CLUS']);
+  refusedWith(variant((v) => geom0(v).push({ ...find(geom0(v), 'VTEX') })), ['node 0', 'second VTEX']);
+  // A NaN UV passes the structure but not the rules.
+  refusedWith(variant((v) => le(find(geom0(v), 'VTEX').payload).setFloat32(4, NaN, true)), ['node 0', 'UV 0 is not finite']);
+  // A vertex of the last node (level 0, small) moved outside its box, still on the grid.
+  const geomLast = (v) => v.chunks.filter((c) => c.id === 'GEOM').at(-1).subs;
+  const toGridEnd = (v) => {
+    const vpos = find(geomLast(v), 'VPOS');
+    const off = 2 ** 20 - 1 - le(vpos.payload).getUint32(0, true); // vertex 0's x at the last grid point
+    for (let k = 0; k < vpos.flags; k++) vpos.payload[12 + k] = (off >>> (8 * k)) & 0xff;
+  };
+  refusedWith(variant(toGridEnd), ['node 19', "outside the node's box"]);
+  // decodeNode with other bytes than the node's.
+  const bytes = read('sphere.strata');
+  const sk = decodeSkeleton(bytes, bytes.length);
+  for (const [i, b] of [
+    [0, nodeBytes(sk, 0, bytes).subarray(1)],
+    [0, bytes.subarray(sk.offset[1], sk.offset[1] + sk.size[0])],
+    [0, new Uint8Array(0)],
+    [20, nodeBytes(sk, 0, bytes)],
+    [-1, nodeBytes(sk, 0, bytes)],
+    [0.5, nodeBytes(sk, 0, bytes)],
+  ]) {
+    assert.throws(() => decodeNode(sk, i, b), FormatError);
+  }
+});
+
+// ---------------------------------------------------------------------------------------------
+// (6) Truncations and extensions
+
+test('truncations at every length and extensions are refused with a FormatError', () => {
+  for (const name of ['plane', 'sphere']) {
+    const bytes = read(`${name}.strata`);
+    const sk = decodeSkeleton(bytes, bytes.length);
+    for (let n = 0; n < bytes.length; n++) {
+      const cut = bytes.subarray(0, n);
+      assert.throws(() => decodeSkeleton(cut, n), FormatError, `${name} cut at ${n}`);
+      // Fewer bytes than the skeleton, of a file of the right length.
+      if (n < sk.skeletonEnd) assert.throws(() => decodeSkeleton(cut, bytes.length), FormatError, `${name} prefix ${n}`);
+    }
+    for (const extra of [1, 7, 8, 4096]) {
+      const longer = new Uint8Array(bytes.length + extra);
+      longer.set(bytes);
+      assert.throws(() => decodeSkeleton(longer, longer.length), /truncated or extended/);
+    }
+    assert.throws(() => decodeSkeleton(bytes, NaN), FormatError);
+    assert.throws(() => decodeSkeleton(bytes, -1), FormatError);
+  }
+});
+
+// ---------------------------------------------------------------------------------------------
+// Versions and unknown chunks (§3, §4.3)
+
+test('a newer minor version is read with what it may add; unknown chunks are skipped', () => {
+  const bytes = read('sphere.strata');
+  const base = decodeAll(bytes);
+  const tree = parseTree(bytes);
+  const same = (b, what, minor = 0) => {
+    const { sk, geoms } = decodeAll(b);
+    const a = dump(sk, geoms), e = dump(base.sk, base.geoms);
+    e.version = `2.${minor}`;
+    // Offsets, sizes and checksums move with inserted chunks; everything else stays.
+    for (const d of [a, e]) {
+      delete d.header.file_size;
+      for (const n of d.nodes) for (const k of ['offset', 'size', 'crc']) delete n[k];
+      for (const l of d.levels) delete l.bytes;
+    }
+    assert.equal(difference(e, a), null, what);
+    return sk;
+  };
+  const variant = (edit) => {
+    const v = clone(tree);
+    edit(v);
+    return serialize(v, { totals: true });
+  };
+  const unknown = (id, n = 13) => ({ id, flags: 5, payload: new Uint8Array(n).fill(0xab) });
+  same(variant((v) => v.chunks.splice(1, 0, unknown('XTRA'), unknown('xtr2', 0))), 'unknown chunks between HEAD and SKEL');
+  same(variant((v) => v.chunks.push(unknown('TAIL'))), 'an unknown chunk after the last GEOM');
+  same(variant((v) => find(v.chunks, 'SKEL').subs.splice(2, 0, unknown('SKX1'))), 'an unknown sub-chunk in SKEL');
+  same(variant((v) => v.chunks.filter((c) => c.id === 'GEOM').forEach((c) => c.subs.splice(1, 0, unknown('GMX1', 3)))), 'unknown sub-chunks in GEOM');
+  // A newer minor: unknown attribute bits, fields after the tool string and after the last material.
+  const newer = (v) => {
+    v.minor = 3;
+    const h = find(v.chunks, 'HEAD');
+    h.payload = concat([h.payload, new Uint8Array(24).fill(7)]);
+    le(h.payload).setUint32(40, le(h.payload).getUint32(40, true) | 0x100, true);
+    const m = find(find(v.chunks, 'SKEL').subs, 'MATL');
+    m.payload = concat([m.payload, new Uint8Array(5).fill(9)]);
+  };
+  same(variant(newer), 'minor 3 with additions', 3);
+  // The same additions in a 2.0 file are errors.
+  const b = variant((v) => {
+    newer(v);
+    v.minor = 0;
+  });
+  assert.throws(() => decodeAll(b), /unknown attribute bits 0x107/);
+  const only = (edit, re) => assert.throws(() => decodeAll(variant((v) => (edit(v), (v.minor = 0)))), re);
+  only((v) => (find(v.chunks, 'HEAD').payload = concat([find(v.chunks, 'HEAD').payload, new Uint8Array(8)])), /8 bytes after the tool string/);
+  only((v) => {
+    const m = find(find(v.chunks, 'SKEL').subs, 'MATL');
+    m.payload = concat([m.payload, new Uint8Array(3)]);
+  }, /3 bytes after 2 materials/);
+  // A known chunk where it is not allowed.
+  assert.throws(() => decodeAll(variant((v) => v.chunks.splice(1, 0, { ...v.chunks[0] }))), /expected the SKEL chunk/);
+  assert.throws(() => decodeAll(variant((v) => v.chunks.splice(1, 0, clone(v.chunks.find((c) => c.id === 'GEOM'))))), /expected the SKEL chunk/);
+  // An unknown chunk between SKEL and node 0's GEOM breaks the back-to-back layout (§2).
+  assert.throws(() => decodeAll(variant((v) => v.chunks.splice(2, 0, unknown('GAP1')))), FormatError);
+  // Non-zero padding (§4.1).
+  const padded = bytes.slice();
+  const skelEnd = decodeSkeleton(bytes, bytes.length).skeletonEnd;
+  padded[skelEnd - 1] = 1;
+  assert.throws(() => decodeSkeleton(padded, padded.length), /padding is not zero/);
+});
+
+// ---------------------------------------------------------------------------------------------
+// (7) The worked example of spec §9 and plane.strata
+
+/** The bytes of the hex dump of spec §9, offsets checked line by line. */
+function specExample() {
+  const md = readFileSync(join(ROOT, 'format-spec', 'strata-v2.md'), 'utf8');
+  const block = md.split('```hex\n')[1].split('```')[0];
+  const out = [];
+  for (const line of block.split('\n').filter(Boolean)) {
+    const m = /^([0-9a-f]{8})  ([0-9a-f ]+?)\s*\|/.exec(line);
+    assert.ok(m, line);
+    assert.equal(parseInt(m[1], 16), out.length, line);
+    out.push(...m[2].trim().split(/\s+/).map((x) => parseInt(x, 16)));
+  }
+  return new Uint8Array(out);
+}
+
+test('the worked example of spec §9 and plane.strata decode to the values the spec gives', () => {
+  const step = 2 ** -19;
+  const unitSquare = (sk, g, what) => {
+    const h = sk.header;
+    assert.equal(h.metresPerUnit, 1, what);
+    assert.deepEqual([h.min, h.max], [[0, 0, 0], [1, 1, 0]], what);
+    assert.deepEqual(h.attributes, { normals: false, uvs: false, colors: false }, what);
+    assert.deepEqual([h.levels, h.nodes, h.materials, h.inputVertices, h.inputFaces, h.clusters], [1, 1, 1, 4, 2, 1], what);
+    assert.deepEqual(h.grid, { origin: [0, 0, 0], step, bits: 20 }, what);
+    assert.equal(h.levelRatio, 0.5);
+    assert.deepEqual(sk.materials, [{ name: 'default', baseColor: [fr(0.8), fr(0.8), fr(0.8), 1], texture: null }], what);
+    assert.deepEqual(sk.levels, [{ firstNode: 0, nodes: 1, faces: 2, vertices: 4, bytes: sk.size[0] + ((8 - (sk.size[0] % 8)) % 8) }], what);
+    assert.deepEqual([...sk.boxMin, ...sk.boxMax, ...sk.center], [0, 0, 0, 1, 1, 0, 0.5, 0.5, 0], what);
+    assert.deepEqual([...sk.coneAxis, sk.coneHalfAngle[0]], [0, 0, 1, 0], what);
+    assert.equal(sk.error[0], fr((step * Math.sqrt(3)) / 2), what);
+    assert.deepEqual([sk.childCount[0], sk.neighborCount[0], sk.parent[0], sk.faces[0], sk.vertices[0]], [0, 0, 0xffffffff, 2, 4], what);
+    assert.equal(sk.offset[0], sk.skeletonEnd, `${what}: GEOM right after SKEL`);
+    assert.deepEqual([...g.positions], [0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0], what);
+    assert.deepEqual([...g.indices], [0, 1, 2, 0, 2, 3], what);
+    assert.deepEqual(g.materialRanges, [[0, 0, 6]], what);
+    assert.deepEqual([g.normals, g.uvs, g.colors], [null, null, null], what);
+    assert.equal(g.clusters.length, 1, what);
+    const c = g.clusters[0];
+    assert.deepEqual([c.axis, c.halfAngle, c.center, c.firstFace, c.faceCount], [[0, 0, 1], 0, [0.5, 0.5, 0], 0, 2], what);
+  };
+
+  const spec = specExample();
+  assert.equal(spec.length, 648);
+  assert.equal(crc32(spec, 0, 12), 0x9dac61cd);
+  const ex = decodeAll(spec);
+  unitSquare(ex.sk, ex.geoms[0], 'spec §9');
+  assert.equal(ex.sk.header.tool, 'strata test');
+  assert.equal(ex.sk.header.fileSize, 648);
+  assert.equal(ex.sk.skeletonEnd, 448);
+  assert.deepEqual([ex.sk.offset[0], ex.sk.size[0], ex.sk.crc[0]], [448, 196, 0x4b7f2f50]);
+  assert.equal(ex.sk.radius[0], 1537 * 2 ** 8 * step); // 0x4601
+  assert.equal(ex.sk.radius[0], 0.75048828125);
+  assert.equal(ex.geoms[0].clusters[0].radius, 0.75048828125);
+  assert.deepEqual(ex.sk.header.params, {
+    cluster_faces: 64,
+    cluster_angle: new DataView(new Uint8Array([0xc2, 0xb8, 0x32, 0x3f]).buffer).getFloat32(0, true),
+    leaf_faces: 512,
+    leaf_angle: new DataView(new Uint8Array([0x36, 0x8d, 0xa7, 0x3f]).buffer).getFloat32(0, true),
+    angle_step: new DataView(new Uint8Array([0x92, 0x0a, 0x06, 0x3f]).buffer).getFloat32(0, true),
+    growth: 4,
+    kc: 1,
+    ks: 0.25,
+    kn: fr(0.1),
+    top_groups: 8,
+  });
+  assert.deepEqual(openingRange(spec, spec.length), { skeletonEnd: 448, topEnd: 648 });
+
+  const plane = read('plane.strata');
+  const pl = decodeAll(plane);
+  unitSquare(pl.sk, pl.geoms[0], 'plane.strata');
+  // The vector's sphere is the tight one: √½ times the writer's margin, rounded up to a code.
+  assert.ok(pl.sk.radius[0] >= Math.SQRT1_2 && pl.sk.radius[0] < Math.SQRT1_2 * 1.001);
+  // opts.localOrigin: positions relative to a point, computed in f64 before the rounding to f32.
+  const g = decodeNode(pl.sk, 0, nodeBytes(pl.sk, 0, plane), { localOrigin: [0.5, 0.5, 0] });
+  assert.deepEqual([...g.local], [-0.5, -0.5, 0, 0.5, -0.5, 0, 0.5, 0.5, 0, -0.5, 0.5, 0]);
+});
+
+test('opts.localOrigin keeps precision far from the origin', (t) => {
+  // The sphere moved by 2^20 on every axis: the grid origin shifts (exactly, in f64), grid points stay.
+  const far0 = 2 ** 20;
+  const tree = parseTree(read('sphere.strata'));
+  const d = le(find(tree.chunks, 'HEAD').payload);
+  for (let k = 0; k < 3; k++) {
+    d.setFloat64(120 + 8 * k, d.getFloat64(120 + 8 * k, true) + far0, true);
+    // Bounds widened to hold the rounded positions (an f32 step is 1/8 at 2^20).
+    d.setFloat32(16 + 4 * k, d.getFloat32(16 + 4 * k, true) + far0 - 1, true);
+    d.setFloat32(28 + 4 * k, d.getFloat32(28 + 4 * k, true) + far0 + 1, true);
+  }
+  const far = serialize(tree, { totals: true });
+  const near = decodeAll(read('sphere.strata'));
+  const sk = decodeSkeleton(far, far.length);
+  let decoded = 0;
+  for (let i = 0; i < sk.nodeCount; i++) {
+    let g;
+    try {
+      g = decodeNode(sk, i, nodeBytes(sk, i, far), { localOrigin: [far0, far0, far0] });
+    } catch (e) {
+      // The rules are checked on the absolute positions, rounded to f32 steps of 1/8 here: the
+      // tight spheres and cones of small nodes no longer hold them.
+      assert.ok(e instanceof FormatError, String(e));
+      continue;
+    }
+    decoded++;
+    const exact = near.geoms[i].positions;
+    assert.ok(!g.local.every((x, k) => x === g.positions[k] - far0), 'the absolute positions have lost precision');
+    for (let k = 0; k < exact.length; k++) {
+      assert.equal(g.local[k], exact[k], `node ${i} coordinate ${k}: local = the position near 0, bit for bit`);
+      assert.ok(Math.abs(g.positions[k] - far0 - exact[k]) <= 1 / 16, 'the absolute position is the f32 nearest');
+    }
+  }
+  assert.ok(decoded >= 1, 'some node decodes');
+  t.diagnostic(`${decoded} of ${sk.nodeCount} nodes of the moved sphere decode; their local positions equal the unmoved ones`);
+});
+
+// ---------------------------------------------------------------------------------------------
+// Files strata converts, against `strata inspect --json`
+
+// The strata binary: STRATA_BIN (cargo test passes its own), else the release build. The CT head
+// (566,027 faces) is converted only by a release build, in a few seconds.
+const BIN = process.env.STRATA_BIN || join(ROOT, 'target', 'release', 'strata');
+const RELEASE = BIN.split(/[\\/]/).includes('release');
+const CTHEAD = join(ROOT, '..', 'shared', 'meshes', 'large', 'cthead_skin_native.ply');
+
+function inspectJson(path, args = []) {
+  return JSON.parse(execFileSync(BIN, ['inspect', '--json', ...args, path], { encoding: 'utf8', maxBuffer: 1 << 28 }));
+}
+
+/** Compare a decoded skeleton with what `strata inspect --json --depth L` prints. */
+function compareWithInspect(sk, path) {
+  const ins = inspectJson(path, ['--depth', String(sk.header.levels)]);
+  const h = sk.header;
+  const header = {
+    file_size: h.fileSize,
+    metres_per_unit: h.metresPerUnit,
+    min: h.min,
+    max: h.max,
+    attributes: h.attributes,
+    levels: h.levels,
+    nodes: h.nodes,
+    materials: sk.materials.map((m) => m.name),
+    input_vertices: h.inputVertices,
+    input_faces: h.inputFaces,
+    clusters: h.clusters,
+    params: h.params,
+    grid: h.grid,
+    level_ratio: h.levelRatio,
+    tool: h.tool,
+  };
+  const deg = (rad) => fr(rad * fr(57.29577951308232));
+  assert.equal(ins.version, `${sk.major}.${sk.minor}`);
+  assert.equal(difference(ins.header, header, 'header'), null);
+  const skel = ins.chunks.find((c) => c.id === 'SKEL');
+  const e = skel.offset + 20 + skel.size;
+  assert.equal(e + ((8 - (e % 8)) % 8), sk.skeletonEnd);
+  const levels = sk.levels.map((l, k) => {
+    const [a, b] = sk.levelNodes(k);
+    let coneMax = 0, errMax = 0;
+    for (let i = a; i < b; i++) [coneMax, errMax] = [Math.max(coneMax, deg(sk.coneHalfAngle[i])), Math.max(errMax, sk.error[i])];
+    return { level: k, nodes: l.nodes, faces: l.faces, vertices: l.vertices, bytes: l.bytes, start: sk.offset[a], end: sk.offset[a] + l.bytes, cone_deg_max: coneMax, error_max: errMax };
+  });
+  assert.equal(difference(ins.levels, levels, 'levels'), null);
+  assert.equal(ins.nodes.length, sk.nodeCount);
+  for (const n of ins.nodes) {
+    const i = n.node;
+    const [c0, c1] = sk.children(i);
+    const mine = {
+      node: i,
+      depth: n.depth,
+      level: sk.level[i],
+      parent: sk.parent[i] === 0xffffffff ? null : sk.parent[i],
+      children: Array.from({ length: c1 - c0 }, (_, k) => c0 + k),
+      neighbors: sk.neighbors(i).length,
+      faces: sk.faces[i],
+      vertices: sk.vertices[i],
+      cone_deg: deg(sk.coneHalfAngle[i]),
+      radius: sk.radius[i],
+      error: sk.error[i],
+      offset: sk.offset[i],
+      bytes: sk.size[i],
+      chunks: [],
+    };
+    assert.equal(difference(n, mine, `node ${i}`), null);
+  }
+}
+
+const noBinary = !existsSync(BIN) && `skipping: no strata binary at ${BIN} (cargo build --release, or set STRATA_BIN)`;
+
+test('files strata converts agree with `strata inspect --json`, and every node decodes', { skip: noBinary }, (t) => {
+  const dir = mkdtempSync(join(process.env.STRATA_TEST_DIR || tmpdir(), 'strata-js-'));
+  try {
+    const inputs = ['icosphere.obj', 'colored_sphere.ply', 'two_materials.glb', 'cad_part.obj', 'noisy_sphere.ply'].map((f) => join(ROOT, 'fixtures', f));
+    if (!existsSync(CTHEAD)) t.diagnostic(`skipping the CT head: ${CTHEAD} not found`);
+    else if (!RELEASE) t.diagnostic(`skipping the CT head: ${BIN} is not a release build`);
+    else inputs.push(CTHEAD);
+    for (const input of inputs.filter(existsSync)) {
+      const out = join(dir, input.split('/').pop().replace(/\.\w+$/, '.strata'));
+      execFileSync(BIN, ['convert', '-q', input, out], { stdio: 'ignore' });
+      const bytes = new Uint8Array(readFileSync(out));
+      let t0 = performance.now();
+      const sk = decodeSkeleton(bytes, bytes.length);
+      const skelMs = performance.now() - t0;
+      compareWithInspect(sk, out);
+      const r = openingRange(bytes.subarray(0, Math.min(bytes.length, 65536)), bytes.length);
+      if (r.need === undefined) {
+        assert.equal(r.skeletonEnd, sk.skeletonEnd);
+        if (r.topEnd !== undefined) assert.equal(r.topEnd, sk.skeletonEnd + sk.levels[sk.top()].bytes);
+      }
+      // Every node, three times: the best pass is reported (the first warms the JIT).
+      let ms = Infinity, faces = 0;
+      for (let pass = 0; pass < 3; pass++) {
+        t0 = performance.now();
+        for (let i = 0; i < sk.nodeCount; i++) {
+          const g = decodeNode(sk, i, nodeBytes(sk, i, bytes));
+          if (pass === 0) {
+            assert.equal(g.positions.length, 3 * sk.vertices[i]);
+            assert.equal(g.indices.length, 3 * sk.faces[i]);
+            assert.equal(!!g.normals, sk.header.attributes.normals);
+            faces += sk.faces[i];
+          }
+        }
+        ms = Math.min(ms, performance.now() - t0);
+      }
+      const geomBytes = bytes.length - sk.skeletonEnd;
+      t.diagnostic(
+        `${input.split('/').pop()}: ${bytes.length} bytes, ${sk.nodeCount} nodes, ${sk.levels.length} levels, ${faces} faces; ` +
+          `skeleton ${sk.skeletonEnd} bytes in ${skelMs.toFixed(1)} ms; ` +
+          `nodes in ${ms.toFixed(0)} ms: ${Math.round(sk.nodeCount / (ms / 1000))} nodes/s, ${(geomBytes / 1e6 / (ms / 1000)).toFixed(0)} MB/s, ` +
+          `${((faces / 1e6) / (ms / 1000)).toFixed(1)} M faces/s`,
+      );
+      if (input === CTHEAD) {
+        t0 = performance.now();
+        for (let k = 0; k < 5; k++) crc32(bytes);
+        t.diagnostic(`crc32: ${((5 * bytes.length) / 1e6 / ((performance.now() - t0) / 1000)).toFixed(0)} MB/s`);
+      }
+    }
+  } finally {
+    rmSync(dir, { recursive: true, force: true });
+  }
+});
