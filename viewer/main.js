@@ -302,14 +302,14 @@ function controls() {
     drag = null;
     if (!click || !measuring || !streamer) return;
     const dpr = devicePixelRatio || 1;
-    const p = pick(e.offsetX * dpr, e.offsetY * dpr);
+    const p = pick(Math.floor(e.offsetX * dpr), Math.floor(e.offsetY * dpr));
     if (!p) return;
     picks = picks.length >= 2 ? [p] : [...picks, p];
     describePicks();
   });
   canvas.addEventListener('dblclick', (e) => {
     const dpr = devicePixelRatio || 1;
-    const p = camera && pick(e.offsetX * dpr, e.offsetY * dpr);
+    const p = camera && pick(Math.floor(e.offsetX * dpr), Math.floor(e.offsetY * dpr));
     if (!p) return;
     const move = sub(p.point, camera.target);
     camera.target = p.point;
