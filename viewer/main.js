@@ -384,8 +384,16 @@ window.strata = {
   },
   camera: () => camera?.toJSON(),
   setLimits({ pixelError, budget, maxFaces, priority } = {}) {
-    if (pixelError !== undefined) streamer.pixelError = pixelError;
-    if (budget !== undefined) streamer.budget = budget;
+    if (pixelError !== undefined) {
+      streamer.pixelError = pixelError;
+      if (pixelError > 0) $('error').value = String(Math.log2(pixelError));
+      $('o-error').textContent = String(pixelError);
+    }
+    if (budget !== undefined) {
+      streamer.budget = budget;
+      $('budget').value = String(Math.log2(budget / 2 ** 20));
+      $('o-budget').textContent = (budget / 2 ** 20).toFixed(0);
+    }
     if (maxFaces !== undefined) streamer.maxFaces = maxFaces;
     if (priority !== undefined) streamer.priority = priority;
     dirty = true;
