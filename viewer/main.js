@@ -147,8 +147,8 @@ async function open(source) {
   $('name').textContent = source.name;
   firstFrameMs = null;
   try {
-    renderer ??= new Renderer(canvas);
-    const next = await Streamer.open(source, {
+    // The first read goes out before WebGL starts up, which takes a while in a software renderer.
+    const opening = Streamer.open(source, {
       budget: budgetBytes(),
       pixelError: pixelError(),
       onLoad: (i, g) => renderer.upload(g),
@@ -157,7 +157,8 @@ async function open(source) {
         dirty = true;
       },
     });
-    streamer = next;
+    renderer ??= new Renderer(canvas);
+    streamer = await opening;
     showWarning(source.warning);
     resize();
     fit();

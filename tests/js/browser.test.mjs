@@ -339,6 +339,21 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     assert.ok(differ / covered < 0.01, `${differ} of ${covered} pixels differ`);
   });
 
+  await sub('a local file opens without a server, read by slices', async (t) => {
+    const { p, requests, errors } = await page(`${base}/viewer/`);
+    assert.match(await p.textContent('#warning'), /No model yet/);
+    await p.setInputFiles('#open', models.sphere);
+    await within(p.evaluate(() => window.strata.ready()), 60000, 'the local file');
+    await p.evaluate(() => window.strata.setLimits({ pixelError: 0.5 }));
+    await within(p.evaluate(() => window.strata.idle()), 120000, 'refinement');
+    const st = await p.evaluate(() => window.strata.state());
+    t.diagnostic(`local file: ${st.requests} slices, ${st.bytesRead} bytes of ${st.fileLength}`);
+    assert.ok(st.requests >= 2 && st.bytesRead < st.fileLength);
+    assert.equal(requests.filter((r) => new URL(r.url).pathname.endsWith('.strata')).length, 0, 'nothing fetched over HTTP');
+    assert.deepEqual(errors, []);
+    await p.close();
+  });
+
   await sub('failures are messages on the page: a server ignoring Range, a truncated file, a corrupted chunk, a newer version', async (t) => {
     // A plain server that ignores Range (answers 200 with the whole file), serving the viewer's files from disk.
     const plain = createServer((rq, rs) => {
