@@ -174,6 +174,12 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     }
     assert.deepEqual(errors, []);
     await p.close();
+    // The same page again, in a browser already started: what a returning visitor waits.
+    const again = await page(viewer('sphere'));
+    await within(again.p.evaluate(() => window.strata.ready()), 60000, 'first frame again');
+    const w = await again.p.evaluate(() => window.strata.state());
+    t.diagnostic(`sphere, second page in the same browser: first frame ${w.firstFrameMs.toFixed(0)} ms after page load (open ${w.openMs.toFixed(0)} ms), ${w.firstFrameRequests} round trips, ${w.firstFrameBytes} bytes`);
+    await again.p.close();
   });
 
   await sub('selects the fronts strata stream selects, and draws them once resident', async (t) => {
