@@ -569,3 +569,89 @@ fn log_prints_one_line_per_request() {
     );
     assert!(lines[1].starts_with("GET /missing.strata") && lines[1].contains("404"), "{err}");
 }
+
+/// Read one response from a kept-alive connection: the head, then exactly Content-Length body bytes.
+fn read_one(s: &mut TcpStream) -> std::io::Result<Resp> {
+    let mut bytes = Vec::new();
+    let mut byte = [0u8; 1];
+    while !bytes.ends_with(b"\r\n\r\n") {
+        if s.read(&mut byte)? == 0 {
+            return Err(std::io::ErrorKind::UnexpectedEof.into());
+        }
+        bytes.push(byte[0]);
+    }
+    let mut resp = parse(&bytes);
+    let len: usize = resp.header("content-length").expect("no Content-Length").parse().unwrap();
+    resp.body = vec![0; len];
+    s.read_exact(&mut resp.body)?;
+    Ok(resp)
+}
+
+/// A browser opens a page's modules on several kept-alive connections at once and leaves them open.
+/// Every request on every accepted connection must be answered, however many connections sit idle:
+/// tiny_http (before hyper) lost a wake-up in its per-connection thread pool when connections came
+/// faster than its idle threads woke, and the request on the connection left over then sat unread
+/// for as long as the others stayed open.
+#[test]
+fn bursts_of_keep_alive_connections_beside_idle_ones_are_all_answered() {
+    let t = Tree::new();
+    let s = t.serve();
+    let data = t.ico();
+    // Eight new connections at once, each sending one request; the answered connections are returned
+    // open, with nothing more to say.
+    let burst = |round: usize| -> Vec<TcpStream> {
+        let barrier = std::sync::Arc::new(std::sync::Barrier::new(8));
+        let threads: Vec<_> = (0..8usize)
+            .map(|k| {
+                let (barrier, addr) = (barrier.clone(), s.addr.clone());
+                let raw = format!("GET /ico.strata HTTP/1.1\r\nHost: {addr}\r\nRange: bytes={k}-{}\r\n\r\n", k + 99);
+                std::thread::spawn(move || {
+                    barrier.wait();
+                    let mut c = TcpStream::connect(&addr).unwrap();
+                    c.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+                    c.write_all(raw.as_bytes()).unwrap();
+                    (read_one(&mut c), c)
+                })
+            })
+            .collect();
+        let answers: Vec<_> = threads.into_iter().map(|h| h.join().unwrap()).collect();
+        answers
+            .into_iter()
+            .enumerate()
+            .map(|(k, (r, c))| {
+                let r = r.unwrap_or_else(|e| panic!("round {round}, connection {k}: no answer within 5 s ({e})"));
+                assert_eq!(r.status, 206);
+                assert_eq!(r.body, &data[k..k + 100]);
+                c
+            })
+            .collect()
+    };
+    let mut idle = burst(0);
+    for round in 1..=20 {
+        // Two connections close, so that a few server threads (if it has them) wait for work; the
+        // other six stay open and idle, as a browser keeps them.
+        let mut open = burst(round);
+        open.truncate(6);
+        idle.extend(open);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // Every idle connection still answers.
+    for c in &mut idle {
+        c.write_all(format!("GET /viewer/ HTTP/1.1\r\nHost: {}\r\n\r\n", s.addr).as_bytes()).unwrap();
+        assert_eq!(read_one(c).unwrap().status, 200);
+    }
+}
+
+/// A client that shuts its sending side once the request is written still gets the answer.
+#[test]
+fn a_half_closed_request_is_answered() {
+    let t = Tree::new();
+    let s = t.serve();
+    let mut c = TcpStream::connect(&s.addr).unwrap();
+    c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    c.write_all(format!("GET /ico.strata HTTP/1.1\r\nHost: {}\r\nRange: bytes=0-9\r\n\r\n", s.addr).as_bytes()).unwrap();
+    c.shutdown(std::net::Shutdown::Write).unwrap();
+    let r = read_one(&mut c).unwrap();
+    assert_eq!(r.status, 206);
+    assert_eq!(r.body, &t.ico()[..10]);
+}

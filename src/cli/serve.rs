@@ -6,26 +6,35 @@
 //! single file is served under its own name. The viewer's files are embedded in the binary at build
 //! time and served under `/viewer/`. Data files answer byte ranges, conditional requests and CORS
 //! (a viewer served from elsewhere may read them); nothing outside the folder is ever served.
+//!
+//! The transport is hyper's HTTP/1.1 on a tokio runtime: one task per connection, so a connection
+//! kept alive and idle (as browsers keep several) holds no thread, and every accepted connection is
+//! read. Routing and the file system run on tokio's blocking threads; data files are streamed in
+//! chunks of [`READ_BUFFER`] bytes as the client takes them, never read whole.
 
 use anyhow::{bail, Context, Result};
+use hyper::body::{Body as HttpBody, Bytes, Frame, Incoming, SizeHint};
+use hyper::header::{HeaderName, HeaderValue};
+use hyper::http::request::Parts;
+use hyper::{Method, Request, Response, StatusCode};
 use include_dir::{include_dir, Dir};
 use std::borrow::Cow;
+use std::convert::Infallible;
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Component, Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::pin::Pin;
 use std::sync::Arc;
+use std::task::{ready, Context as TaskContext, Poll};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
-use tiny_http::{Header, Method, Request, Response, StatusCode};
+use tokio::io::{AsyncRead, ReadBuf};
 
 /// The viewer (`viewer/` of the source tree), embedded so that installing the binary is enough.
 static VIEWER: Dir<'static> = include_dir!("$CARGO_MANIFEST_DIR/viewer");
 
-/// Requests handled at once; each worker answers one request at a time, so a slow client holds one.
-const WORKERS: usize = 16;
-
-/// Bytes read from a data file per copy into the socket.
+/// Bytes read from a data file per chunk handed to the socket: a response holds at most a few such
+/// chunks in memory, however large the file.
 const READ_BUFFER: usize = 64 * 1024;
 
 const ALLOW: &str = "GET, HEAD, OPTIONS";
@@ -50,15 +59,21 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let site = Site::open(&a.path)?;
     // A client that goes away mid-response must cost only that response: writes into its closed
-    // socket then fail with an error (ignored) instead of killing the process with SIGPIPE.
+    // socket then fail with an error (which ends that connection) instead of killing the process
+    // with SIGPIPE.
     #[cfg(unix)]
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_IGN);
     }
-    let server = tiny_http::Server::http(SocketAddr::new(a.bind, a.port))
-        .map_err(|e| anyhow::anyhow!("cannot listen on {}: {e}", SocketAddr::new(a.bind, a.port)))?;
-    let addr = server.server_addr().to_ip().context("the server has no IP address")?;
-    let log = a.log;
+    let at = SocketAddr::new(a.bind, a.port);
+    let listener = std::net::TcpListener::bind(at).map_err(|e| anyhow::anyhow!("cannot listen on {at}: {e}"))?;
+    let addr = listener.local_addr().context("the server has no address")?;
+    listener.set_nonblocking(true).context("cannot listen")?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().thread_name("strata-serve").build().context("cannot start")?;
+    let listener = {
+        let _entered = runtime.enter();
+        tokio::net::TcpListener::from_std(listener).context("cannot listen")?
+    };
     let first = match &site {
         Site::Folder { .. } => format!("serving {} at http://{addr}/", a.path.display()),
         Site::File { name, .. } => format!("open http://{addr}/viewer/?file=/{}", encode_segment(name)),
@@ -66,31 +81,66 @@ pub fn run(a: Args) -> Result<()> {
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{first}").and_then(|_| out.flush());
     drop(out);
-
-    let (server, site) = (Arc::new(server), Arc::new(site));
-    let workers: Vec<_> = (0..WORKERS)
-        .map(|_| {
-            let (server, site) = (server.clone(), site.clone());
-            std::thread::spawn(move || loop {
-                match server.recv() {
-                    Ok(rq) => {
-                        // A bug answering one request must not take a worker away from the others.
-                        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(&site, rq, log)));
-                    }
-                    Err(e) => {
-                        if log {
-                            let _ = writeln!(std::io::stderr(), "accept: {e}");
-                        }
-                        std::thread::sleep(Duration::from_millis(10));
-                    }
-                }
-            })
-        })
-        .collect();
-    for w in workers {
-        let _ = w.join();
-    }
+    runtime.block_on(accept(listener, Arc::new(site), a.log));
     Ok(())
+}
+
+/// Accept connections for ever, each served by a task of its own.
+async fn accept(listener: tokio::net::TcpListener, site: Arc<Site>, log: bool) {
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(e) => {
+                // Out of file descriptors, or a connection reset before it was taken: wait a little
+                // (connections still open may close) rather than spin.
+                if log {
+                    let _ = writeln!(std::io::stderr(), "accept: {e}");
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+                continue;
+            }
+        };
+        // Small responses go out at once instead of waiting for the previous segment's ACK.
+        let _ = stream.set_nodelay(true);
+        let site = site.clone();
+        tokio::spawn(async move {
+            let service = hyper::service::service_fn(move |rq| respond(site.clone(), rq, log));
+            // A connection's error (a client gone, a malformed request) ends that connection only.
+            let _ = hyper::server::conn::http1::Builder::new()
+                .keep_alive(true)
+                // A client may shut its side once its request is sent (`nc -N`, some scripts): it
+                // still gets its answer.
+                .half_close(true)
+                .title_case_headers(true)
+                .serve_connection(hyper_util::rt::TokioIo::new(stream), service)
+                .await;
+        });
+    }
+}
+
+/// Answer one request. Routing touches the file system, so it runs on a blocking thread; a panic
+/// there answers 500 and touches nothing else.
+async fn respond(site: Arc<Site>, rq: Request<Incoming>, log: bool) -> std::result::Result<Response<Out>, Infallible> {
+    let (parts, _body) = rq.into_parts();
+    let line = log.then(|| {
+        let range = header(&parts, "Range").map(|r| format!(" range {r:?}")).unwrap_or_default();
+        format!("{} {}{range}", parts.method, parts.uri)
+    });
+    let head = parts.method == Method::HEAD;
+    let reply = tokio::task::spawn_blocking(move || {
+        let reply = route(&site, &parts);
+        // Seek here, off the runtime's threads.
+        match reply.body {
+            Body::File { mut file, start, len } => match file.seek(SeekFrom::Start(start)) {
+                Ok(_) => Reply { body: Body::File { file, start, len }, ..reply },
+                Err(_) => Reply::text(500, "cannot read the file"),
+            },
+            _ => reply,
+        }
+    })
+    .await
+    .unwrap_or_else(|_| Reply::text(500, "internal error"));
+    Ok(reply.into_response(head, line))
 }
 
 /// What is served besides the viewer.
@@ -265,65 +315,124 @@ impl Reply {
     }
 }
 
-/// Answer one request and, with `--log`, report it. Errors writing to the client are ignored: it
-/// has gone away, and the next request is unaffected.
-fn answer(site: &Site, rq: Request, log: bool) {
-    let reply = route(site, &rq);
-    let status = reply.status;
-    let len = reply.body_len();
-    let sent = Arc::new(AtomicU64::new(0));
-    let reader: Box<dyn Read + Send> = match reply.body {
-        Body::Bytes(b) => Box::new(Counting { inner: std::io::Cursor::new(b), sent: sent.clone() }),
-        Body::Headless(_) => Box::new(std::io::empty()),
-        Body::File { mut file, start, len } => match file.seek(SeekFrom::Start(start)) {
-            Ok(_) => Box::new(Counting { inner: BufReader::with_capacity(READ_BUFFER, file.take(len)), sent: sent.clone() }),
-            Err(_) => Box::new(std::io::empty()),
-        },
-    };
-    let mut headers: Vec<Header> = [
-        ("Server", concat!("strata/", env!("CARGO_PKG_VERSION"))),
-        ("Access-Control-Allow-Origin", "*"),
-        ("Access-Control-Expose-Headers", EXPOSED),
-    ]
-    .iter()
-    .filter_map(|(k, v)| Header::from_bytes(*k, *v).ok())
-    .collect();
-    headers.extend(reply.headers.iter().filter_map(|(k, v)| Header::from_bytes(*k, v.as_bytes()).ok()));
-    let Ok(len) = usize::try_from(len) else { return };
-    // The exact length is always sent (never chunked), so that a range's Content-Length is exact.
-    let response = Response::new(StatusCode(status), headers, reader, Some(len), None).with_chunked_threshold(usize::MAX);
-    let line = log.then(|| {
-        let range = header(&rq, "Range").map(|r| format!(" range {r:?}")).unwrap_or_default();
-        format!("{} {}{range}", rq.method(), rq.url())
-    });
-    let _ = rq.respond(response);
-    if let Some(line) = line {
-        let _ = writeln!(std::io::stderr(), "{line} -> {status}, {} bytes", sent.load(Ordering::Relaxed));
+impl Reply {
+    /// The response hyper sends: the exact length always (never chunked), so that a range's
+    /// Content-Length is exact; for HEAD the length a GET would have, and no body.
+    fn into_response(self, head: bool, log: Option<String>) -> Response<Out> {
+        let status = StatusCode::from_u16(self.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+        let body = if head { Body::Headless(self.body_len()) } else { self.body };
+        let mut headers: Vec<(&str, Cow<str>)> = vec![
+            ("Server", Cow::Borrowed(concat!("strata/", env!("CARGO_PKG_VERSION")))),
+            ("Access-Control-Allow-Origin", Cow::Borrowed("*")),
+            ("Access-Control-Expose-Headers", Cow::Borrowed(EXPOSED)),
+        ];
+        headers.extend(self.headers.iter().map(|(k, v)| (*k, Cow::Borrowed(v.as_str()))));
+        let kind = match body {
+            Body::Bytes(Cow::Borrowed(b)) => Kind::Bytes(Some(Bytes::from_static(b))),
+            Body::Bytes(Cow::Owned(b)) => Kind::Bytes(Some(Bytes::from(b))),
+            Body::Headless(len) => {
+                // hyper sends this Content-Length on a HEAD answer and drops it from a 304's.
+                headers.push(("Content-Length", Cow::Owned(len.to_string())));
+                Kind::Empty
+            }
+            Body::File { file, len, .. } => Kind::File { file: tokio::fs::File::from_std(file), left: len, buf: Vec::new() },
+        };
+        let mut response = Response::new(Out { kind, sent: 0, status: status.as_u16(), log });
+        *response.status_mut() = status;
+        let map = response.headers_mut();
+        for (k, v) in headers {
+            if let (Ok(k), Ok(v)) = (HeaderName::from_bytes(k.as_bytes()), HeaderValue::from_str(&v)) {
+                map.append(k, v);
+            }
+        }
+        response
     }
 }
 
-/// A reader that counts what is read from it: the body bytes handed to the socket.
-struct Counting<R> {
-    inner: R,
-    sent: Arc<AtomicU64>,
+/// A response body as hyper pulls it. With `--log`, its line is written when it is dropped: once
+/// its last byte is handed to the connection, or when the client has gone.
+struct Out {
+    kind: Kind,
+    /// Body bytes handed to the connection.
+    sent: u64,
+    status: u16,
+    log: Option<String>,
 }
 
-impl<R: Read> Read for Counting<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.sent.fetch_add(n as u64, Ordering::Relaxed);
-        Ok(n)
+enum Kind {
+    Empty,
+    Bytes(Option<Bytes>),
+    /// `left` more bytes of `file` from its position, read a chunk at a time into `buf`.
+    File {
+        file: tokio::fs::File,
+        left: u64,
+        buf: Vec<u8>,
+    },
+}
+
+impl HttpBody for Out {
+    type Data = Bytes;
+    type Error = std::io::Error;
+
+    fn poll_frame(self: Pin<&mut Self>, cx: &mut TaskContext<'_>) -> Poll<Option<std::result::Result<Frame<Bytes>, std::io::Error>>> {
+        let this = self.get_mut();
+        let chunk = match &mut this.kind {
+            Kind::Empty => None,
+            Kind::Bytes(b) => b.take(),
+            Kind::File { left: 0, .. } => None,
+            Kind::File { file, left, buf } => {
+                if buf.is_empty() {
+                    *buf = vec![0; (*left).min(READ_BUFFER as u64) as usize];
+                }
+                let mut read = ReadBuf::new(buf);
+                ready!(Pin::new(file).poll_read(cx, &mut read))?;
+                let n = read.filled().len();
+                if n == 0 {
+                    // The file shrank since its length was announced: end the connection.
+                    return Poll::Ready(Some(Err(std::io::ErrorKind::UnexpectedEof.into())));
+                }
+                *left -= n as u64;
+                let mut chunk = std::mem::take(buf);
+                chunk.truncate(n);
+                Some(Bytes::from(chunk))
+            }
+        };
+        Poll::Ready(chunk.map(|c| {
+            this.sent += c.len() as u64;
+            Ok(Frame::data(c))
+        }))
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.size_hint().exact() == Some(0)
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        SizeHint::with_exact(match &self.kind {
+            Kind::Empty => 0,
+            Kind::Bytes(b) => b.as_ref().map_or(0, |b| b.len() as u64),
+            Kind::File { left, .. } => *left,
+        })
     }
 }
 
-fn header<'a>(rq: &'a Request, name: &'static str) -> Option<&'a str> {
-    rq.headers().iter().find(|h| h.field.equiv(name)).map(|h| h.value.as_str())
+impl Drop for Out {
+    fn drop(&mut self) {
+        if let Some(line) = self.log.take() {
+            let _ = writeln!(std::io::stderr(), "{line} -> {}, {} bytes", self.status, self.sent);
+        }
+    }
 }
 
-fn route(site: &Site, rq: &Request) -> Reply {
-    match rq.method() {
-        Method::Get | Method::Head => {}
-        Method::Options => {
+/// A request header's value, if present and plain text.
+fn header<'a>(rq: &'a Parts, name: &'static str) -> Option<&'a str> {
+    rq.headers.get(name).and_then(|v| v.to_str().ok())
+}
+
+fn route(site: &Site, rq: &Parts) -> Reply {
+    match rq.method {
+        Method::GET | Method::HEAD => {}
+        Method::OPTIONS => {
             return Reply::empty(204)
                 .with("Access-Control-Allow-Methods", ALLOW)
                 .with("Access-Control-Allow-Headers", "Range, If-Range, If-None-Match")
@@ -332,7 +441,8 @@ fn route(site: &Site, rq: &Request) -> Reply {
         }
         _ => return Reply::text(405, "method not allowed").with("Allow", ALLOW),
     }
-    let url = rq.url();
+    // The target as sent, less the scheme and host of an absolute-form one (`GET http://h/p`).
+    let url = rq.uri.path_and_query().map_or("", |p| p.as_str());
     let (path, query) = url.split_once('?').unwrap_or((url, ""));
     if !path.starts_with('/') {
         return Reply::text(400, "bad request target");
@@ -358,7 +468,7 @@ fn route(site: &Site, rq: &Request) -> Reply {
 }
 
 /// An embedded viewer file; a path ending in `/` names that folder's index.html.
-fn asset(rest: &str, rq: &Request) -> Reply {
+fn asset(rest: &str, rq: &Parts) -> Reply {
     let mut rel = rest.to_string();
     if rel.is_empty() || rel.ends_with('/') {
         rel.push_str("index.html");
@@ -399,7 +509,7 @@ fn none_match(value: &str, etag: &str) -> bool {
 }
 
 /// A data file, whole or one byte range, honouring If-None-Match, If-Modified-Since and If-Range.
-fn data_file(path: &Path, rq: &Request) -> Reply {
+fn data_file(path: &Path, rq: &Parts) -> Reply {
     let opened = File::open(path).and_then(|f| f.metadata().map(|m| (f, m)));
     let Ok((file, meta)) = opened else { return Reply::text(404, "not found") };
     if !meta.is_file() {
