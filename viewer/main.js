@@ -21,7 +21,10 @@ let autoClip = true;
 let colorMode = 'material';
 let dirty = true;
 let frameMs = 0;
+/** Time from the page's start (first model) or from the open (later ones) to the first frame. */
 let firstFrameMs = null;
+let openStart = 0;
+let opens = 0;
 let firstFrameRequests = null;
 let firstFrameBytes = null;
 let picks = [];
@@ -98,7 +101,7 @@ function frame() {
     if (!$('message').textContent) fail(streamer.error);
     return;
   }
-  if (!dirty && streamer.idle()) return;
+  if (!dirty) return;
   dirty = false;
   const t0 = performance.now();
   const before = { requests: streamer.source.requests, bytes: streamer.source.bytes };
@@ -108,7 +111,7 @@ function frame() {
   renderer.draw(camera, streamer.localOrigin, drawn.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials);
   frameMs = performance.now() - t0;
   if (firstFrameMs === null) {
-    firstFrameMs = performance.now();
+    firstFrameMs = performance.now() - openStart;
     firstFrameRequests = before.requests;
     firstFrameBytes = before.bytes;
   }
@@ -137,9 +140,12 @@ function stats() {
   $('s-first').textContent = firstFrameMs === null ? '–' : `${firstFrameMs.toFixed(0)} ms, ${firstFrameRequests} requests, ${fmtBytes(firstFrameBytes)}`;
 }
 
+/** Open `source`, replacing what is shown; a later open wins over an earlier one still loading. */
 async function open(source) {
-  if (streamer) for (const i of streamer.cache.keys()) renderer.release(streamer.handle(i));
+  const generation = ++opens;
+  streamer?.close();
   streamer = null;
+  openStart = generation === 1 ? 0 : performance.now();
   showMessage('');
   showWarning(null);
   picks = [];
@@ -157,13 +163,19 @@ async function open(source) {
         dirty = true;
       },
     });
+    opening.catch(() => {});
     renderer ??= new Renderer(canvas);
-    streamer = await opening;
+    const next = await opening;
+    if (generation !== opens) {
+      next.close();
+      return;
+    }
+    streamer = next;
     showWarning(source.warning);
     resize();
     fit();
   } catch (e) {
-    fail(e);
+    if (generation === opens) fail(e);
     throw e;
   }
 }
@@ -190,14 +202,16 @@ function rotate(v, axis, a) {
   return add(add(scale(v, c), scale(cross(k, v), s)), scale(k, dot(k, v) * (1 - c)));
 }
 
+/** Turn about the up axis by dx, and tilt by dy with the elevation kept within ±89°. */
 function orbit(dx, dy) {
   const offset = sub(camera.eye, camera.target);
-  const right = unit(cross(camera.up, offset)) ?? [1, 0, 0];
-  let o = rotate(offset, camera.up, -dx * 0.008);
-  const pitched = rotate(o, right, dy * 0.008);
-  const upness = dot(unit(pitched), unit(camera.up));
-  if (Math.abs(upness) < 0.995) o = pitched;
-  camera.eye = add(camera.target, o);
+  const up = unit(camera.up) ?? [0, 1, 0];
+  const right = unit(cross(up, offset)) ?? [1, 0, 0];
+  const o = rotate(offset, up, -dx * 0.008);
+  const elevation = Math.asin(Math.max(-1, Math.min(1, dot(unit(o) ?? up, up))));
+  const limit = (89 * Math.PI) / 180;
+  const next = Math.max(-limit, Math.min(limit, elevation + dy * 0.008));
+  camera.eye = add(camera.target, rotate(o, right, elevation - next));
   autoClip = true;
   dirty = true;
 }
@@ -218,7 +232,7 @@ function pan(dx, dy) {
 function zoom(factor) {
   const offset = sub(camera.eye, camera.target);
   const { radius } = modelSphere();
-  const d = Math.max(length(offset) * factor, radius * 1e-4);
+  const d = Math.min(Math.max(length(offset) * factor, radius * 1e-3), radius * 1e4);
   camera.eye = add(camera.target, scale(unit(offset) ?? [0, 0, 1], d));
   autoClip = true;
   dirty = true;
@@ -261,7 +275,7 @@ function pick(x, y) {
       const v = dot(dir, r) / det;
       if (v < 0 || u + v > 1) continue;
       const d = dot(e2, r) / det;
-      if (d > 0 && d < best) {
+      if (d >= camera.near && d < best) {
         best = d;
         hit = { node: i, level: s.level[i] };
       }
@@ -285,6 +299,10 @@ function describePicks() {
 function controls() {
   let drag = null;
   canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+  canvas.addEventListener('webglcontextlost', (e) => {
+    e.preventDefault();
+    fail(new Error('The WebGL context was lost (the graphics driver was reset or ran out of memory): reload the page.'));
+  });
   canvas.addEventListener('pointerdown', (e) => {
     canvas.setPointerCapture(e.pointerId);
     drag = { x: e.clientX, y: e.clientY, moved: 0, panning: e.button === 2 || e.shiftKey };

@@ -77,7 +77,6 @@ export class Renderer {
     if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`shader program: ${gl.getProgramInfoLog(p)}`);
     this.program = p;
     this.u = Object.fromEntries(['viewProjection', 'light', 'tint', 'useColors', 'hasNormals'].map((n) => [n, gl.getUniformLocation(p, n)]));
-    this.bytes = 0;
   }
 
   /** Upload a node's geometry (local positions); returns its handle. */
@@ -86,7 +85,6 @@ export class Renderer {
     const vao = gl.createVertexArray();
     gl.bindVertexArray(vao);
     const buffers = [];
-    let bytes = 0;
     const attribute = (location, data, size, type, normalized) => {
       const b = gl.createBuffer();
       gl.bindBuffer(gl.ARRAY_BUFFER, b);
@@ -94,7 +92,6 @@ export class Renderer {
       gl.enableVertexAttribArray(location);
       gl.vertexAttribPointer(location, size, type, normalized, 0, 0);
       buffers.push(b);
-      bytes += data.byteLength;
     };
     attribute(0, geometry.local ?? geometry.positions, 3, gl.FLOAT, false);
     if (geometry.normals) attribute(1, geometry.normals, 3, gl.FLOAT, false);
@@ -102,17 +99,14 @@ export class Renderer {
     const index = gl.createBuffer();
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, index);
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, geometry.indices, gl.STATIC_DRAW);
-    bytes += geometry.indices.byteLength;
     buffers.push(index);
     gl.bindVertexArray(null);
-    this.bytes += bytes;
-    return { vao, buffers, normals: !!geometry.normals, colors: !!geometry.colors, ranges: geometry.materialRanges, count: geometry.indices.length, bytes };
+    return { vao, buffers, normals: !!geometry.normals, colors: !!geometry.colors, ranges: geometry.materialRanges, count: geometry.indices.length };
   }
 
   release(handle) {
     if (!handle) return;
     const gl = this.gl;
-    this.bytes -= handle.bytes;
     gl.deleteVertexArray(handle.vao);
     for (const b of handle.buffers) gl.deleteBuffer(b);
   }

@@ -64,10 +64,6 @@ export class Selector {
     this.touched = [];
   }
 
-  mark(i) {
-    return this.marks[i];
-  }
-
   set(i, m) {
     if (this.marks[i] === OFF) this.touched.push(i);
     this.marks[i] = m;

@@ -1,11 +1,23 @@
 // Byte sources the viewer reads a chunk file from: a URL read by HTTP range requests (any static
 // host that answers them), or a local file read by slices. Each counts its requests and bytes.
 
+/** A read that takes longer fails (and is tried again by the streamer). */
+const READ_TIMEOUT_MS = 60000;
+/** The largest file read whole when a server ignores Range. */
+const WHOLE_FILE_LIMIT = 1 << 30;
+/** Requests kept in `log` (the most recent). */
+const LOG_LIMIT = 10000;
+
 /** A URL read with `Range` requests; a server that ignores Range is read whole, once, with a warning. */
 export class HttpSource {
   constructor(url) {
     this.url = url;
-    this.name = decodeURIComponent(new URL(url, globalThis.location?.href).pathname.split('/').pop() || url);
+    const last = new URL(url, globalThis.location?.href).pathname.split('/').pop() || url;
+    try {
+      this.name = decodeURIComponent(last);
+    } catch {
+      this.name = last;
+    }
     this.length = undefined;
     this.whole = null;
     this.warning = null;
@@ -22,12 +34,13 @@ export class HttpSource {
     this.requests++;
     let res;
     try {
-      res = await fetch(this.url, { headers: { Range: `bytes=${start}-${end - 1}` } });
+      res = await fetch(this.url, { headers: { Range: `bytes=${start}-${end - 1}` }, signal: AbortSignal.timeout(READ_TIMEOUT_MS) });
     } catch (e) {
       throw new Error(`${this.url}: the request failed (${e.message}); is the server running and does it allow this origin (CORS)?`);
     }
     const entry = { start, end, status: res.status, bytes: 0, ms: 0 };
     this.log.push(entry);
+    if (this.log.length > LOG_LIMIT) this.log.splice(0, this.log.length - LOG_LIMIT);
     if (res.status === 206) {
       const range = /^bytes (\d+)-(\d+)\/(\d+)$/.exec(res.headers.get('Content-Range') ?? '');
       if (!range) throw new Error(`${this.url}: a 206 answer without a readable Content-Range (a cross-origin server must expose it)`);
@@ -43,6 +56,12 @@ export class HttpSource {
       return body.subarray(0, want - start);
     }
     if (res.status === 200) {
+      const size = Number(res.headers.get('Content-Length') ?? NaN);
+      if (size > WHOLE_FILE_LIMIT) {
+        await res.body?.cancel();
+        throw new Error(`${this.url}: the server ignores Range requests (it answered 200, not 206), and the file is ${size.toLocaleString()} bytes, too large to download whole; serve it with strata serve or any server that answers ranges`);
+      }
+      this.warning = 'The server ignores Range requests (it answered 200, not 206): downloading the whole file.';
       const body = new Uint8Array(await res.arrayBuffer());
       this.note(entry, body.length, t0);
       this.whole = body;

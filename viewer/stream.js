@@ -6,13 +6,14 @@
 // the skeleton's level table, where the top level's geometry ends; a second read fetches the rest
 // of both. So the first frame needs two round trips (one when the file is smaller than the prefix).
 //
-// While a node of the front is not resident, its nearest resident ancestor stands in for it (and
-// for its siblings, so nothing is drawn twice); when the camera moves away and a coarser node is
-// not resident yet, its resident descendants drawn last frame stand in. The screen never goes
-// blank where it showed something, and coarse always comes before fine.
+// What is drawn is always a front by the rule: the same selection, with every node held whose
+// visible children are not all resident yet. So a view refines level by level as data arrives,
+// coarse before fine, never with a hole; the top level stays resident to stand in for anything.
+// Drawn nodes and their ancestors are the most recently used, so moving away finds coarser nodes
+// still resident.
 
 import { FormatError, decodeNode, decodeSkeleton, openingRange } from './format.js';
-import { Selector, recordBytes } from './select.js';
+import { Selector, recordBytes, sees } from './select.js';
 
 const NO_PARENT = 0xffffffff;
 
@@ -58,6 +59,14 @@ export class Streamer {
     this.source = source;
     this.skeleton = skeleton;
     this.selector = new Selector(skeleton);
+    this.drawSelector = new Selector(skeleton);
+    const [top0, top1] = skeleton.levelNodes(skeleton.top());
+    this.topBytes = 0;
+    for (let i = top0; i < top1; i++) this.topBytes += recordBytes(skeleton, i);
+    this.touched = new Uint32Array(skeleton.nodeCount);
+    this.failures = 0;
+    this.retryAt = 0;
+    this.closed = false;
     this.budget = options.budget ?? 512 * 2 ** 20;
     this.pixelError = options.pixelError ?? 2;
     this.maxFaces = options.maxFaces;
@@ -70,7 +79,7 @@ export class Streamer {
     const [x, y, z] = skeleton.header.min.map((m, k) => (m + skeleton.header.max[k]) / 2);
     /** Positions are drawn relative to this point (model units, f64), so large coordinates keep their precision. */
     this.localOrigin = options.localOrigin ?? [x, y, z];
-    /** node → `{geometry, handle, bytes, used}` */
+    /** node → `{geometry, handle, bytes}`, least recently drawn first */
     this.cache = new Map();
     this.pending = new Set();
     this.inFlight = 0;
@@ -89,7 +98,10 @@ export class Streamer {
     if (this.cache.has(i)) return;
     const geometry = decodeNode(this.skeleton, i, bytes, { localOrigin: this.localOrigin });
     const size = recordBytes(this.skeleton, i);
-    this.cache.set(i, { geometry, handle: this.onLoad(i, geometry), bytes: size, used: this.frame });
+    const handle = this.onLoad(i, geometry);
+    // What picking needs stays on this side; the rest lives in the renderer's buffers.
+    const kept = { local: geometry.local, positions: geometry.local ? null : geometry.positions, indices: geometry.indices, materialRanges: geometry.materialRanges };
+    this.cache.set(i, { geometry: kept, handle, bytes: size });
     this.residentBytes += size;
     this.peakResidentBytes = Math.max(this.peakResidentBytes, this.residentBytes);
   }
@@ -98,58 +110,64 @@ export class Streamer {
     return { pixelError: this.pixelError, maxFaces: this.maxFaces, maxBytes: this.budget, priority: this.priority };
   }
 
-  /** Select the front for `camera`, decide what to draw now, start the reads it lacks. Returns the nodes to draw. */
+  /**
+   * Select the front for `camera` and start the reads it lacks; return the nodes to draw now: the
+   * same selection with every node held whose visible children are not all resident, so what is
+   * drawn is always a front by the rule, coarser where data is missing, never a hole.
+   */
   update(camera) {
     const s = this.skeleton;
     this.frame++;
-    const cut = this.selector.select(camera, this.limits());
+    const limits = this.limits();
+    // The top level stays resident (it stands in for everything): the front gets what it leaves.
+    limits.maxBytes -= this.topBytes;
+    const planes = camera.frustum();
+    const cut = this.selector.select(camera, limits);
     this.front = cut.shown;
     this.culled = cut.culled;
     this.faces = cut.faces;
-    const draw = new Set();
-    const missing = cut.shown.filter((i) => !this.cache.has(i));
-    const missingSet = new Set(missing);
-    // Zooming out: a coarser node not yet resident keeps what was drawn beneath it last frame.
-    const keptBelow = new Set(), covered = new Set();
-    for (const d of this.drawn) {
-      if (!this.cache.has(d)) continue;
-      for (let a = s.parent[d]; a !== NO_PARENT; a = s.parent[a]) {
-        if (missingSet.has(a)) {
-          keptBelow.add(d);
-          covered.add(a);
-          break;
-        }
-      }
+    this.missing = cut.shown.filter((i) => !this.cache.has(i));
+    let drawn = cut.shown;
+    if (this.missing.length > 0) {
+      const waiting = {
+        has: (i) => {
+          const [c0, c1] = s.children(i);
+          for (let c = c0; c < c1; c++) if (!this.cache.has(c) && sees(s, c, camera, planes)) return true;
+          return false;
+        },
+      };
+      drawn = this.drawSelector.select(camera, limits, waiting).shown;
     }
-    // Zooming in: the nearest resident ancestor stands in for a node not yet resident.
-    const standIns = new Set();
-    for (const i of missing) {
-      if (covered.has(i)) continue;
-      let a = s.parent[i];
-      while (a !== NO_PARENT && !this.cache.has(a)) a = s.parent[a];
-      if (a !== NO_PARENT) standIns.add(a);
+    this.drawn = drawn;
+    // Drawn nodes and their ancestors become the most recently used, ancestors first, so that
+    // moving away finds the coarser nodes still resident.
+    for (const i of drawn) {
+      const chain = [];
+      for (let a = s.parent[i]; a !== NO_PARENT && this.touched[a] !== this.frame; a = s.parent[a]) chain.push(a);
+      for (let k = chain.length - 1; k >= 0; k--) this.touch(chain[k]);
+      this.touch(i);
     }
-    const under = (i, set) => {
-      for (let a = s.parent[i]; a !== NO_PARENT; a = s.parent[a]) if (set.has(a)) return true;
-      return false;
-    };
-    for (const i of cut.shown) if (this.cache.has(i) && !under(i, standIns)) draw.add(i);
-    for (const a of standIns) if (!under(a, standIns)) draw.add(a);
-    for (const d of keptBelow) if (!under(d, standIns)) draw.add(d);
-    this.drawn = [...draw].sort((a, b) => a - b);
-    for (const i of this.drawn) this.cache.get(i).used = this.frame;
-    this.missing = missing;
     this.request();
     this.evict();
     return this.drawn;
   }
 
+  /** Move node i to the recent end of the cache's order (a Map keeps insertion order: the LRU list). */
+  touch(i) {
+    this.touched[i] = this.frame;
+    const e = this.cache.get(i);
+    if (!e) return;
+    this.cache.delete(i);
+    this.cache.set(i, e);
+  }
+
   /** Start reads of missing front nodes, coarsest first, consecutive nodes in one range. */
   request() {
     const s = this.skeleton;
+    if (performance.now() < this.retryAt) return;
     const queue = this.missing.filter((i) => !this.pending.has(i));
     let k = 0;
-    while (this.inFlight < this.maxInFlight && k < queue.length && !this.error) {
+    while (this.inFlight < this.maxInFlight && k < queue.length && !this.error && !this.closed) {
       const first = queue[k];
       let last = first;
       k++;
@@ -164,35 +182,53 @@ export class Streamer {
       this.source
         .read(start, s.offset[last] + s.size[last])
         .then((bytes) => {
+          if (this.closed) return;
           for (const i of nodes) {
             const at = s.offset[i] - start;
             if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
             this.insert(i, bytes.subarray(at, at + s.size[i]));
           }
+          this.failures = 0;
           this.evict();
         })
         .catch((e) => {
-          this.error = e;
+          // A file that breaks a rule is never drawn from; a failed read is tried again a few times.
+          if (e instanceof FormatError || ++this.failures > 3) this.error = e;
+          else {
+            const delay = 500 * 2 ** this.failures;
+            this.retryAt = performance.now() + delay;
+            setTimeout(() => !this.closed && this.onChange(), delay);
+          }
         })
         .finally(() => {
           for (const i of nodes) this.pending.delete(i);
           this.inFlight--;
-          this.onChange();
+          if (!this.closed) this.onChange();
         });
     }
   }
 
-  /** Drop least-recently drawn nodes not in the front while over the budget. */
+  /** Drop least-recently drawn nodes, neither drawn nor in the front nor of the top level, while over the budget. */
   evict() {
     if (this.residentBytes <= this.budget) return;
+    const s = this.skeleton;
+    const [top0, top1] = s.levelNodes(s.top());
     const keep = new Set([...this.drawn, ...this.front]);
-    const victims = [...this.cache.entries()].filter(([i]) => !keep.has(i)).sort((a, b) => a[1].used - b[1].used);
-    for (const [i, e] of victims) {
+    for (const [i, e] of this.cache) {
       if (this.residentBytes <= this.budget) break;
+      if (keep.has(i) || (i >= top0 && i < top1)) continue;
       this.onEvict(i, e.handle);
       this.cache.delete(i);
       this.residentBytes -= e.bytes;
     }
+  }
+
+  /** Release everything; reads still in flight are dropped when they land. */
+  close() {
+    this.closed = true;
+    for (const [i, e] of this.cache) this.onEvict(i, e.handle);
+    this.cache.clear();
+    this.residentBytes = 0;
   }
 
   /** Nothing missing and nothing in flight: the drawn nodes are the selected front. */

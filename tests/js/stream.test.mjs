@@ -93,7 +93,7 @@ test('a long orbit under a small budget keeps converging, within the cap on read
   t.diagnostic(`${n} cameras: ${src.requests} reads, ${src.bytes} bytes of ${bytes.length}; resident when idle at most ${peakIdle}, peak while loading ${st.peakResidentBytes} (budget ${budget})`);
 });
 
-test('what is drawn while loading covers what was drawn: stand-ins are resident ancestors or kept descendants', async () => {
+test('what is drawn while loading is resident and a front: coarser where data is missing, nothing drawn twice', async () => {
   const bytes = new Uint8Array(readFileSync(converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, [])));
   const st = await Streamer.open(new SlowSource(bytes, 2), { pixelError: 0.5 });
   const s = st.skeleton;
