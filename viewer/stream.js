@@ -28,7 +28,7 @@ export class Streamer {
   /**
    * Open `source` (source.js): read the skeleton and the top level, decode and check them.
    * `options`: `prefix` (first read, bytes), `budget` (resident bytes), `maxInFlight`,
-   * `maxRequestBytes`, `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
+   * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
    * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`.
    */
   static async open(source, options = {}) {
@@ -73,6 +73,7 @@ export class Streamer {
     this.priority = options.priority ?? 'error';
     this.maxInFlight = options.maxInFlight ?? 4;
     this.maxRequestBytes = options.maxRequestBytes ?? 1 << 20;
+    this.maxGapBytes = options.maxGapBytes ?? 16384;
     this.onLoad = options.onLoad ?? (() => null);
     this.onEvict = options.onEvict ?? (() => {});
     this.onChange = options.onChange ?? (() => {});
@@ -168,15 +169,21 @@ export class Streamer {
     const queue = this.missing.filter((i) => !this.pending.has(i));
     let k = 0;
     while (this.inFlight < this.maxInFlight && k < queue.length && !this.error && !this.closed) {
+      // Nodes lie in the file in id order: one range takes the next missing ones while the bytes
+      // between them (other nodes' geometry, read and dropped) stay under maxGapBytes.
       const first = queue[k];
+      const nodes = [first];
       let last = first;
       k++;
-      while (k < queue.length && queue[k] === last + 1 && s.offset[queue[k]] + s.size[queue[k]] - s.offset[first] <= this.maxRequestBytes) last = queue[k++];
-      const nodes = [];
-      for (let i = first; i <= last; i++) {
-        nodes.push(i);
-        this.pending.add(i);
+      while (
+        k < queue.length &&
+        s.offset[queue[k]] - (s.offset[last] + s.size[last]) <= this.maxGapBytes &&
+        s.offset[queue[k]] + s.size[queue[k]] - s.offset[first] <= this.maxRequestBytes
+      ) {
+        last = queue[k++];
+        nodes.push(last);
       }
+      for (const i of nodes) this.pending.add(i);
       this.inFlight++;
       const start = s.offset[first];
       this.source
