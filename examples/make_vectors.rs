@@ -19,11 +19,16 @@ use strata::write::{write_to, WriteOptions};
 
 /// The chunk file of `mesh`, grouped with `params` and simplified per level.
 fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64) -> Vec<u8> {
+    convert_placed(mesh, params, metres_per_unit, None)
+}
+
+/// [`convert`] with a georeference (a `GEOR` chunk, format 2.1).
+fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, georef: Option<format::Georef>) -> Vec<u8> {
     let adjacency = Adjacency::build(&mesh);
     let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
     let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
     let mut out = Cursor::new(Vec::new());
-    let opts = WriteOptions { metres_per_unit, params, level_ratio: 0.5, tool: "strata vectors".into() };
+    let opts = WriteOptions { metres_per_unit, params, level_ratio: 0.5, tool: "strata vectors".into(), georef };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
     out.into_inner()
 }
@@ -47,6 +52,25 @@ fn sphere() -> Vec<u8> {
     mesh.face_materials = mesh.face_normals.iter().map(|n| u32::from(n.z > 0.0)).collect();
     let params = HierarchyParams { cluster_faces: 4, leaf_faces: 10, growth: 2, top_groups: 2, ..HierarchyParams::default() };
     convert(mesh, params, 0.0)
+}
+
+/// A 9 × 7 elevation grid in degrees with one void, as the DEM readers make it: a `GEOR` chunk
+/// (local tangent plane) and the file version 2.1.
+fn terrain() -> Vec<u8> {
+    use strata::import::heightfield::{axis, triangulate, Grid, Placement};
+    let (cols, rows) = (9, 7);
+    let placement = Placement::Geographic { lon: axis(7.0, 0.01, cols), lat: axis(46.06, -0.01, rows), crs: "EPSG:4326".into() };
+    let grid = Grid { cols, rows, placement, metres_per_height_unit: 1.0, z_scale: 1.0 };
+    let raw = triangulate(Path::new("terrain"), &grid, &mut Vec::new(), |i, row| {
+        for (j, h) in row.iter_mut().enumerate() {
+            *h = if (i, j) == (3, 4) { f64::NAN } else { 1000.0 + 40.0 * ((i as f64) * 0.9).sin() * ((j as f64) * 0.7).cos() };
+        }
+        Ok(())
+    })
+    .expect("a valid grid");
+    let mesh = raw.mesh.clean().expect("finite").0;
+    let params = HierarchyParams { cluster_faces: 8, leaf_faces: 24, growth: 2, top_groups: 2, ..HierarchyParams::default() };
+    convert_placed(mesh, params, 1.0, raw.georef)
 }
 
 /// Offsets of the chunks read at open, by ID.
@@ -171,7 +195,7 @@ fn main() -> anyhow::Result<()> {
     std::fs::create_dir_all(&dir)?;
     let sphere = sphere();
     let (nan, nan_node) = nan_error(&sphere);
-    let valid = [("plane", plane()), ("sphere", sphere.clone())];
+    let valid = [("plane", plane()), ("sphere", sphere.clone()), ("terrain", terrain())];
     let refused = [
         ("refused-nan-error", nan, vec![format!("node {nan_node}"), "error".to_string()]),
         ("refused-index-past-vertices", index_past_vertices(&sphere), vec!["node 0".to_string(), "index".to_string()]),

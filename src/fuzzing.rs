@@ -169,7 +169,7 @@ pub struct ImportDir {
 }
 
 /// Extensions [`ImportDir::import`] writes.
-const EXTENSIONS: [&str; 4] = ["obj", "ply", "gltf", "glb"];
+const EXTENSIONS: [&str; 8] = ["obj", "ply", "gltf", "glb", "asc", "tif", "hgt", "png"];
 
 impl ImportDir {
     pub fn new() -> std::io::Result<ImportDir> {

@@ -27,6 +27,7 @@ pub mod export;
 pub mod fixtures;
 pub mod format;
 pub mod fuzzing;
+pub mod geodesy;
 pub mod group;
 pub mod hierarchy;
 pub mod import;

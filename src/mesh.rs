@@ -136,7 +136,13 @@ impl Mesh {
     /// Weld equal positions, drop degenerate and duplicate faces and unreferenced vertices, and
     /// compute face normals and areas. Fails on the first vertex with a non-finite coordinate.
     /// Face order is kept (minus removed faces); vertices are renumbered in order of first use.
-    pub fn clean(mut self) -> Result<(Mesh, CleanReport), NonFiniteVertex> {
+    pub fn clean(self) -> Result<(Mesh, CleanReport), NonFiniteVertex> {
+        self.clean_known(false)
+    }
+
+    /// [`Mesh::clean`] for a mesh whose faces are known to be distinct when no vertex is welded
+    /// (an elevation grid's cells): then the search for duplicate faces is skipped.
+    pub fn clean_known(mut self, distinct_faces: bool) -> Result<(Mesh, CleanReport), NonFiniteVertex> {
         if let Some(index) = self.positions.iter().position(|p| !p.is_finite()) {
             return Err(NonFiniteVertex { index });
         }
@@ -159,10 +165,13 @@ impl Mesh {
                 *first_at.entry(key).or_insert(i as u32)
             })
             .collect();
+        let no_welds = first_at.len() == self.positions.len();
         drop(first_at);
 
         // Keep faces that are neither degenerate nor duplicates.
-        let mut seen: FxHashSet<[u32; 3]> = FxHashSet::with_capacity_and_hasher(self.triangles.len(), Default::default());
+        let check_duplicates = !(distinct_faces && no_welds);
+        let capacity = if check_duplicates { self.triangles.len() } else { 0 };
+        let mut seen: FxHashSet<[u32; 3]> = FxHashSet::with_capacity_and_hasher(capacity, Default::default());
         let mut keep = Vec::with_capacity(self.triangles.len());
         for (f, t) in self.triangles.iter_mut().enumerate() {
             *t = t.map(|v| weld[v as usize]);
@@ -170,11 +179,13 @@ impl Mesh {
                 report.degenerate_faces += 1;
                 continue;
             }
-            let mut key = *t;
-            key.sort_unstable();
-            if !seen.insert(key) {
-                report.duplicate_faces += 1;
-                continue;
+            if check_duplicates {
+                let mut key = *t;
+                key.sort_unstable();
+                if !seen.insert(key) {
+                    report.duplicate_faces += 1;
+                    continue;
+                }
             }
             keep.push(f);
         }

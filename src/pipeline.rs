@@ -112,7 +112,7 @@ pub fn convert(
     lap(&mut times.group_ms);
 
     progress.stage("simplify", levels::expected_levels(mesh.face_count(), h.levels.len(), &opts.levels) as u64);
-    let metres_per_unit = imported.metres_per_unit;
+    let (metres_per_unit, georef) = (imported.metres_per_unit, imported.georef.take());
     let lv = levels::build(imported.mesh, &mut h, &opts.levels, &mut |_| progress.step());
     lap(&mut times.simplify_ms);
 
@@ -121,6 +121,7 @@ pub fn convert(
         metres_per_unit: metres_per_unit.unwrap_or(0.0),
         params: opts.hierarchy,
         level_ratio: opts.levels.ratio,
+        georef,
         ..WriteOptions::default()
     };
     let summary = write::write(output, &h, &lv, &write_opts)?;

@@ -8,7 +8,9 @@ use crate::atomic::AtomicFile;
 use crate::bounds;
 use crate::error::{Error, Result};
 use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
-use crate::format::{octa, Attributes, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, MAX_TOOL_BYTES, NO_PARENT};
+use crate::format::{
+    octa, Attributes, Georef, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, MAX_TOOL_BYTES, NO_PARENT,
+};
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
 use crate::mesh::{Material, Mesh};
@@ -28,6 +30,8 @@ pub struct WriteOptions {
     pub level_ratio: f32,
     /// Name and version of the writing program, at most 1024 bytes.
     pub tool: String,
+    /// Where the model sits on Earth, for terrain (a `GEOR` chunk, format 2.1).
+    pub georef: Option<Georef>,
 }
 
 impl Default for WriteOptions {
@@ -37,6 +41,7 @@ impl Default for WriteOptions {
             params: HierarchyParams::default(),
             level_ratio: 0.5,
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
+            georef: None,
         }
     }
 }
@@ -83,6 +88,7 @@ fn write_named<W: Write>(
         materials: material_table(&lv.levels[0].mesh),
         input_vertices: lv.levels[0].mesh.vertex_count() as u64,
         levels: h.levels.len() as u32,
+        georef: opts.georef.clone(),
     };
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
     let top = h.levels.len() - 1;

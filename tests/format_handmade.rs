@@ -189,7 +189,7 @@ fn example_params() -> HierarchyParams {
 }
 
 fn options() -> WriteOptions {
-    WriteOptions { metres_per_unit: 1.0, params: example_params(), level_ratio: 0.5, tool: "strata test".into() }
+    WriteOptions { metres_per_unit: 1.0, params: example_params(), level_ratio: 0.5, tool: "strata test".into(), georef: None }
 }
 
 /// The example's grid step: the smallest power of two with 1 / step ≤ 2^20 − 1.
@@ -203,6 +203,11 @@ const RADIUS: u16 = 1537 | 8 << 11;
 
 /// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
 fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
+    build(major, minor, extra, false)
+}
+
+/// [`handmade`], with a `GEOR` chunk after `HEAD` when `geor` (spec §5.2): frame 2, UTM zone 13N.
+fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
     let mut d = Doc::default();
     let p = example_params();
     // Prologue.
@@ -242,6 +247,20 @@ fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
     d.u32(11, "tool length");
     d.raw(b"strata test", "tool");
     d.end();
+
+    if geor {
+        d.begin(b"GEOR", 0);
+        d.u32(2, "frame: projected CRS");
+        d.u32(0, "reserved");
+        d.f64(480_000.0, "origin: easting");
+        d.f64(4_400_000.0, "origin: northing");
+        d.f64(1500.0, "origin: height");
+        d.f64(1.0, "metres per CRS unit");
+        d.f64(2.0, "z scale");
+        d.u32(10, "CRS length");
+        d.raw(b"EPSG:32613", "CRS");
+        d.end();
+    }
 
     if extra {
         d.chunk(b"XTRA", b"skip me");
@@ -358,7 +377,7 @@ fn spec_bytes() -> Vec<u8> {
 
 #[test]
 fn handmade_file_matches_spec_and_writer() {
-    let d = handmade(MAJOR, MINOR, false);
+    let d = handmade(MAJOR, 0, false);
     if std::env::var_os("STRATA_PRINT_EXAMPLE").is_some() {
         print!("{}", d.dump());
     }
@@ -396,12 +415,62 @@ fn check_reads(bytes: &[u8]) {
 
 #[test]
 fn handmade_file_reads() {
-    check_reads(&handmade(MAJOR, MINOR, false).bytes);
+    check_reads(&handmade(MAJOR, 0, false).bytes);
+}
+
+/// A file with `GEOR` built from spec §5.2 reads as the spec says, equals the writer's output for
+/// the same georeference, and is version 2.1; the writer writes 2.0 without it.
+#[test]
+fn georeference_chunk_follows_the_spec() {
+    let d = build(MAJOR, MINOR, false, true);
+    check_reads(&d.bytes);
+    let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
+    let expect = format::Georef {
+        frame: format::GeoFrame::Projected,
+        origin: [480_000.0, 4_400_000.0, 1500.0],
+        metres_per_crs_unit: 1.0,
+        z_scale: 2.0,
+        crs: "EPSG:32613".into(),
+    };
+    assert_eq!(rd.georef(), Some(&expect));
+    assert_eq!((rd.header().major, rd.header().minor), (2, 1));
+    let mesh = quad();
+    let lv = LevelMeshes { levels: vec![LevelMesh { mesh, face_group: vec![0, 0], group_error: vec![0.0] }] };
+    let mut cur = Cursor::new(Vec::new());
+    let opts = WriteOptions { georef: Some(expect), ..options() };
+    strata::write::write_to(&mut cur, &hierarchy(), &lv, &opts).expect("write");
+    assert_eq!(cur.into_inner(), d.bytes, "the writer follows §5.2");
+    assert_eq!(Reader::open(Cursor::new(handmade(MAJOR, 0, false).bytes)).expect("open").georef(), None);
+    // A second GEOR, and a broken one, are refused.
+    let twice = {
+        let one = &d.bytes;
+        let at = one.windows(4).position(|w| w == b"GEOR").expect("GEOR");
+        let size = u64::from_le_bytes(one[at + 8..at + 16].try_into().unwrap()) as usize;
+        let len = (20 + size + 7) & !7;
+        let mut b = one[..at + len].to_vec();
+        b.extend_from_slice(&one[at..]);
+        // HEAD's file size, then its CRC.
+        let file_size = b.len() as u64;
+        b[32..40].copy_from_slice(&file_size.to_le_bytes());
+        let head = u64::from_le_bytes(b[24..32].try_into().unwrap()) as usize;
+        let crc = crc32fast::hash(&b[32..32 + head]);
+        b[32 + head..36 + head].copy_from_slice(&crc.to_le_bytes());
+        b
+    };
+    let e = Reader::open(Cursor::new(twice)).err().expect("refused").to_string();
+    assert!(e.contains("a second GEOR"), "{e}");
+    let mut bad = d.bytes.clone();
+    let at = bad.windows(4).position(|w| w == b"GEOR").expect("GEOR") + 16;
+    bad[at..at + 4].copy_from_slice(&9u32.to_le_bytes());
+    let crc = crc32fast::hash(&bad[at..at + 62]);
+    bad[at + 62..at + 66].copy_from_slice(&crc.to_le_bytes());
+    let e = Reader::open(Cursor::new(bad)).err().expect("refused").to_string();
+    assert!(e.contains("chunk GEOR") && e.contains("unknown frame 9"), "{e}");
 }
 
 #[test]
 fn unknown_chunks_are_skipped() {
-    let d = handmade(MAJOR, MINOR, true);
+    let d = handmade(MAJOR, 0, true);
     check_reads(&d.bytes);
     let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     let ids: Vec<&str> = rd.skeleton_chunks().iter().map(|c| c.id.as_str()).collect();

@@ -16,7 +16,7 @@
 // bounds-checked first, every size taken from the file is checked against counts and lengths before
 // anything is allocated with it, and u64 fields beyond 2^53 are refused.
 
-export const MAJOR = 2, MINOR = 0;
+export const MAJOR = 2, MINOR = 1;
 
 /** A file that breaks the format; `offset` is the byte offset the message names, `node` the node. */
 export class FormatError extends Error {
@@ -456,6 +456,39 @@ function decodeHead(b, dv, pos, size, minor) {
   };
 }
 
+const GEOR_FIXED = 52;
+const GEO_FRAMES = ['unplaced', 'local_tangent', 'projected'];
+
+/**
+ * The GEOR chunk at `pos` (§5.2): where terrain sits on Earth. `frame` is 'unplaced',
+ * 'local_tangent' (origin: longitude°, latitude°, height m on WGS 84; x east, y up, z south) or
+ * 'projected' (easting = origin[0] + x / k, northing = origin[1] − z / k).
+ */
+function decodeGeoref(b, dv, pos, size, minor) {
+  const p0 = pos + FRAME, end = p0 + size;
+  const err = (at, msg) => chunkFail(at, 'GEOR', pos, msg);
+  const newer = minor > MINOR;
+  if (size < GEOR_FIXED) throw err(p0, `${size} bytes, fewer than the ${GEOR_FIXED} of its fixed fields`);
+  const code = u32(b, p0);
+  if (code >= GEO_FRAMES.length) throw err(p0, newer ? `frame ${code} is newer than this reader (format ${MAJOR}.${MINOR})` : `unknown frame ${code}`);
+  if (u32(b, p0 + 4) !== 0 && !newer) throw err(p0 + 4, 'reserved field is not 0');
+  const origin = [0, 1, 2].map((k) => dv.getFloat64(p0 + 8 + 8 * k, true));
+  if (!origin.every(Number.isFinite)) throw err(p0 + 8, `origin [${origin.join(', ')}] is not finite`);
+  if (code === 1 && !(Math.abs(origin[0]) <= 180 && Math.abs(origin[1]) <= 90)) throw err(p0 + 8, `longitude ${origin[0]} or latitude ${origin[1]} out of range`);
+  const k = dv.getFloat64(p0 + 32, true);
+  if (!(Number.isFinite(k) && k > 0)) throw err(p0 + 32, `metres per CRS unit ${k}`);
+  const zScale = dv.getFloat64(p0 + 40, true);
+  if (!(Number.isFinite(zScale) && zScale > 0)) throw err(p0 + 40, `z scale ${zScale}`);
+  const len = u32(b, p0 + 48);
+  if (len > MAX_TOOL) throw err(p0 + 48, `CRS string of ${len} bytes exceeds ${MAX_TOOL}`);
+  const c0 = p0 + GEOR_FIXED;
+  if (len > end - c0) throw err(c0, `needs ${len} more bytes, ${end - c0} left`);
+  const crs = utf8(b, c0, c0 + len);
+  if (crs === null) throw err(c0, 'string is not UTF-8');
+  if (end - c0 - len > 0 && !newer) throw err(c0 + len, `${end - c0 - len} bytes after the CRS string`);
+  return { frame: GEO_FRAMES[code], origin, metresPerCrsUnit: k, zScale, crs };
+}
+
 /**
  * Decode and check the skeleton from `bytes`, which hold at least [0, skeletonEnd) of a file of
  * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL, every check of spec §10 "To open".
@@ -489,8 +522,9 @@ export function decodeSkeleton(bytes, fileLength) {
   };
   zeroPadding(hp + head.size + TRAILER, head.end, 'HEAD', PROLOGUE);
 
-  // Unknown chunks up to SKEL.
+  // GEOR and unknown chunks up to SKEL.
   let pos = head.end;
+  let georef = null;
   for (;;) {
     frameFits(pos, fileLength);
     have(pos + FRAME);
@@ -498,7 +532,15 @@ export function decodeSkeleton(bytes, fileLength) {
     if (id === 'SKEL') break;
     if (id === 'HEAD' || id === 'GEOM') throw chunkFail(pos, id, pos, 'expected the SKEL chunk before any other known chunk');
     const size = u64(b, pos + 8);
+    if (id === 'GEOR' && size > MAX_HEAD_BYTES) throw chunkFail(pos + 8, id, pos, `size ${size === Infinity ? 'beyond 2^53' : size} exceeds the ${MAX_HEAD_BYTES}-byte limit`);
     const end = chunkEnd(pos, id, size, fileLength);
+    if (id === 'GEOR') {
+      if (georef) throw chunkFail(pos, id, pos, 'a second GEOR chunk');
+      have(pos + FRAME + size + TRAILER);
+      const stored = u32(b, pos + FRAME + size), actual = crc32(b, pos + FRAME, pos + FRAME + size);
+      if (stored !== actual) throw chunkFail(pos + FRAME + size, id, pos, `CRC ${hex(actual)} != stored ${hex(stored)}`);
+      georef = decodeGeoref(b, dv, pos, size, minor);
+    }
     zeroPadding(pos + FRAME + size + TRAILER, end, id, pos);
     pos = end;
   }
@@ -562,6 +604,7 @@ export function decodeSkeleton(bytes, fileLength) {
   sk.major = major;
   sk.minor = minor;
   sk.header = header;
+  sk.georef = georef;
   sk.levels = levels;
   sk.skeletonEnd = skeletonEnd;
   sk.nodeCount = N;

@@ -11,6 +11,8 @@ import { Renderer } from './render.js';
 const $ = (id) => document.getElementById(id);
 const canvas = $('view');
 const VIEW_DIR = [0.3, 0.4, 1.0];
+/** Terrain (a file with GEOR, y up) is seen from the south, 50° above the horizon, as `strata render` does. */
+const TERRAIN_VIEW_DIR = [0, 1, 0.8];
 const FOV = (45 * Math.PI) / 180;
 
 let renderer = null;
@@ -81,7 +83,8 @@ function resize() {
 
 function fit() {
   const { center, radius } = modelSphere();
-  camera = Camera.framing(center, radius, VIEW_DIR, FOV, canvas.width, canvas.height);
+  const dir = streamer.skeleton.georef ? TERRAIN_VIEW_DIR : VIEW_DIR;
+  camera = Camera.framing(center, radius, dir, FOV, canvas.width, canvas.height);
   autoClip = true;
   dirty = true;
 }

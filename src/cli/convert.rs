@@ -50,7 +50,7 @@ pub fn run(a: Args) -> Result<()> {
         },
     };
     let mut bars = Bars::new(a.quiet || a.json);
-    let c = strata::pipeline::convert(&a.input.mesh, &a.input.options(), &a.output, &opts, &mut bars)?;
+    let c = strata::pipeline::convert(&a.input.mesh, &a.input.options()?, &a.output, &opts, &mut bars)?;
     drop(bars);
     for w in &c.warnings {
         eprintln!("warning: {}: {w}", a.input.mesh.display());

@@ -39,6 +39,8 @@ pub fn run(a: Args) -> Result<()> {
             "boundary_edges": adj.boundary_edges,
             "nonmanifold_edges": adj.nonmanifold_edges.len(),
             "cleaned": imp.cleaned,
+            "grid": imp.grid,
+            "georef": imp.georef,
             "warnings": imp.warnings,
             "import_ms": imp.import_ms,
         });
@@ -60,6 +62,22 @@ pub fn run(a: Args) -> Result<()> {
         "cleaning           welded {} vertices, removed {} degenerate faces, {} duplicate faces, {} unreferenced vertices",
         c.welded_vertices, c.degenerate_faces, c.duplicate_faces, c.unreferenced_vertices
     );
+    if let Some(g) = &imp.grid {
+        println!(
+            "grid               {} × {} samples, {} without data, heights {} .. {} m",
+            g.cols, g.rows, g.voids, g.min_height, g.max_height
+        );
+    }
+    if let Some(g) = &imp.georef {
+        let frame = match g.frame {
+            strata::format::GeoFrame::Unplaced => "placed nowhere (the file does not say where)".to_string(),
+            strata::format::GeoFrame::LocalTangent => {
+                format!("local tangent plane (x east, y up, z south) at {:.6}°, {:.6}° on WGS 84", g.origin[0], g.origin[1])
+            }
+            strata::format::GeoFrame::Projected => format!("x east, y up, z south from ({}, {}) of the CRS", g.origin[0], g.origin[1]),
+        };
+        println!("georeference       {frame}{}", if g.crs.is_empty() { String::new() } else { format!("; source CRS {}", g.crs) });
+    }
     println!("import time        {:.1} ms", imp.import_ms);
     Ok(())
 }

@@ -79,7 +79,7 @@ pub fn run(cli: Cli) -> Result<()> {
 /// Where a mesh comes from.
 #[derive(clap::Args)]
 pub struct MeshInput {
-    /// OBJ, glTF/GLB or PLY file.
+    /// OBJ, glTF/GLB or PLY mesh, or elevation grid (.asc, .tif, .hgt, heightmap .png).
     mesh: PathBuf,
     /// Read as this format whatever the extension.
     #[arg(long, value_parser = format_parser())]
@@ -87,6 +87,75 @@ pub struct MeshInput {
     /// Let a glTF file read buffers outside its folder (an absolute path or `..` in a buffer uri).
     #[arg(long)]
     allow_outside_files: bool,
+    #[command(flatten)]
+    dem: DemArgs,
+}
+
+/// How elevation grids (.asc, .tif, .hgt, heightmap .png) are read.
+#[derive(clap::Args, Clone, Default)]
+#[command(next_help_heading = "Elevation grids")]
+pub struct DemArgs {
+    /// How a PNG stores heights: 16-bit grey values (default), Mapbox Terrain-RGB or Terrarium colours.
+    #[arg(long, value_enum)]
+    dem_encoding: Option<DemEncodingArg>,
+    /// Whether grid coordinates are degrees or projected, when the file does not say.
+    #[arg(long, value_enum, default_value_t = DemCrsArg::Auto)]
+    dem_crs: DemCrsArg,
+    /// Multiply heights by this (vertical exaggeration; recorded in the file).
+    #[arg(long, default_value_t = 1.0)]
+    z_scale: f64,
+    /// Metres between samples of a grid that says nothing of where it lies.
+    #[arg(long)]
+    dem_cell_size: Option<f64>,
+    /// The PNG is this Web Mercator tile, "z/x/y".
+    #[arg(long, value_parser = parse_tile)]
+    dem_tile: Option<[u32; 3]>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum DemEncodingArg {
+    Grey16,
+    TerrainRgb,
+    Terrarium,
+}
+
+#[derive(Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+enum DemCrsArg {
+    #[default]
+    Auto,
+    Degrees,
+    Projected,
+}
+
+fn parse_tile(s: &str) -> std::result::Result<[u32; 3], String> {
+    let v: Vec<u32> =
+        s.split('/').map(|x| x.trim().parse::<u32>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("{s:?} is not z/x/y"))?;
+    <[u32; 3]>::try_from(v).map_err(|_| format!("{s:?} is not z/x/y"))
+}
+
+impl DemArgs {
+    fn options(&self) -> anyhow::Result<strata::import::DemOptions> {
+        use strata::import::{DemCrs, DemEncoding};
+        anyhow::ensure!(self.z_scale.is_finite() && self.z_scale > 0.0, "--z-scale must be a positive number, not {}", self.z_scale);
+        if let Some(c) = self.dem_cell_size {
+            anyhow::ensure!(c.is_finite() && c > 0.0, "--dem-cell-size must be a positive number of metres, not {c}");
+        }
+        Ok(strata::import::DemOptions {
+            encoding: self.dem_encoding.map(|e| match e {
+                DemEncodingArg::Grey16 => DemEncoding::Grey16,
+                DemEncodingArg::TerrainRgb => DemEncoding::TerrainRgb,
+                DemEncodingArg::Terrarium => DemEncoding::Terrarium,
+            }),
+            crs: match self.dem_crs {
+                DemCrsArg::Auto => DemCrs::Auto,
+                DemCrsArg::Degrees => DemCrs::Degrees,
+                DemCrsArg::Projected => DemCrs::Projected,
+            },
+            z_scale: self.z_scale,
+            cell_size: self.dem_cell_size,
+            tile: self.dem_tile,
+        })
+    }
 }
 
 /// `--format`: the names of the importer table.
@@ -97,8 +166,8 @@ fn format_parser() -> impl clap::builder::TypedValueParser<Value = Format> {
 }
 
 impl MeshInput {
-    fn options(&self) -> ImportOptions {
-        ImportOptions { format: self.format, allow_outside_files: self.allow_outside_files }
+    fn options(&self) -> anyhow::Result<ImportOptions> {
+        Ok(ImportOptions { format: self.format, allow_outside_files: self.allow_outside_files, dem: self.dem.options()? })
     }
 }
 
@@ -179,7 +248,7 @@ fn open_chunk_file(path: &Path) -> strata::error::Result<format::Reader<std::fs:
 }
 
 fn load(input: &MeshInput) -> Result<strata::Imported> {
-    let imported = import_with(&input.mesh, &input.options())?;
+    let imported = import_with(&input.mesh, &input.options()?)?;
     for w in &imported.warnings {
         eprintln!("warning: {}: {w}", input.mesh.display());
     }

@@ -24,15 +24,18 @@ pub struct Args {
     /// Vertical field of view, degrees.
     #[arg(long, default_value_t = 45.0)]
     fov: f32,
-    /// Direction from the model toward the eye for the default camera, as "x,y,z".
-    #[arg(long, default_value = "0.3,0.4,1.0", allow_hyphen_values = true)]
-    view_dir: String,
+    /// Direction from the model toward the eye for the default camera, as "x,y,z"; default
+    /// "0.3,0.4,1.0", and for terrain (y up) "0,1,0.8": from the south, 50° above the horizon.
+    #[arg(long, allow_hyphen_values = true)]
+    view_dir: Option<String>,
     /// Color by: one plain color, each node (strata files), or the level (strata files).
     #[arg(long, value_enum, default_value_t = RenderColor::Plain)]
     color: RenderColor,
     /// Level of a strata file to draw (0 = full detail).
     #[arg(long, default_value_t = 0)]
     level: u32,
+    #[command(flatten)]
+    dem: super::DemArgs,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -55,7 +58,7 @@ pub fn run(a: Args) -> Result<()> {
         let rd = open_chunk_file(&a.input)?;
         let levels = rd.header().levels;
         anyhow::ensure!(a.level < levels, "--level {}: {} has levels 0..{}", a.level, a.input.display(), levels.saturating_sub(1));
-        let camera = render_camera(&a, rd.header().min, rd.header().max)?;
+        let camera = render_camera(&a, rd.header().min, rd.header().max, rd.georef().is_some())?;
         for node in rd.level_nodes(a.level) {
             let g = rd.read_node(node)?;
             let color = match a.color {
@@ -70,9 +73,10 @@ pub fn run(a: Args) -> Result<()> {
         }
     } else {
         anyhow::ensure!(a.color == RenderColor::Plain, "--color groups and levels need a .strata file");
-        let m = load(&MeshInput { mesh: a.input.clone(), format: None, allow_outside_files: false })?.mesh;
+        let imported = load(&MeshInput { mesh: a.input.clone(), format: None, allow_outside_files: false, dem: a.dem.clone() })?;
+        let m = imported.mesh;
         let (min, max) = m.bounds().context("empty mesh")?;
-        let camera = render_camera(&a, min, max)?;
+        let camera = render_camera(&a, min, max, imported.georef.is_some())?;
         // Corner normals become vertices of their own; without them, faces are flat.
         let (positions, normals, indices): (Vec<_>, Vec<_>, Vec<u32>) = if m.normals.is_empty() {
             (m.positions.clone(), Vec::new(), m.triangles.iter().flatten().copied().collect())
@@ -102,12 +106,17 @@ fn parse_vec3(s: &str, what: &str) -> Result<glam::Vec3> {
 }
 
 /// The camera of `strata render`: framing the bounding sphere, or at --camera's eye and target.
-fn render_camera(a: &Args, min: glam::Vec3, max: glam::Vec3) -> Result<strata::camera::Camera> {
+fn render_camera(a: &Args, min: glam::Vec3, max: glam::Vec3, terrain: bool) -> Result<strata::camera::Camera> {
     anyhow::ensure!(a.fov > 0.0 && a.fov < 180.0, "--fov must be between 0 and 180 degrees, not {}", a.fov);
     let (center, radius) = ((min + max) * 0.5, ((max - min).length() * 0.5).max(f32::MIN_POSITIVE));
     let fov = a.fov.to_radians();
     let Some(spec) = &a.camera else {
-        return Ok(strata::camera::Camera::framing(center, radius, parse_vec3(&a.view_dir, "--view-dir")?, fov, a.width, a.height));
+        let dir = match &a.view_dir {
+            Some(d) => parse_vec3(d, "--view-dir")?,
+            None if terrain => glam::Vec3::new(0.0, 1.0, 0.8),
+            None => glam::Vec3::new(0.3, 0.4, 1.0),
+        };
+        return Ok(strata::camera::Camera::framing(center, radius, dir, fov, a.width, a.height));
     };
     let (eye, target) = spec.split_once(':').with_context(|| format!("--camera: {spec:?} is not \"ex,ey,ez:tx,ty,tz\""))?;
     let (eye, target) = (parse_vec3(eye, "--camera eye")?, parse_vec3(target, "--camera target")?);

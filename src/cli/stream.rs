@@ -9,14 +9,17 @@ use strata::format;
 use strata::stream::Priority;
 
 #[derive(clap::Args)]
-#[command(group(clap::ArgGroup::new("session").args(["orbit", "path"])))]
+#[command(group(clap::ArgGroup::new("session").args(["orbit", "path", "flyover"])))]
 pub struct Args {
     /// A .strata file.
     file: PathBuf,
     /// N frames around the model, moving in from far (model ~5% of the view) to a close-up over the
-    /// first half. The default session (64 frames).
+    /// first half; terrain is seen from 45° above the horizon. The default session (64 frames).
     #[arg(long, value_name = "N")]
     orbit: Option<usize>,
+    /// N frames flying low over terrain from its south edge to its north edge, looking ahead.
+    #[arg(long, value_name = "N")]
+    flyover: Option<usize>,
     /// Camera path: one camera per line, "ex ey ez tx ty tz" (eye, then target, model units);
     /// blank lines and lines starting with # are skipped.
     #[arg(long, value_name = "FILE")]
@@ -80,9 +83,14 @@ pub fn run(a: Args) -> Result<()> {
             let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             session::parse_path(&text, p, center, radius, width, height)?
         }
+        None if a.flyover.is_some() => {
+            let n = a.flyover.unwrap_or(64).max(2);
+            (0..n).map(|i| session::flyover(h.min, h.max, i, n, width, height)).collect()
+        }
         None => {
             let n = a.orbit.unwrap_or(64).max(1);
-            (0..n).map(|i| session::orbit(center, radius, i, n, width, height)).collect()
+            let orbit = if reader.georef().is_some() { session::terrain_orbit } else { session::orbit };
+            (0..n).map(|i| orbit(center, radius, i, n, width, height)).collect()
         }
     };
     if let Some(d) = &a.frames_dir {

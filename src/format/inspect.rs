@@ -79,6 +79,8 @@ pub struct NodeView {
 pub struct Inspection {
     pub version: String,
     pub header: HeaderView,
+    /// Where the model sits on Earth (`GEOR`), for terrain.
+    pub georef: Option<super::Georef>,
     /// Chunks read at open (`HEAD`, `SKEL` and its sub-chunks); geometry chunks are summarized per
     /// level in `levels`.
     pub chunks: Vec<ChunkInfo>,
@@ -150,7 +152,14 @@ pub fn inspect<S: ByteSource>(rd: &Reader<S>, select: Selection) -> Result<Inspe
         v.chunks = rd.node_chunks(i)?;
         nodes.push(v);
     }
-    Ok(Inspection { version: format!("{}.{}", h.major, h.minor), header, chunks: rd.skeleton_chunks().to_vec(), levels, nodes })
+    Ok(Inspection {
+        version: format!("{}.{}", h.major, h.minor),
+        header,
+        georef: rd.georef().cloned(),
+        chunks: rd.skeleton_chunks().to_vec(),
+        levels,
+        nodes,
+    })
 }
 
 fn view<S: ByteSource>(rd: &Reader<S>, i: u32, depth: u32) -> NodeView {
@@ -241,6 +250,7 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
             "level_ratio": f(h.level_ratio),
             "tool": h.tool,
         },
+        "georef": rd.georef(),
         "levels": rd.levels().iter().map(|l| json!({
             "first_node": l.first_node, "nodes": l.nodes, "faces": l.faces, "vertices": l.vertices, "bytes": l.bytes,
         })).collect::<Vec<_>>(),

@@ -13,7 +13,7 @@
 //! - [`records`]: the decoded records (header, levels, nodes, clusters, geometry) as plain data;
 //! - [`chunk`]: the frame every chunk shares (ID, flags, size, payload, CRC-32, padding);
 //! - [`codes`]: the position grid and the u16 codes of angles and radii; [`octa`]: normals;
-//! - [`skeleton`]: `HEAD` and `SKEL`, encoded and decoded;
+//! - [`skeleton`]: `HEAD` and `SKEL`, encoded and decoded; [`georef`]: `GEOR`, where terrain sits;
 //! - [`geom`]: a node's geometry, one codec per format version ([`geom::v2`]);
 //! - [`source`]: [`ByteSource`], where bytes come from;
 //! - [`read`]: [`Reader`], the lazy reader; [`rules`]: what every reader checks (spec §10);
@@ -25,6 +25,7 @@
 pub mod chunk;
 pub mod codes;
 pub mod geom;
+pub mod georef;
 pub mod inspect;
 pub mod octa;
 pub mod read;
@@ -36,6 +37,7 @@ pub mod verify;
 pub mod write;
 
 pub use codes::{angle_code, angle_decode, pack, radius_code, radius_decode, unpack, Grid, GRID_BITS, MAX_GRID_BITS};
+pub use georef::{GeoFrame, Georef};
 pub use read::Reader;
 pub use records::{Attributes, Cluster, Cone, Header, HierarchyParams, LevelRecord, Material, MaterialRange, NodeGeometry, NodeRecord};
 pub use source::ByteSource;
@@ -44,10 +46,11 @@ pub use write::{LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
 
 /// Major format version: a reader refuses files with a larger major version.
 pub const MAJOR: u16 = 2;
-/// Minor format version: a newer minor only adds chunk kinds, which older readers skip.
-pub const MINOR: u16 = 0;
+/// Minor format version this reader knows: a newer minor only adds chunk kinds, which older readers
+/// skip. Writers write the lowest minor that holds what a file carries: 1 with a `GEOR` chunk, else 0.
+pub const MINOR: u16 = 1;
 /// The format version as the spec writes it.
-pub const VERSION: &str = "2.0";
+pub const VERSION: &str = "2.1";
 
 /// The first 8 bytes of every strata file.
 pub const MAGIC: [u8; 8] = *b"\x89STRATA\n";
@@ -73,6 +76,7 @@ pub const RANGE_RECORD_BYTES: u64 = 12;
 /// Chunk IDs.
 pub mod id {
     pub const HEAD: [u8; 4] = *b"HEAD";
+    pub const GEOR: [u8; 4] = *b"GEOR";
     pub const SKEL: [u8; 4] = *b"SKEL";
     pub const GEOM: [u8; 4] = *b"GEOM";
     pub const LEVL: [u8; 4] = *b"LEVL";

@@ -8,6 +8,7 @@
 
 use super::chunk::{self, Frame, HEADER_BYTES, TRAILER_BYTES};
 use super::geom::{self, NodeContext};
+use super::georef::{self, Georef};
 use super::rules::{self, Sink};
 pub use super::skeleton::ChunkInfo;
 use super::skeleton::{self, Context, Skeleton};
@@ -20,7 +21,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// Largest `HEAD` payload a reader accepts (newer minor versions may append fields).
+/// Largest `HEAD` or `GEOR` payload a reader accepts (newer minor versions may append fields).
 const MAX_HEAD_BYTES: u64 = 1 << 16;
 
 /// An open strata file: its header and skeleton in memory, geometry read on demand.
@@ -36,6 +37,7 @@ pub struct Reader<S> {
     skeleton_end: u64,
     /// Whether the rules of spec §6 are checked at open and as each node is decoded.
     strict: bool,
+    georef: Option<Georef>,
 }
 
 impl Reader<File> {
@@ -80,6 +82,7 @@ impl<S: ByteSource> Reader<S> {
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
             strict: false,
+            georef: None,
         };
         let (major, minor) = rd.read_prologue()?;
         let mut pos = PROLOGUE_BYTES;
@@ -111,6 +114,16 @@ impl<S: ByteSource> Reader<S> {
             if f.id == id::HEAD || f.id == id::GEOM {
                 return Err(rd.err(pos, &f.id, pos, "expected the SKEL chunk before any other known chunk"));
             }
+            if f.id == id::GEOR {
+                if rd.georef.is_some() {
+                    return Err(rd.err(pos, &f.id, pos, "a second GEOR chunk"));
+                }
+                if f.size > MAX_HEAD_BYTES {
+                    return Err(rd.err(pos + 8, &f.id, pos, format!("size {} exceeds the {MAX_HEAD_BYTES}-byte limit", f.size)));
+                }
+                let payload = rd.payload_at(pos, &f)?;
+                rd.georef = Some(georef::decode(path, minor, &payload, pos)?);
+            }
             rd.skeleton_chunks.push(ChunkInfo::new(&f, pos, 0));
             pos = rd.next(pos, &f)?;
         };
@@ -132,6 +145,11 @@ impl<S: ByteSource> Reader<S> {
     /// The `HEAD` chunk.
     pub fn header(&self) -> &Header {
         &self.skeleton.header
+    }
+
+    /// Where the model sits on Earth (`GEOR`, spec §5.2), for a file made from an elevation grid.
+    pub fn georef(&self) -> Option<&Georef> {
+        self.georef.as_ref()
     }
 
     /// The node table, in file order (top level first).

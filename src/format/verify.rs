@@ -76,7 +76,7 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     for (k, c) in chunks.iter().enumerate() {
         let here = |msg: String| Error::at_byte(&path, c.offset, format!("chunk {} at offset {}: {msg}", c.id, c.offset));
         let end = c.offset + HEADER_BYTES + c.size + TRAILER_BYTES;
-        let known = [id::HEAD, id::SKEL, id::GEOM].iter().any(|i| chunk::id_str(i) == c.id);
+        let known = [id::HEAD, id::GEOR, id::SKEL, id::GEOM].iter().any(|i| chunk::id_str(i) == c.id);
         if known && c.flags != 0 && strict {
             v.push(here(format!("flags {:#x} should be 0", c.flags)));
         }
@@ -93,6 +93,10 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
                 v.push(here("a second SKEL".into()));
             }
             seen_skel = true;
+        } else if c.id == "GEOR" {
+            if seen_skel {
+                v.push(here("GEOR after SKEL: it belongs between HEAD and SKEL".into()));
+            }
         } else if c.id == "GEOM" {
             geoms.push((c.offset, HEADER_BYTES + c.size + TRAILER_BYTES));
         } else if !known {

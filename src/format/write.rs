@@ -11,6 +11,7 @@
 
 use super::chunk;
 use super::geom::v2::{self, GeometryCodes};
+use super::georef::{self, Georef};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
 use super::{
     angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC, MAJOR,
@@ -42,6 +43,8 @@ pub struct WriterOptions {
     pub input_vertices: u64,
     /// Number of levels, at least 1.
     pub levels: u32,
+    /// Where the model sits on Earth; a file with it is format 2.1 (spec §5.2).
+    pub georef: Option<Georef>,
 }
 
 /// One finished node.
@@ -346,9 +349,10 @@ impl<W: Write> Writer<W> {
 
         let top = level_first[nl - 1] as usize..(level_first[nl - 1] + levels[nl - 1].nodes) as usize;
         let grid = self.opts.grid;
+        let minor = if self.opts.georef.is_some() { MINOR } else { 0 };
         let mut header = Header {
             major: MAJOR,
-            minor: MINOR,
+            minor,
             file_size: 0,
             metres_per_unit: self.opts.metres_per_unit,
             min: codes[top.clone()].iter().fold(Vec3::splat(f32::MAX), |m, c| m.min(grid.decode(c.min))),
@@ -366,17 +370,19 @@ impl<W: Write> Writer<W> {
             tool: self.opts.tool.clone(),
         };
         let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials);
-        let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + skel.len() as u64;
+        let geor = self.opts.georef.as_ref().map(georef::encode).unwrap_or_default();
+        let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + geor.len() as u64 + skel.len() as u64;
         header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>();
 
         let mut prologue = Vec::with_capacity(16);
         prologue.extend_from_slice(&MAGIC);
         prologue.extend_from_slice(&MAJOR.to_le_bytes());
-        prologue.extend_from_slice(&MINOR.to_le_bytes());
+        prologue.extend_from_slice(&minor.to_le_bytes());
         let crc = chunk::crc32(&prologue);
         prologue.extend_from_slice(&crc.to_le_bytes());
         self.out.write_all(&prologue).map_err(io)?;
         self.out.write_all(&encode_head(&header)).map_err(io)?;
+        self.out.write_all(&geor).map_err(io)?;
         self.out.write_all(&skel).map_err(io)?;
         let mut buf = Vec::new();
         for l in (0..nl).rev() {

@@ -43,7 +43,7 @@ const APPEARANCE_ONLY: &[&str] = &["KHR_texture_basisu", "EXT_texture_webp", "EX
 /// folder unless `options.allow_outside_files`.
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
     // glTF's unit is the metre (glTF 2.0 §3.4).
-    read_mesh(path, options, warnings).map(|mesh| Raw { mesh, metres_per_unit: Some(1.0) })
+    read_mesh(path, options, warnings).map(|mesh| Raw { mesh, metres_per_unit: Some(1.0), georef: None, grid: None })
 }
 
 fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {

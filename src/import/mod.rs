@@ -1,4 +1,5 @@
-//! Import OBJ, glTF/GLB and PLY files into a cleaned [`Mesh`].
+//! Import OBJ, glTF/GLB and PLY meshes, and elevation grids (ESRI ASCII, GeoTIFF, SRTM .hgt,
+//! heightmap PNG), into a cleaned [`Mesh`].
 //!
 //! The formats are the rows of [`IMPORTERS`]. Each format module reads its file into a [`Raw`] mesh
 //! (positions not yet welded, corner arrays filled or empty, and the file's units if it states
@@ -6,13 +7,20 @@
 //! [`crate::mesh::MAX_COORDINATE`]), replaces NaN or infinite normals and UVs with a warning, welds
 //! and cleans the mesh, and reports what cleaning removed.
 
+pub mod asc;
+pub mod geotiff;
 pub mod gltf;
+pub mod heightfield;
+pub mod heightmap_png;
+pub mod hgt;
 pub mod obj;
 pub mod ply;
 
 use crate::error::{Error, Result};
+use crate::format::Georef;
 use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
 use glam::Vec2;
+pub use heightfield::{DemCrs, DemEncoding, DemOptions, GridSummary};
 use std::path::Path;
 use std::time::Instant;
 
@@ -31,6 +39,10 @@ pub static IMPORTERS: &[Importer] = &[
     Importer { name: "obj", extensions: &["obj"], read: obj::read },
     Importer { name: "gltf", extensions: &["gltf", "glb"], read: gltf::read },
     Importer { name: "ply", extensions: &["ply"], read: ply::read },
+    Importer { name: "asc", extensions: &["asc"], read: asc::read },
+    Importer { name: "geotiff", extensions: &["tif", "tiff"], read: geotiff::read },
+    Importer { name: "hgt", extensions: &["hgt"], read: hgt::read },
+    Importer { name: "png", extensions: &["png"], read: heightmap_png::read },
 ];
 
 /// What a format's reader makes of a file: the raw mesh (positions not yet welded, corner arrays
@@ -40,6 +52,10 @@ pub struct Raw {
     pub mesh: Mesh,
     /// Metres per model unit when the file says (glTF is in metres); `None` when it does not.
     pub metres_per_unit: Option<f64>,
+    /// Where the model sits on Earth: elevation grids have one (spec §5.2).
+    pub georef: Option<Georef>,
+    /// What an elevation grid held.
+    pub grid: Option<GridSummary>,
 }
 
 /// One of the [`IMPORTERS`].
@@ -97,7 +113,7 @@ impl std::str::FromStr for Format {
 }
 
 /// How to import a file.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ImportOptions {
     /// Read as this format whatever the extension.
     pub format: Option<Format>,
@@ -105,6 +121,8 @@ pub struct ImportOptions {
     /// above the folder, in a buffer uri). Off by default, so that a model from elsewhere cannot
     /// make strata read other files.
     pub allow_outside_files: bool,
+    /// How elevation grids are read.
+    pub dem: DemOptions,
 }
 
 /// An imported, cleaned mesh and what happened on the way.
@@ -119,6 +137,10 @@ pub struct Imported {
     pub warnings: Vec<String>,
     /// Metres per model unit when the file says; `None` when it does not (OBJ, PLY).
     pub metres_per_unit: Option<f64>,
+    /// Where the model sits on Earth, for an elevation grid.
+    pub georef: Option<Georef>,
+    /// What an elevation grid held: size, voids, height range.
+    pub grid: Option<GridSummary>,
     /// Wall-clock time of reading and cleaning, in milliseconds.
     pub import_ms: f64,
 }
@@ -183,7 +205,7 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
         return Err(Error::invalid(path, None, format!("unknown mesh format: use a {} file, or --format", Format::extension_list())));
     };
     let mut warnings = Vec::new();
-    let Raw { mesh: mut raw, metres_per_unit } = (format.0.read)(path, options, &mut warnings)?;
+    let Raw { mesh: mut raw, metres_per_unit, georef, grid } = (format.0.read)(path, options, &mut warnings)?;
     if let Err(e) = raw.validate() {
         return Err(Error::invalid(path, None, format!("internal import error: {e}")));
     }
@@ -195,12 +217,13 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     }
     replace_non_finite_corners(&mut raw, &mut warnings);
     let source_faces = raw.face_count();
-    let (mesh, cleaned) =
-        raw.clean().map_err(|e| Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite"))?;
+    let (mesh, cleaned) = raw
+        .clean_known(grid.is_some())
+        .map_err(|e| Error::at_element(path, format!("vertex {}", e.index), "coordinate is NaN or infinite"))?;
     if mesh.triangles.is_empty() {
         return Err(Error::invalid(path, None, "no faces left: the file holds no usable triangles"));
     }
-    Ok(Imported { mesh, source_faces, cleaned, warnings, metres_per_unit, import_ms: start.elapsed().as_secs_f64() * 1e3 })
+    Ok(Imported { mesh, source_faces, cleaned, warnings, metres_per_unit, georef, grid, import_ms: start.elapsed().as_secs_f64() * 1e3 })
 }
 
 /// Replace NaN or infinite corner normals by their face's normal and such UVs by (0, 0), with a

@@ -25,7 +25,7 @@ const USEMTL_TABLE: &str = "\0strata-usemtl-names";
 
 /// Read an OBJ file into a raw, uncleaned mesh.
 pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None })
+    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None, georef: None, grid: None })
 }
 
 fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {

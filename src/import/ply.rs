@@ -21,7 +21,7 @@ use std::path::Path;
 /// Read a PLY file into a raw, uncleaned mesh: positions as in the file, one triangle list.
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
 pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None })
+    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None, georef: None, grid: None })
 }
 
 fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {

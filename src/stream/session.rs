@@ -17,6 +17,17 @@ pub const NEAR_RADII: f32 = 1.3;
 /// experiments: one turn around the vertical axis, moving over the first half from far (the model
 /// spans 5% of the view) to a close-up, then staying close.
 pub fn orbit(center: Vec3, radius: f32, i: usize, n: usize, width: u32, height: u32) -> Camera {
+    orbit_at(center, radius, i, n, width, height, 0.3)
+}
+
+/// [`orbit`] for terrain: from 45° above the horizon, so that the surface is seen rather than its
+/// edge.
+pub fn terrain_orbit(center: Vec3, radius: f32, i: usize, n: usize, width: u32, height: u32) -> Camera {
+    orbit_at(center, radius, i, n, width, height, 1.0)
+}
+
+/// Camera `i` of an orbit whose eye direction rises `lift` per unit of horizontal distance.
+fn orbit_at(center: Vec3, radius: f32, i: usize, n: usize, width: u32, height: u32, lift: f32) -> Camera {
     let radius = radius.max(f32::MIN_POSITIVE);
     let far = radius / (FAR_FRACTION * (0.5 * FOV_Y).tan());
     let near = NEAR_RADII * radius;
@@ -24,8 +35,22 @@ pub fn orbit(center: Vec3, radius: f32, i: usize, n: usize, width: u32, height: 
     let t = (i as f32 / (half - 1) as f32).min(1.0);
     let distance = far * (near / far).powf(t);
     let angle = std::f32::consts::TAU * i as f32 / n.max(1) as f32;
-    let dir = Vec3::new(angle.sin(), 0.3, angle.cos()).normalize();
+    let dir = Vec3::new(angle.sin(), lift, angle.cos()).normalize();
     looking(center + dir * distance, center, center, radius, width, height)
+}
+
+/// Camera `i` of an `n`-frame flight over terrain with bounds `min..max` (y up), along the middle
+/// at a tenth of the width above the highest point, looking north and down at the ground a quarter
+/// of the width ahead: from where that point is the south edge to where it is the north edge.
+pub fn flyover(min: Vec3, max: Vec3, i: usize, n: usize, width: u32, height: u32) -> Camera {
+    let extent = (max.x - min.x).max(max.z - min.z).max(f32::MIN_POSITIVE);
+    let t = i as f32 / (n.max(2) - 1) as f32;
+    let x = 0.5 * (min.x + max.x);
+    let z = max.z + 0.25 * extent - t * (max.z - min.z);
+    let eye = Vec3::new(x, max.y + 0.1 * extent, z);
+    let target = Vec3::new(x, 0.5 * (min.y + max.y), z - 0.25 * extent);
+    let (center, radius) = (0.5 * (min + max), 0.5 * (max - min).length());
+    looking(eye, target, center, radius, width, height)
 }
 
 /// A perspective camera from `eye` toward `target` whose depth range holds the model's bounding

@@ -67,6 +67,13 @@ function dump(sk, geoms) {
       level_ratio: h.levelRatio,
       tool: h.tool,
     },
+    georef: sk.georef && {
+      frame: sk.georef.frame,
+      origin: sk.georef.origin,
+      metres_per_crs_unit: sk.georef.metresPerCrsUnit,
+      z_scale: sk.georef.zScale,
+      crs: sk.georef.crs,
+    },
     levels: sk.levels.map((l) => ({ first_node: l.firstNode, nodes: l.nodes, faces: l.faces, vertices: l.vertices, bytes: l.bytes })),
     materials: sk.materials.map((m) => ({ name: m.name, base_color: m.baseColor, texture: m.texture })),
     nodes: geoms.map((g, i) => ({
@@ -106,7 +113,7 @@ function dump(sk, geoms) {
 
 // Fields that are f64 in the file: compared exactly. Every other non-integer is an f32, compared as
 // Math.fround of the JSON number against the decoded value, bit for bit (Object.is: -0 ≠ 0).
-const F64_PATHS = [/^header\.metres_per_unit$/, /^header\.grid\.(origin\.\d|step)$/];
+const F64_PATHS = [/^header\.metres_per_unit$/, /^header\.grid\.(origin\.\d|step)$/, /^georef\./];
 
 /** The first difference between `expected` (JSON) and `actual`, as "path: what", or null. */
 function difference(expected, actual, path = '') {
