@@ -19,7 +19,8 @@ fn inputs() -> Vec<(String, PathBuf)> {
                 let p = e.path();
                 if p.is_dir() {
                     stack.push(p);
-                } else if strata::Format::from_path(&p).is_some() {
+                } else if strata::Format::from_path(&p).is_some_and(|f| f.name() != "png" || d.ends_with("dem")) {
+                    // PNGs elsewhere are textures, not heightmaps.
                     let rel = p.strip_prefix(dir).unwrap().to_string_lossy().replace('\\', "/");
                     out.push((format!("{prefix}{rel}"), p));
                 }

@@ -175,12 +175,24 @@ async function open(source) {
     }
     streamer = next;
     showWarning(source.warning);
+    showPlace(next.skeleton.georef);
     resize();
     fit();
   } catch (e) {
     if (generation === opens) fail(e);
     throw e;
   }
+}
+
+/** Where terrain sits on Earth (GEOR, format-spec §5.2), in the panel; hidden for other models. */
+function showPlace(g) {
+  $('r-place').hidden = !g;
+  if (!g) return;
+  const crs = g.crs ? ` (${g.crs})` : '';
+  $('s-place').textContent =
+    g.frame === 'local_tangent' ? `${g.origin[1].toFixed(5)}°, ${g.origin[0].toFixed(5)}°${crs}`
+      : g.frame === 'projected' ? `${g.origin[0].toFixed(1)}, ${g.origin[1].toFixed(1)}${crs}`
+        : 'terrain, place unknown';
 }
 
 const pixelError = () => 2 ** Number($('error').value);
@@ -431,6 +443,9 @@ window.strata = {
   },
   state() {
     return {
+      camera: camera ? { eye: [...camera.eye], target: [...camera.target] } : null,
+      georef: streamer?.skeleton.georef ?? null,
+      place: $('r-place').hidden ? '' : $('s-place').textContent,
       front: streamer?.front ?? [],
       drawn: streamer?.drawn ?? [],
       culled: streamer?.culled ?? [],

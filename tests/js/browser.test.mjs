@@ -55,6 +55,7 @@ before(async () => {
   copy('sphere', converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, []));
   copy('ico', converted('icosphere', `${root}/fixtures/icosphere.obj`, ['--leaf-faces', '16', '--cluster-faces', '4', '--top-groups', '2']));
   if (existsSync(CT_HEAD)) copy('cthead', converted('cthead', CT_HEAD, []));
+  copy('terrain', `${root}/format-spec/vectors/terrain.strata`);
   // Far from the origin, as georeferenced scans are: the noisy sphere scaled to a radius of about
   // 100 and snapped to multiples of 1/32, at the origin and moved by (500 000, 250 000, 1 000),
   // where 1/32 is still exact in f32, so both import the same shape bit for bit.
@@ -346,6 +347,21 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     t.diagnostic(`far from the origin: ${differ} of ${covered} covered pixels differ by more than 24 from the same close-up at the origin`);
     assert.ok(covered > (W * H) / 2, 'the close-up is covered by the surface');
     assert.ok(differ / covered < 0.01, `${differ} of ${covered} pixels differ`);
+  });
+
+  await sub('terrain opens from above and shows where it lies', async (t) => {
+    const { p, errors } = await page(viewer('terrain'));
+    await within(p.evaluate(() => window.strata.ready()), 60000, 'first frame');
+    const s = await p.evaluate(() => window.strata.state());
+    assert.equal(s.georef.frame, 'local_tangent');
+    const d = s.camera.eye.map((e, k) => e - s.camera.target[k]);
+    const up = d[1] / Math.hypot(...d);
+    t.diagnostic(`terrain: seen from ${((Math.asin(up) * 180) / Math.PI).toFixed(1)}° above the horizon; place "${s.place}"`);
+    assert.ok(Math.abs(up - 1 / Math.hypot(1, 0.8)) < 1e-3, `the default terrain view looks down (${up})`);
+    assert.match(s.place, /^46\.03000°, 7\.04000° \(EPSG:4326\)$/);
+    assert.ok(s.drawn.length > 0);
+    assert.deepEqual(errors, []);
+    await p.close();
   });
 
   await sub('a local file opens without a server, read by slices', async (t) => {
