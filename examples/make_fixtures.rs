@@ -1,11 +1,21 @@
 //! Rewrite `fixtures/` from the procedural meshes in `strata::fixtures`:
 //! `cargo run --release --example make_fixtures`. `tests/fixtures_generated.rs` checks that the
 //! committed files are exactly what this writes.
+//!
+//! `cargo run --release --example make_fixtures -- --large FACES out.ply` instead writes one large
+//! detailed mesh of about FACES faces (a bumpy sphere, `fixtures::write_bumpy_sphere_ply`) straight
+//! to a binary PLY, in constant memory: inputs for tests and benchmarks too large to commit.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if let [flag, faces, out] = &args[..] {
+        anyhow::ensure!(flag == "--large", "usage: make_fixtures [--large FACES out.ply]");
+        return large(faces.parse()?, Path::new(out));
+    }
+    anyhow::ensure!(args.is_empty(), "usage: make_fixtures [--large FACES out.ply]");
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     std::fs::create_dir_all(&dir)?;
     let mut readme = String::from(
@@ -26,5 +36,22 @@ fn main() -> anyhow::Result<()> {
     writeln!(readme, "\nVertices are welded positions; PLY and GLB store more where corners differ in attributes.")?;
     std::fs::write(dir.join("README.md"), readme)?;
     println!("total {total} bytes");
+    Ok(())
+}
+
+/// Write the large bumpy sphere to `out` (a temporary name renamed when complete), with progress.
+fn large(faces: u64, out: &Path) -> anyhow::Result<()> {
+    let start = std::time::Instant::now();
+    let mut file = strata::atomic::AtomicFile::create(out)?;
+    let mut shown = 0;
+    let (faces, vertices) = strata::fixtures::write_bumpy_sphere_ply(file.writer(), faces, 1, &mut |f| {
+        let pct = (f * 100.0) as u32;
+        if pct >= shown + 10 {
+            shown = pct;
+            eprintln!("{pct}%");
+        }
+    })?;
+    file.commit()?;
+    println!("wrote {} ({faces} faces, {vertices} vertices) in {:.1} s", out.display(), start.elapsed().as_secs_f64());
     Ok(())
 }
