@@ -31,6 +31,8 @@ let firstFrameRequests = null;
 let firstFrameBytes = null;
 let picks = [];
 let measuring = false;
+/** The last click in measure mode (time and place), to tell a double-click from two clicks. */
+let lastClick = null;
 let opened = null;
 let idleWaiters = [];
 
@@ -260,11 +262,19 @@ function pick(x, y) {
   const f = camera.forward();
   const right = unit(cross(f, camera.up)) ?? [1, 0, 0];
   const up = cross(right, f);
-  const h = 2 * Math.tan(camera.projection.perspective?.fov_y / 2 || 0.5);
-  const nx = ((x + 0.5) / camera.width - 0.5) * h * camera.aspect();
-  const ny = (0.5 - (y + 0.5) / camera.height) * h;
-  const dir = unit(add(f, add(scale(right, nx), scale(up, ny))));
-  const eye = sub(camera.eye, o);
+  // The ray through the pixel's centre: from the eye (perspective), or parallel to the view
+  // direction from the pixel's place on the view plane (orthographic).
+  const sx = (x + 0.5) / camera.width - 0.5, sy = 0.5 - (y + 0.5) / camera.height;
+  let dir, eye;
+  if (camera.projection.orthographic) {
+    const h = camera.projection.orthographic.height;
+    dir = unit(f);
+    eye = sub(add(camera.eye, add(scale(right, sx * h * camera.aspect()), scale(up, sy * h))), o);
+  } else {
+    const h = 2 * Math.tan(camera.projection.perspective.fov_y / 2);
+    dir = unit(add(f, add(scale(right, sx * h * camera.aspect()), scale(up, sy * h))));
+    eye = sub(camera.eye, o);
+  }
   let best = Infinity;
   let hit = null;
   for (const i of streamer.drawn) {
@@ -335,6 +345,11 @@ function controls() {
     const click = drag && drag.moved < 4;
     drag = null;
     if (!click || !measuring || !streamer) return;
+    // The second click of a double-click is not a second point.
+    const now = performance.now();
+    const again = lastClick && now - lastClick.t < 500 && Math.abs(e.clientX - lastClick.x) + Math.abs(e.clientY - lastClick.y) < 6;
+    lastClick = { t: now, x: e.clientX, y: e.clientY };
+    if (again) return;
     const dpr = devicePixelRatio || 1;
     const p = pick(Math.floor(e.offsetX * dpr), Math.floor(e.offsetY * dpr));
     if (!p) return;
@@ -342,6 +357,8 @@ function controls() {
     describePicks();
   });
   canvas.addEventListener('dblclick', (e) => {
+    // Measuring takes clicks as points; re-centring would move what is being measured.
+    if (measuring) return;
     const dpr = devicePixelRatio || 1;
     const p = camera && pick(Math.floor(e.offsetX * dpr), Math.floor(e.offsetY * dpr));
     if (!p) return;

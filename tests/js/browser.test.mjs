@@ -306,6 +306,24 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     const text = await p.textContent('#picked');
     const d = Math.hypot(...hits[0].point.map((v, k) => v - hits[1].point[k]));
     assert.match(text, new RegExp(`distance ${d.toPrecision(6).replace('.', '\\.')} units`));
+    // A double-click while measuring is one point, and does not move the view.
+    await p.mouse.dblclick(spots[0][0] + 0.5, spots[0][1] + 0.5);
+    await p.waitForTimeout(300);
+    assert.match(await p.textContent('#picked'), /^A: [^\n]*$/, 'one point after a double-click');
+    assert.deepEqual((await p.evaluate(() => window.strata.camera())).target, cam.target);
+    // Orthographic: the ray runs along the view direction from the pixel's place.
+    const ortho = { ...cam, projection: { orthographic: { height: 2.2 * Math.hypot(...cam.eye.map((e, k) => e - cam.target[k])) * Math.tan(Math.PI / 8) } } };
+    await p.evaluate((c) => window.strata.setCamera(c), ortho);
+    const inner = [[215, 165], [250, 200]]; // the sphere looks smaller without perspective
+    const flat = await p.evaluate((spots) => spots.map(([x, y]) => window.strata.pick(x, y)), inner);
+    const op = new Camera(ortho).viewProjection();
+    for (const [k, [x, y]] of inner.entries()) {
+      assert.ok(flat[k], `orthographic pick ${k} hits the model`);
+      const q = flat[k].point;
+      const clip = [0, 1, 2, 3].map((r) => op[r] * q[0] + op[4 + r] * q[1] + op[8 + r] * q[2] + op[12 + r]);
+      const px = ((clip[0] / clip[3] + 1) / 2) * W, py = ((1 - clip[1] / clip[3]) / 2) * H;
+      assert.ok(Math.abs(px - (x + 0.5)) < 0.01 && Math.abs(py - (y + 0.5)) < 0.01, `orthographic: the picked point projects to (${px}, ${py}), not (${x + 0.5}, ${y + 0.5})`);
+    }
     await p.close();
   });
 
