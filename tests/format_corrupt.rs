@@ -49,6 +49,12 @@ fn small_file() -> Vec<u8> {
     bytes
 }
 
+/// The small file, and the terrain golden vector, whose `GEOR` chunk (format 2.1) gets the same damage.
+fn damage_targets() -> Vec<(&'static str, Vec<u8>)> {
+    let terrain = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors/terrain.strata")).expect("terrain vector");
+    vec![("small", small_file()), ("terrain", terrain)]
+}
+
 /// Exercise every reading path; results are ignored, panics are not.
 fn read_everything(bytes: &[u8]) {
     if let Ok(rd) = Reader::open(Cursor::new(bytes)) {
@@ -67,16 +73,17 @@ fn read_everything(bytes: &[u8]) {
 
 #[test]
 fn every_flipped_byte_is_reported() {
-    let good = small_file();
-    assert!(format::verify(Cursor::new(&good), Path::new("good")).is_sound());
-    let mut bytes = good.clone();
-    for at in 0..good.len() {
-        for mask in [0xFFu8, 0x01] {
-            bytes[at] ^= mask;
-            let v = format::verify(Cursor::new(&bytes), Path::new("flipped"));
-            assert!(!v.is_sound(), "flipping byte {at} with {mask:#x} went unnoticed");
-            read_everything(&bytes);
-            bytes[at] ^= mask;
+    for (name, good) in damage_targets() {
+        assert!(format::verify(Cursor::new(&good), Path::new("good")).is_sound(), "{name}");
+        let mut bytes = good.clone();
+        for at in 0..good.len() {
+            for mask in [0xFFu8, 0x01] {
+                bytes[at] ^= mask;
+                let v = format::verify(Cursor::new(&bytes), Path::new("flipped"));
+                assert!(!v.is_sound(), "{name}: flipping byte {at} with {mask:#x} went unnoticed");
+                read_everything(&bytes);
+                bytes[at] ^= mask;
+            }
         }
     }
     assert!(LARGEST.load(Ordering::Relaxed) < ALLOCATION_LIMIT);
@@ -84,12 +91,13 @@ fn every_flipped_byte_is_reported() {
 
 #[test]
 fn every_truncation_is_an_error() {
-    let good = small_file();
-    for len in 0..good.len() {
-        let cut = &good[..len];
-        assert!(Reader::open(Cursor::new(cut)).is_err(), "truncated to {len} bytes and still opened");
-        assert!(!format::verify(Cursor::new(cut), Path::new("cut")).is_sound());
-        read_everything(cut);
+    for (name, good) in damage_targets() {
+        for len in 0..good.len() {
+            let cut = &good[..len];
+            assert!(Reader::open(Cursor::new(cut)).is_err(), "{name}: truncated to {len} bytes and still opened");
+            assert!(!format::verify(Cursor::new(cut), Path::new("cut")).is_sound(), "{name}");
+            read_everything(cut);
+        }
     }
 }
 

@@ -437,8 +437,8 @@ test('every byte of sphere.strata flipped: refused with a FormatError, or read o
   t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, and GEOM padding); every other flip refused`);
 });
 
-test('resealed mutations (every checksum recomputed): a FormatError or a sane decode, never another error', (t) => {
-  const bytes = read('sphere.strata');
+for (const file of ['sphere.strata', 'terrain.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
+  const bytes = read(file);
   const tree = parseTree(bytes);
   const spots = leaves(tree);
   let tried = 0, accepted = 0;
@@ -452,7 +452,11 @@ test('resealed mutations (every checksum recomputed): a FormatError or a sane de
     tried++;
     if (!refused(b, what)) {
       accepted++;
-      const { geoms } = decodeAll(b);
+      const { sk, geoms } = decodeAll(b);
+      if (sk.georef) {
+        const g = sk.georef;
+        assert.ok(['unplaced', 'local_tangent', 'projected'].includes(g.frame) && g.origin.every(Number.isFinite) && g.zScale > 0 && g.metresPerCrsUnit > 0, what);
+      }
       for (const g of geoms) {
         assert.ok(g.positions.every(Number.isFinite) && (!g.uvs || g.uvs.every(Number.isFinite)), what);
         assert.ok(g.indices.every((x) => x < g.positions.length / 3), what);
@@ -470,7 +474,7 @@ test('resealed mutations (every checksum recomputed): a FormatError or a sane de
       attempt(at(k, (p) => le(p).setUint32(k, 0x7fffffff, true)), `${s.name}[${k}] = i32 max`);
     }
   }
-  t.diagnostic(`${tried} resealed variants of sphere.strata: ${tried - accepted} refused, ${accepted} read (values a reader cannot tell from honest ones)`);
+  t.diagnostic(`${tried} resealed variants of ${file}: ${tried - accepted} refused, ${accepted} read (values a reader cannot tell from honest ones)`);
 });
 
 test('hostile counts fail before anything is allocated with them', () => {
