@@ -77,17 +77,17 @@ pub fn run(a: Args) -> Result<()> {
     let h = reader.header();
     let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
     let (width, height) = (a.width.max(1), a.height.max(1));
-    let cameras = match &a.path {
-        Some(p) => {
+    let cameras = match (&a.path, a.flyover) {
+        (Some(p), _) => {
             strata::atomic::protect(p);
             let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             session::parse_path(&text, p, center, radius, width, height)?
         }
-        None if a.flyover.is_some() => {
-            let n = a.flyover.unwrap_or(64).max(2);
+        (None, Some(n)) => {
+            let n = n.max(2);
             (0..n).map(|i| session::flyover(h.min, h.max, i, n, width, height)).collect()
         }
-        None => {
+        (None, None) => {
             let n = a.orbit.unwrap_or(64).max(1);
             let orbit = if reader.georef().is_some() { session::terrain_orbit } else { session::orbit };
             (0..n).map(|i| orbit(center, radius, i, n, width, height)).collect()

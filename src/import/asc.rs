@@ -6,26 +6,21 @@
 //! [`heightfield::is_geographic`].
 
 use super::heightfield::{self, axis, Grid, Placement};
-use super::{read_regular_file, ImportOptions, Raw};
+use super::{open_regular, read_regular_file, ImportOptions, Raw};
 use crate::error::{Error, Result};
 use std::io::BufRead;
 use std::path::Path;
 
-/// Longest header line or data line kept in memory at once is not limited (a row may be one line),
-/// but a header has at most this many lines before the data must start.
+/// Lines a header may have before the data starts.
 const MAX_HEADER_LINES: usize = 16;
 
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    if !file.metadata().map_err(|e| Error::io(path, e))?.is_file() {
-        return Err(Error::invalid(path, None, "not a regular file"));
-    }
+    let (file, len) = open_regular(path)?;
     let mut tokens = Tokens { reader: std::io::BufReader::with_capacity(1 << 16, file), line: String::new(), pos: 0, line_no: 0, path };
     let header = read_header(&mut tokens)?;
     let (cols, rows, cell) = (header.cols, header.rows, header.cell);
     // Each value takes a digit and a separator at least: 2 bytes per sample, uncompressed.
-    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    heightfield::check_claim(path, cols, rows, 2 * heightfield::MAX_EXPANSION, len)?;
+    heightfield::check_claim(path, cols, rows, 2, len, 1)?;
     // Sample centres: row 0 is the north edge.
     let (x0, y_south) =
         (header.x + if header.center { 0.0 } else { 0.5 * cell.0 }, header.y + if header.center { 0.0 } else { 0.5 * cell.1 });

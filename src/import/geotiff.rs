@@ -6,7 +6,7 @@
 //! strips or tiles at a time.
 
 use super::heightfield::{self, Grid, Placement};
-use super::{ImportOptions, Raw};
+use super::{open_regular, ImportOptions, Raw};
 use crate::error::{Error, Result};
 use std::path::Path;
 use tiff::decoder::{ChunkType, Decoder, DecodingResult};
@@ -25,14 +25,10 @@ mod key {
 }
 
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    if !file.metadata().map_err(|e| Error::io(path, e))?.is_file() {
-        return Err(Error::invalid(path, None, "not a regular file"));
-    }
+    let (file, file_len) = open_regular(path)?;
     let tiff_err = |e: tiff::TiffError| Error::invalid(path, None, format!("TIFF: {e}"));
     // What the decoder may allocate follows from the file's size: stored data cannot exceed it, and
     // decodes to at most MAX_EXPANSION times as much (and at most the crate's default 256 MiB a chunk).
-    let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let mut limits = tiff::decoder::Limits::default();
     let decoded = usize::try_from(file_len.saturating_mul(heightfield::MAX_EXPANSION)).unwrap_or(usize::MAX);
     limits.decoding_buffer_size = decoded.min(limits.decoding_buffer_size);
@@ -90,7 +86,7 @@ pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) ->
     };
     let stored: u64 =
         dec.find_tag_unsigned_vec::<u64>(counts).map_err(tiff_err)?.unwrap_or_default().iter().fold(0, |a, &b| a.saturating_add(b));
-    heightfield::check_claim(path, cols, rows, u64::from(bits / 8).max(1), stored.min(file_len))?;
+    heightfield::check_claim(path, cols, rows, u64::from(bits / 8).max(1), stored.min(file_len), heightfield::MAX_EXPANSION)?;
     let (cw, ch) = dec.chunk_dimensions();
     // A strip or tile taller than the image holds no more rows than the image.
     let (cw, ch) = (cw as usize, (ch as usize).min(rows));
@@ -109,14 +105,14 @@ pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) ->
             band.fill(f64::NAN);
             for c in 0..across {
                 let index = (b * across + c) as u32;
-                let at = || Error::at_element(path, format!("{} {index}", if across == 1 { "strip" } else { "tile" }), "");
-                let data = dec.read_chunk(index).map_err(|e| Error::invalid(path, at().location().cloned(), format!("TIFF: {e}")))?;
+                let at = format!("{} {index}", if across == 1 { "strip" } else { "tile" });
+                let data = dec.read_chunk(index).map_err(|e| Error::at_element(path, at.clone(), format!("TIFF: {e}")))?;
                 let values = to_f64(data);
                 let (dw, dh) = dec.chunk_data_dimensions(index);
                 let (dw, dh) = (dw as usize, dh as usize);
                 let stride = values.len().checked_div(dh).unwrap_or(0);
                 if stride < dw || dh > ch {
-                    return Err(Error::invalid(path, at().location().cloned(), format!("{} values for {dw} × {dh} samples", values.len())));
+                    return Err(Error::at_element(path, at, format!("{} values for {dw} × {dh} samples", values.len())));
                 }
                 for r in 0..dh {
                     let dst = &mut band[r * cols + c * cw..r * cols + (c * cw + dw).min(cols)];

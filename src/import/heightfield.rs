@@ -127,10 +127,11 @@ pub fn is_geographic(crs: DemCrs, x: [f64; 2], y: [f64; 2], cell: f64, warnings:
 pub const MAX_EXPANSION: u64 = 1100;
 
 /// Refuse a grid of `cols` × `rows` samples of `bytes_per_sample` that `stored` bytes cannot hold
-/// even at [`MAX_EXPANSION`].
-pub fn check_claim(path: &Path, cols: usize, rows: usize, bytes_per_sample: u64, stored: u64) -> Result<()> {
+/// when each stored byte decodes to at most `expansion` bytes ([`MAX_EXPANSION`] for compressed
+/// data, 1 for text).
+pub fn check_claim(path: &Path, cols: usize, rows: usize, bytes_per_sample: u64, stored: u64, expansion: u64) -> Result<()> {
     let claimed = (cols as u64).saturating_mul(rows as u64).saturating_mul(bytes_per_sample);
-    if claimed > stored.saturating_mul(MAX_EXPANSION) {
+    if claimed > stored.saturating_mul(expansion) {
         return Err(Error::invalid(
             path,
             None,
@@ -206,10 +207,9 @@ pub fn triangulate(
     if mesh.triangles.is_empty() {
         return Err(Error::invalid(path, None, "no cell has three samples with data: the grid is all voids"));
     }
-    let metres = !matches!(grid.placement, Placement::Unplaced { .. }) || grid.metres_per_height_unit > 0.0;
     let unit = grid.metres_per_height_unit;
     let summary = GridSummary { cols, rows, voids, min_height: lo * unit, max_height: hi * unit };
-    Ok(Raw { mesh, metres_per_unit: metres.then_some(1.0), georef: Some(georef), grid: Some(summary) })
+    Ok(Raw { mesh, metres_per_unit: Some(1.0), georef: Some(georef), grid: Some(summary) })
 }
 
 /// Triangles of the cells between rows `r` (north) and `r + 1` of the ring `ids`/`h` (row k in

@@ -15,17 +15,14 @@
 //! - `nodata`: a stored 16-bit value that means no data.
 
 use super::heightfield::{self, axis, DemCrs, DemEncoding, Grid, Placement};
-use super::{read_regular_file, ImportOptions, Raw};
+use super::{open_regular, read_regular_file, ImportOptions, Raw};
 use crate::error::{Error, Result};
 use crate::geodesy::{mercator_lat, mercator_lon};
 use png::{BitDepth, ColorType};
 use std::path::Path;
 
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    if !file.metadata().map_err(|e| Error::io(path, e))?.is_file() {
-        return Err(Error::invalid(path, None, "not a regular file"));
-    }
+    let (file, stored) = open_regular(path)?;
     let png_err = |e: png::DecodingError| Error::invalid(path, None, format!("not a readable PNG: {e}"));
     let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
     decoder.set_transformations(png::Transformations::IDENTITY);
@@ -60,8 +57,8 @@ pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) ->
             ))
         }
     };
-    let stored = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    heightfield::check_claim(path, cols, rows, if channels == 1 { 2 } else { channels as u64 }, stored)?;
+    let bytes_per_sample = if channels == 1 { 2 } else { channels as u64 };
+    heightfield::check_claim(path, cols, rows, bytes_per_sample, stored, heightfield::MAX_EXPANSION)?;
     let sidecar = Sidecar::read(path)?;
     let placement = placement(path, options, sidecar.as_ref(), cols, rows, warnings)?;
     let (scale, offset, nodata, feet) = sidecar.as_ref().map_or((1.0, 0.0, None, false), |s| (s.scale, s.offset, s.nodata, s.feet));
@@ -79,8 +76,8 @@ pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) ->
             Some(buf) => &buf[i * line..(i + 1) * line],
             None => reader
                 .next_row()
-                .map_err(|e| Error::invalid(path, Some(crate::Location::Element(format!("row {i}"))), format!("PNG data: {e}")))?
-                .ok_or_else(|| Error::invalid(path, Some(crate::Location::Element(format!("row {i}"))), "the image data ends early"))?
+                .map_err(|e| Error::at_element(path, format!("row {i}"), format!("PNG data: {e}")))?
+                .ok_or_else(|| Error::at_element(path, format!("row {i}"), "the image data ends early"))?
                 .data(),
         };
         for (h, px) in out.iter_mut().zip(data.chunks_exact(line / cols)) {

@@ -4,7 +4,7 @@
 //! lying on the degree lines. −32768 marks a void. Read row by row.
 
 use super::heightfield::{self, axis, Grid, Placement};
-use super::{ImportOptions, Raw};
+use super::{open_regular, ImportOptions, Raw};
 use crate::error::{Error, Result};
 use std::io::Read;
 use std::path::Path;
@@ -13,12 +13,7 @@ use std::path::Path;
 const VOID: i16 = i16::MIN;
 
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
-    if !meta.is_file() {
-        return Err(Error::invalid(path, None, "not a regular file"));
-    }
-    let len = meta.len();
+    let (file, len) = open_regular(path)?;
     let n = (len / 2).isqrt();
     if len == 0 || len % 2 != 0 || n * n * 2 != len || n < 2 {
         return Err(Error::invalid(

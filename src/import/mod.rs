@@ -145,16 +145,27 @@ pub struct Imported {
     pub import_ms: f64,
 }
 
-/// Read at most `max_len` bytes of the regular file at `path`. Devices, pipes and folders are
-/// refused: `/dev/zero` never ends and a pipe may never answer.
-fn read_regular_file(path: &Path, max_len: u64) -> std::io::Result<Vec<u8>> {
-    use std::io::Read;
+/// The regular file at `path`, open, and its length. Devices, pipes and folders are refused:
+/// `/dev/zero` never ends and a pipe may never answer.
+fn open_regular_io(path: &Path) -> std::io::Result<(std::fs::File, u64)> {
     let file = std::fs::File::open(path)?;
     let meta = file.metadata()?;
     if !meta.is_file() {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"));
     }
-    let mut bytes = Vec::with_capacity(meta.len().min(max_len) as usize);
+    Ok((file, meta.len()))
+}
+
+/// [`open_regular_io`] for readers that stream a file: errors name `path`.
+fn open_regular(path: &Path) -> Result<(std::fs::File, u64)> {
+    open_regular_io(path).map_err(|e| Error::io(path, e))
+}
+
+/// Read at most `max_len` bytes of the regular file at `path` (see [`open_regular_io`]).
+fn read_regular_file(path: &Path, max_len: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let (file, len) = open_regular_io(path)?;
+    let mut bytes = Vec::with_capacity(len.min(max_len) as usize);
     file.take(max_len).read_to_end(&mut bytes)?;
     Ok(bytes)
 }
