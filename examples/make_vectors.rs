@@ -28,7 +28,14 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
     let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
     let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
     let mut out = Cursor::new(Vec::new());
-    let opts = WriteOptions { metres_per_unit, params, level_ratio: 0.5, tool: "strata vectors".into(), georef };
+    let opts = WriteOptions {
+        metres_per_unit,
+        params,
+        level_ratio: 0.5,
+        tool: "strata vectors".into(),
+        georef,
+        encoding: strata::write::Encoding::V2,
+    };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
     out.into_inner()
 }

@@ -8,7 +8,7 @@ use crate::import::{import_with, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
-use crate::write::{self, WriteOptions};
+use crate::write::{self, Encoding, WriteOptions};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -19,6 +19,8 @@ pub struct ConvertOptions {
     pub hierarchy: HierarchyParams,
     pub levels: LevelParams,
     pub normals: Normals,
+    /// How node geometry is stored (format 2 or 3).
+    pub encoding: Encoding,
 }
 
 impl Default for ConvertOptions {
@@ -27,6 +29,7 @@ impl Default for ConvertOptions {
             hierarchy: HierarchyParams::default(),
             levels: LevelParams::default(),
             normals: Normals::Auto { crease_angle: 60f32.to_radians() },
+            encoding: Encoding::V2,
         }
     }
 }
@@ -122,6 +125,7 @@ pub fn convert(
         params: opts.hierarchy,
         level_ratio: opts.levels.ratio,
         georef,
+        encoding: opts.encoding,
         ..WriteOptions::default()
     };
     let summary = write::write(output, &h, &lv, &write_opts)?;

@@ -1,14 +1,15 @@
 //! Positions on the file's grid (spec §5.1): the grid that spans the model, every position on its
 //! nearest grid point, and at level 0 distinct input positions kept distinct.
 
-use crate::format::{Grid, GRID_BITS};
+use crate::format::Grid;
 use crate::levels::LevelMeshes;
 use crate::mesh::Mesh;
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 
-/// The grid of the file: the bounds of every level's positions, [`GRID_BITS`] bits.
-pub fn model_grid(lv: &LevelMeshes) -> Grid {
+/// The grid of the file: the bounds of every level's positions, `bits` bits per axis
+/// ([`GRID_BITS`] in format 2; format 3's precision).
+pub fn model_grid(lv: &LevelMeshes, bits: u32) -> Grid {
     let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
     for l in &lv.levels {
         for p in &l.mesh.positions {
@@ -19,7 +20,7 @@ pub fn model_grid(lv: &LevelMeshes) -> Grid {
     if lo.cmpgt(hi).any() {
         (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
     }
-    Grid::fit(lo, hi, GRID_BITS)
+    Grid::fit(lo, hi, bits)
 }
 
 /// A level mesh's positions on the grid: grid points and the positions they decode to.
@@ -29,6 +30,9 @@ pub struct Quantized {
     /// Vertices moved off their nearest grid point to stay distinct, and how far each now lies from
     /// its input position (model units); empty for most meshes.
     pub moved: FxHashMap<u32, f32>,
+    /// Format 3: how far each vertex snapped to its node's lattice now lies from its input
+    /// position (model units, 0 for vertices left on the grid); empty when nothing snapped.
+    pub snapped: Vec<f32>,
 }
 
 /// Largest cube radius, in grid steps, searched for a free grid point for a vertex whose nearest
@@ -40,7 +44,7 @@ impl Quantized {
     pub fn new(grid: &Grid, mesh: &Mesh) -> Quantized {
         let points: Vec<[u32; 3]> = mesh.positions.iter().map(|&p| grid.encode(p)).collect();
         let positions = points.iter().map(|&g| grid.decode(g)).collect();
-        Quantized { points, positions, moved: FxHashMap::default() }
+        Quantized { points, positions, moved: FxHashMap::default(), snapped: Vec::new() }
     }
 
     /// Level 0 (spec §5.1): distinct input positions decode to distinct positions, so that the input's
@@ -91,14 +95,56 @@ impl Quantized {
         Ok(q)
     }
 
-    /// The quantization bound of `faces` of `mesh`: [`Grid::error`], or the distance of a moved
-    /// vertex from its input position where larger.
+    /// Format 3 (spec §8.1 of strata-v3.md): move every vertex that lies inside its node (no edge
+    /// on the node's border or the mesh's) to the nearest point of its node's lattice,
+    /// `2^shift[g]` grid steps, where `face_group` gives each face's node. Border vertices stay on
+    /// the grid, so that neighbouring nodes still share them exactly.
+    pub fn snap_inner(&mut self, grid: &Grid, mesh: &Mesh, face_group: &[u32], shift: &[u32]) {
+        let n = self.points.len();
+        let mut edges: Vec<(u32, u32, bool, u32)> = Vec::with_capacity(3 * mesh.face_count());
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                edges.push((a.min(b), a.max(b), a < b, face_group[f]));
+            }
+        }
+        edges.sort_unstable();
+        let mut node = vec![u32::MAX; n];
+        let mut border = vec![false; n];
+        for run in edges.chunk_by(|x, y| (x.0, x.1) == (y.0, y.1)) {
+            let inner = run.len() == 2 && run[0].2 != run[1].2 && run[0].3 == run[1].3;
+            for v in [run[0].0, run[0].1] {
+                let v = v as usize;
+                border[v] |= !inner || (node[v] != u32::MAX && node[v] != run[0].3);
+                node[v] = run[0].3;
+            }
+        }
+        self.snapped = vec![0.0; n];
+        for v in 0..n {
+            if border[v] || node[v] == u32::MAX {
+                continue;
+            }
+            let s = shift[node[v] as usize];
+            if s == 0 {
+                continue;
+            }
+            let g = self.points[v].map(|x| crate::format::geom::v3::snap(x, s, grid.bits));
+            let p = grid.decode(g);
+            self.points[v] = g;
+            self.positions[v] = p;
+            self.snapped[v] = round_up(p.as_dvec3().distance(mesh.positions[v].as_dvec3()));
+        }
+    }
+
+    /// The quantization bound of `faces` of `mesh`: [`Grid::error`], or the distance of a moved or
+    /// snapped vertex from its input position where larger.
     pub fn error(&self, grid: &Grid, mesh: &Mesh, faces: &[u32]) -> f32 {
         let mut e = grid.error();
-        if !self.moved.is_empty() {
+        if !self.moved.is_empty() || !self.snapped.is_empty() {
             for &f in faces {
                 for v in mesh.triangles[f as usize] {
                     e = e.max(self.moved.get(&v).copied().unwrap_or(0.0));
+                    e = e.max(self.snapped.get(v as usize).copied().unwrap_or(0.0));
                 }
             }
         }
@@ -124,7 +170,7 @@ mod tests {
     fn level_zero_positions_stay_distinct_within_their_stated_bound() {
         let mesh = crate::fixtures::isosurface(24, 3);
         let (lo, hi) = mesh.bounds().unwrap();
-        let grid = Grid::fit(lo, hi, GRID_BITS);
+        let grid = Grid::fit(lo, hi, crate::format::GRID_BITS);
         let plain = Quantized::new(&grid, &mesh);
         let q = Quantized::distinct(&grid, &mesh).unwrap();
         let keys =

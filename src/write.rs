@@ -8,8 +8,10 @@ use crate::atomic::AtomicFile;
 use crate::bounds;
 use crate::error::{Error, Result};
 use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
+use crate::format::geom::v3::Lattice;
 use crate::format::{
-    octa, Attributes, Georef, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, MAX_TOOL_BYTES, NO_PARENT,
+    octa, Attributes, Georef, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, GRID_BITS, MAX_GRID_BITS, MAX_TOOL_BYTES,
+    NO_PARENT,
 };
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
@@ -32,6 +34,48 @@ pub struct WriteOptions {
     pub tool: String,
     /// Where the model sits on Earth, for terrain (a `GEOR` chunk, format 2.1).
     pub georef: Option<Georef>,
+    /// How node geometry is stored.
+    pub encoding: Encoding,
+}
+
+/// How node geometry is stored: format 2's fixed-width arrays on a 20-bit grid, or format 3's
+/// compressed streams at a chosen precision. Format 3 is in progress (issue 15; notes/format3.md):
+/// until its spec is in `format-spec/` and the viewer reads it, `strata convert` does not write it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Encoding {
+    V2,
+    V3(Precision),
+}
+
+/// Format 3's quantization (strata-v3.md §8.1): level 0 on the grid, coarser levels' inner vertices
+/// on lattices tied to their error, normals and UVs to stated bits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Precision {
+    /// Grid bits per axis over the model's largest extent (level 0's precision), 1..=21.
+    pub grid_bits: u32,
+    /// A node's lattice is the largest power-of-two number of grid steps not above this fraction of
+    /// its error before quantization, so quantization adds at most `√3/2` of the fraction to it.
+    pub lattice: f32,
+    /// Bits of each octahedral normal coordinate, 2..=16.
+    pub normal_bits: u32,
+    /// UVs are multiples of `2^−uv_bits` (fewer where a node's UVs are too large for f32 to hold
+    /// them exactly), 1..=24.
+    pub uv_bits: u32,
+}
+
+impl Default for Precision {
+    fn default() -> Self {
+        Precision { grid_bits: 14, lattice: 0.25, normal_bits: 10, uv_bits: 16 }
+    }
+}
+
+impl Encoding {
+    fn major(&self) -> u16 {
+        match self {
+            Encoding::V2 => 2,
+            Encoding::V3(_) => 3,
+        }
+    }
 }
 
 impl Default for WriteOptions {
@@ -42,6 +86,7 @@ impl Default for WriteOptions {
             level_ratio: 0.5,
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
             georef: None,
+            encoding: Encoding::V2,
         }
     }
 }
@@ -72,10 +117,21 @@ fn write_named<W: Write>(
 ) -> Result<WriteSummary> {
     let bad = |msg: String| Error::invalid(path, None, msg);
     let attributes = check_inputs(h, lv, opts).map_err(bad)?;
-    let grid = model_grid(lv);
+    let precision = match opts.encoding {
+        Encoding::V2 => None,
+        Encoding::V3(p) => Some(check_precision(p).map_err(bad)?),
+    };
+    let grid = model_grid(lv, precision.map_or(GRID_BITS, |p| p.grid_bits));
     let mut quant = Vec::with_capacity(lv.levels.len());
     quant.push(Quantized::distinct(&grid, &lv.levels[0].mesh).map_err(bad)?);
     quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(&grid, &l.mesh)));
+    let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
+    if let Some(p) = precision {
+        for l in 1..lv.levels.len() {
+            shifts[l] = lv.levels[l].group_error.iter().map(|&e| lattice_shift(e, p.lattice, &grid)).collect();
+            quant[l].snap_inner(&grid, &lv.levels[l].mesh, &lv.levels[l].face_group, &shifts[l]);
+        }
+    }
     let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
     let bounds = bounds::nodes(h, lv, &faces, &grid, &quant).map_err(bad)?;
     let writer_opts = WriterOptions {
@@ -89,6 +145,7 @@ fn write_named<W: Write>(
         input_vertices: lv.levels[0].mesh.vertex_count() as u64,
         levels: h.levels.len() as u32,
         georef: opts.georef.clone(),
+        major: opts.encoding.major(),
     };
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
     let top = h.levels.len() - 1;
@@ -96,7 +153,12 @@ fn write_named<W: Write>(
         let mesh = &lv.levels[l].mesh;
         for (g, b) in bounds[l].iter().enumerate() {
             let clusters = (l == 0).then_some(&h.clusters);
-            let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes).map_err(bad)?;
+            let lattice = precision.map_or(Lattice::default(), |p| Lattice {
+                shift: shifts[l][g],
+                normal_bits: if attributes.normals { p.normal_bits } else { 0 },
+                uv_bits: if attributes.uvs { p.uv_bits } else { 0 },
+            });
+            let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
             writer.add(NodeIn {
                 level: l as u32,
                 key: g as u32,
@@ -109,6 +171,30 @@ fn write_named<W: Write>(
         }
     }
     writer.finish()
+}
+
+fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
+    let valid = (1..=MAX_GRID_BITS).contains(&p.grid_bits)
+        && (2..=16).contains(&p.normal_bits)
+        && (1..=24).contains(&p.uv_bits)
+        && p.lattice.is_finite()
+        && p.lattice >= 0.0;
+    if !valid {
+        return Err(format!(
+            "precision {p:?}: grid bits must be 1..={MAX_GRID_BITS}, normal bits 2..=16, UV bits 1..=24, the lattice fraction finite and ≥ 0"
+        ));
+    }
+    Ok(p)
+}
+
+/// The lattice shift of a node whose error before quantization is `error`: the largest `s` with
+/// `2^s` grid steps at most `fraction · error`, below the grid's bits.
+fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
+    let steps = (fraction as f64 * error as f64) / grid.step;
+    if steps.is_nan() || steps < 2.0 {
+        return 0;
+    }
+    (steps.log2().floor() as u32).min(grid.bits - 1)
 }
 
 /// The material table: level 0's, or one default material if it has none.
@@ -211,6 +297,24 @@ fn check_inputs(h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> std::re
     Ok(attributes)
 }
 
+/// The UV bits a node's faces `order` can keep: at most `bits`, and few enough that every UV's
+/// multiple of `2^−bits` is an exact f32 (below 2^24 steps).
+fn uv_bits(mesh: &Mesh, order: &[u32], bits: u32) -> u32 {
+    let largest = order.iter().flat_map(|&f| (0..3).map(move |k| 3 * f as usize + k)).fold(0f32, |m, c| {
+        let uv = mesh.uvs[c];
+        if uv.is_finite() {
+            m.max(uv.x.abs()).max(uv.y.abs())
+        } else {
+            m
+        }
+    });
+    let mut b = bits;
+    while b > 1 && (largest as f64) * (1u64 << b) as f64 >= (1u64 << 23) as f64 {
+        b -= 1;
+    }
+    b
+}
+
 /// The geometry of `faces` of `mesh`, as the format stores it. Faces are ordered by culling cluster
 /// (level 0), then material; vertices are deduplicated corners (grid point and attributes) in
 /// order of first use. Cluster records start from the hierarchy's cones and spheres
@@ -222,6 +326,7 @@ fn node_geometry(
     faces: &[u32],
     clusters: Option<&hierarchy::Level>,
     attrs: Attributes,
+    lattice: Lattice,
 ) -> std::result::Result<GeometryCodes, String> {
     let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
     let mut order: Vec<u32> = faces.to_vec();
@@ -229,13 +334,26 @@ fn node_geometry(
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
     let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());
-    let mut out = GeometryCodes { indices: Vec::with_capacity(order.len() * 3), ..GeometryCodes::default() };
+    let mut lattice = lattice;
+    if lattice.uv_bits > 0 {
+        lattice.uv_bits = uv_bits(mesh, &order, lattice.uv_bits);
+    }
+    let uv_scale = (1u64 << lattice.uv_bits) as f64;
+    let mut out = GeometryCodes { indices: Vec::with_capacity(order.len() * 3), lattice, ..GeometryCodes::default() };
     for &f in &order {
         for k in 0..3 {
             let corner = 3 * f as usize + k;
             let g = q.points[mesh.triangles[f as usize][k] as usize];
-            let n = if attrs.normals { octa::encode(mesh.normals[corner]) } else { [0; 2] };
-            let uv = if attrs.uvs { mesh.uvs[corner].to_array().map(f32::to_bits) } else { [0; 2] };
+            let n = match (attrs.normals, lattice.normal_bits) {
+                (false, _) => [0; 2],
+                (true, 0) => octa::encode(mesh.normals[corner]),
+                (true, bits) => octa::encode_bits(mesh.normals[corner], bits),
+            };
+            let uv = match (attrs.uvs, lattice.uv_bits) {
+                (false, _) => [0; 2],
+                (true, 0) => mesh.uvs[corner].to_array().map(f32::to_bits),
+                (true, _) => mesh.uvs[corner].to_array().map(|u| (((u as f64 * uv_scale).round() / uv_scale) as f32).to_bits()),
+            };
             let c = if attrs.colors { mesh.colors[corner] } else { [0; 4] };
             let next = index_of.len() as u32;
             let i = *index_of.entry((g, n, uv, c)).or_insert_with(|| {

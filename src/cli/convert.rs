@@ -48,6 +48,7 @@ pub fn run(a: Args) -> Result<()> {
             NormalsArg::Input => Normals::Input,
             NormalsArg::None => Normals::None,
         },
+        ..Default::default()
     };
     let mut bars = Bars::new(a.quiet || a.json);
     let c = strata::pipeline::convert(&a.input.mesh, &a.input.options()?, &a.output, &opts, &mut bars)?;

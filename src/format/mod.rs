@@ -44,8 +44,12 @@ pub use source::ByteSource;
 pub use verify::{verify, verify_path, Verification};
 pub use write::{LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
 
-/// Major format version: a reader refuses files with a larger major version.
+/// Major format version writers write by default: 2. Readers read 2 and 3 ([`NEWEST_MAJOR`]) and
+/// refuse larger ones.
 pub const MAJOR: u16 = 2;
+/// The newest major version this reader reads: 3, whose node geometry is compressed
+/// (format-spec/strata-v3.md).
+pub const NEWEST_MAJOR: u16 = 3;
 /// Minor format version this reader knows: a newer minor only adds chunk kinds, which older readers
 /// skip. Writers write the lowest minor that holds what a file carries: 1 with a `GEOR` chunk, else 0.
 pub const MINOR: u16 = 1;

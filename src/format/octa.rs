@@ -34,8 +34,17 @@ fn unfold(n: Vec3) -> Vec2 {
 
 /// Decode a stored pair into a unit normal.
 pub fn decode(q: [i16; 2]) -> Vec3 {
-    let x = (q[0] as f32 / SCALE).clamp(-1.0, 1.0);
-    let y = (q[1] as f32 / SCALE).clamp(-1.0, 1.0);
+    decode_scaled(q, SCALE)
+}
+
+fn decode_scaled(q: [i16; 2], scale: f32) -> Vec3 {
+    decode_at([q[0] as i32, q[1] as i32], scale)
+}
+
+/// Decode a pair at `scale` steps per unit of the unfolded square (format 3: `2^(bits−1) − 1`).
+pub fn decode_at(q: [i32; 2], scale: f32) -> Vec3 {
+    let x = (q[0] as f32 / scale).clamp(-1.0, 1.0);
+    let y = (q[1] as f32 / scale).clamp(-1.0, 1.0);
     let z = 1.0 - x.abs() - y.abs();
     let (x, y) = if z < 0.0 { ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y)) } else { (x, y) };
     Vec3::new(x, y, z).normalize()
@@ -43,14 +52,20 @@ pub fn decode(q: [i16; 2]) -> Vec3 {
 
 /// Encode a normal (any length; zero or non-finite becomes +Z).
 pub fn encode(n: Vec3) -> [i16; 2] {
-    let p = unfold(n) * SCALE;
+    encode_bits(n, 16)
+}
+
+/// Encode a normal with `bits` (2..=16) per coordinate, scale `2^(bits−1) − 1` (format 3).
+pub fn encode_bits(n: Vec3, bits: u32) -> [i16; 2] {
+    let scale = ((1u32 << (bits - 1)) - 1) as f32;
+    let p = unfold(n) * scale;
     let target = n.normalize_or(Vec3::Z);
     let mut best = [0i16; 2];
     let mut best_gap = f32::INFINITY;
     for x in [p.x.floor(), p.x.ceil()] {
         for y in [p.y.floor(), p.y.ceil()] {
-            let q = [x.clamp(-SCALE, SCALE) as i16, y.clamp(-SCALE, SCALE) as i16];
-            let gap = decode(q).distance_squared(target);
+            let q = [x.clamp(-scale, scale) as i16, y.clamp(-scale, scale) as i16];
+            let gap = decode_scaled(q, scale).distance_squared(target);
             if gap < best_gap {
                 best_gap = gap;
                 best = q;

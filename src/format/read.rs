@@ -12,7 +12,7 @@ use super::georef::{self, Georef};
 use super::rules::{self, Sink};
 pub use super::skeleton::ChunkInfo;
 use super::skeleton::{self, Context, Skeleton};
-use super::{id, ByteSource, Header, LevelRecord, Material, NodeGeometry, NodeRecord, MAGIC, MAJOR, PROLOGUE_BYTES, VERSION};
+use super::{id, ByteSource, Header, LevelRecord, Material, NodeGeometry, NodeRecord, MAGIC, MAJOR, NEWEST_MAJOR, PROLOGUE_BYTES, VERSION};
 use crate::error::{Error, Result};
 use byteorder::{ByteOrder, LittleEndian as LE};
 use glam::Vec3;
@@ -289,7 +289,7 @@ impl<S: ByteSource> Reader<S> {
             return Err(Error::at_byte(&self.path, 0, "not a strata file (the first 8 bytes are not the strata magic)"));
         }
         let (major, minor) = (LE::read_u16(&p[8..10]), LE::read_u16(&p[10..12]));
-        if major > MAJOR {
+        if major > NEWEST_MAJOR {
             return Err(Error::at_byte(
                 &self.path,
                 8,

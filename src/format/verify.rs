@@ -107,7 +107,7 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     }
     // 2.1 adds only GEOR, and writers write 2.1 only for a file that has one (spec §0, §5.2): a
     // 2.1 file without it lost it (its ID damaged into an unknown chunk's, say).
-    if rd.header().minor == 1 && !chunks.iter().any(|c| c.id == "GEOR") {
+    if rd.header().major == 2 && rd.header().minor == 1 && !chunks.iter().any(|c| c.id == "GEOR") {
         v.push(Error::invalid(&path, None, "format 2.1 without a GEOR chunk: 2.1 is written only for a file with one (spec §5.2)"));
     }
     if let Some(last) = chunks.last() {

@@ -11,10 +11,11 @@
 
 use super::chunk;
 use super::geom::v2::{self, GeometryCodes};
+use super::geom::v3;
 use super::georef::{self, Georef};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
 use super::{
-    angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC, MAJOR,
+    angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC,
     MAX_TOOL_BYTES, MINOR, NO_PARENT,
 };
 use crate::error::{Error, Result};
@@ -45,6 +46,8 @@ pub struct WriterOptions {
     pub levels: u32,
     /// Where the model sits on Earth; a file with it is format 2.1 (spec §5.2).
     pub georef: Option<Georef>,
+    /// The major format version to write: 2 (fixed-width arrays) or 3 (compressed node geometry).
+    pub major: u16,
 }
 
 /// One finished node.
@@ -88,6 +91,9 @@ pub struct WriteSummary {
     pub clusters: u32,
     /// Finest level first.
     pub levels: Vec<LevelSummary>,
+    /// Format 3: bits of node geometry by kind ([`v3::STAT_NAMES`]), over all nodes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geometry_bits: Option<[u64; 8]>,
 }
 
 impl WriteSummary {
@@ -155,6 +161,7 @@ pub struct Writer<W> {
     levels: Vec<Vec<Pending>>,
     clusters: u64,
     buf: Vec<u8>,
+    geometry_bits: Option<[u64; 8]>,
 }
 
 impl<W: Write> Writer<W> {
@@ -165,6 +172,9 @@ impl<W: Write> Writer<W> {
         let bad = |msg: String| Error::invalid(path, None, msg);
         if opts.tool.len() as u64 > MAX_TOOL_BYTES {
             return Err(bad(format!("tool string of {} bytes exceeds {MAX_TOOL_BYTES}", opts.tool.len())));
+        }
+        if !(opts.major == 2 || opts.major == 3) {
+            return Err(bad(format!("format version {}: this writer writes 2 and 3", opts.major)));
         }
         if opts.levels == 0 || opts.levels == u32::MAX {
             return Err(bad(format!("{} levels", opts.levels)));
@@ -177,7 +187,7 @@ impl<W: Write> Writer<W> {
             });
         }
         let levels = (0..opts.levels).map(|_| Vec::new()).collect();
-        Ok(Writer { out, path: path.to_path_buf(), opts, spills, levels, clusters: 0, buf: Vec::new() })
+        Ok(Writer { out, path: path.to_path_buf(), opts, spills, levels, clusters: 0, buf: Vec::new(), geometry_bits: None })
     }
 
     /// Encode a finished node and keep it for [`finish`](Self::finish).
@@ -204,7 +214,17 @@ impl<W: Write> Writer<W> {
         if faces > (u32::MAX / 3) as usize || vertices > u32::MAX as usize {
             return Err(bad(format!("level {l} node {}: {faces} faces in one node", node.key)));
         }
-        let payload = v2::encode(g);
+        let payload = if self.opts.major == 3 {
+            let (payload, _, stats) =
+                v3::encode_with_stats(g, g.lattice, self.opts.grid.bits).map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
+            let sum = self.geometry_bits.get_or_insert([0; 8]);
+            for (s, b) in sum.iter_mut().zip(stats.bits) {
+                *s += b;
+            }
+            payload
+        } else {
+            v2::encode(g)
+        };
         self.buf.clear();
         chunk::put(&mut self.buf, id::GEOM, 0, &payload);
         let span = payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES;
@@ -349,9 +369,10 @@ impl<W: Write> Writer<W> {
 
         let top = level_first[nl - 1] as usize..(level_first[nl - 1] + levels[nl - 1].nodes) as usize;
         let grid = self.opts.grid;
-        let minor = if self.opts.georef.is_some() { MINOR } else { 0 };
+        // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2.
+        let minor = if self.opts.georef.is_some() && self.opts.major == 2 { MINOR } else { 0 };
         let mut header = Header {
-            major: MAJOR,
+            major: self.opts.major,
             minor,
             file_size: 0,
             metres_per_unit: self.opts.metres_per_unit,
@@ -376,7 +397,7 @@ impl<W: Write> Writer<W> {
 
         let mut prologue = Vec::with_capacity(16);
         prologue.extend_from_slice(&MAGIC);
-        prologue.extend_from_slice(&MAJOR.to_le_bytes());
+        prologue.extend_from_slice(&self.opts.major.to_le_bytes());
         prologue.extend_from_slice(&minor.to_le_bytes());
         let crc = chunk::crc32(&prologue);
         prologue.extend_from_slice(&crc.to_le_bytes());
@@ -407,6 +428,7 @@ impl<W: Write> Writer<W> {
                 .enumerate()
                 .map(|(l, r)| LevelSummary { level: l as u32, nodes: r.nodes, faces: r.faces, vertices: r.vertices, bytes: r.bytes })
                 .collect(),
+            geometry_bits: self.geometry_bits,
         })
     }
 }

@@ -1,8 +1,11 @@
 //! A node's `GEOM` chunk, framed and decoded: the frame and checksums here, the payload by the
-//! codec of the file's format version (one file per version: [`v2`]). Pure functions over byte
-//! slices, so any byte source, thread or second implementation can use them.
+//! codec of the file's format version (one file per version: [`v2`], [`v3`]). Pure functions over byte
+//! slices, so any byte source, thread or second implementation can use them. [`v3`] codes with
+//! the tools of [`bits`].
 
+pub mod bits;
 pub mod v2;
+pub mod v3;
 
 use super::chunk::{self, Frame, Sub, HEADER_BYTES};
 use super::skeleton::ChunkInfo;
@@ -28,7 +31,7 @@ impl NodeContext<'_> {
 
 /// Check the `GEOM` chunk `bytes` (its `size` bytes from ID through CRC, at the record's offset):
 /// its ID, its size against the node table, its CRC against the trailer and the table; return its
-/// frame and sub-chunks (offsets within `bytes[16..]`).
+/// frame and, in format 2, its sub-chunks (offsets within `bytes[16..]`; format 3 has none).
 pub fn split(ctx: &NodeContext, bytes: &[u8]) -> Result<(Frame, Vec<Sub>)> {
     let (i, rec) = (ctx.index, ctx.record);
     let at = rec.offset;
@@ -50,14 +53,22 @@ pub fn split(ctx: &NodeContext, bytes: &[u8]) -> Result<(Frame, Vec<Sub>)> {
     if stored != actual || stored != rec.crc {
         return Err(ctx.err(at + end as u64, &frame.id, format!("CRC {actual:08x}, stored {stored:08x}, node table {:08x}", rec.crc)));
     }
+    if ctx.header.major >= 3 {
+        return Ok((frame, Vec::new()));
+    }
     let subs = chunk::subs(ctx.path, &id::GEOM, at, &bytes[16..end], at + HEADER_BYTES)?;
     Ok((frame, subs))
 }
 
-/// Check and decode the `GEOM` chunk `bytes` of a node.
+/// Check and decode the `GEOM` chunk `bytes` of a node, by the codec of the file's major version.
 pub fn decode(ctx: &NodeContext, bytes: &[u8]) -> Result<NodeGeometry> {
     let (_, subs) = split(ctx, bytes)?;
-    v2::decode(ctx, &bytes[16..bytes.len() - 4], &subs)
+    let payload = &bytes[16..bytes.len() - 4];
+    if ctx.header.major >= 3 {
+        v3::decode(ctx, payload)
+    } else {
+        v2::decode(ctx, payload, &subs)
+    }
 }
 
 /// The chunk and its sub-chunks, for listings.

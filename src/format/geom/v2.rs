@@ -27,6 +27,9 @@ pub struct GeometryCodes {
     pub material_ranges: Vec<MaterialRange>,
     /// Level-0 nodes: the clusters' shift and records, tiling the faces.
     pub clusters: Option<(u32, Vec<ClusterCodes>)>,
+    /// Format 3: the precision the codes were quantized to (normals at `normal_bits`, UVs on
+    /// multiples of `2^−uv_bits`); format 2 ignores it (its normals are 16-bit, its UVs f32).
+    pub lattice: super::v3::Lattice,
 }
 
 /// A cluster record as stored (spec §8.7).
