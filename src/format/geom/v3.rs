@@ -42,10 +42,11 @@ const LEFT: usize = 3;
 const RING: usize = 4;
 const INDEX: usize = RING + VERTEX_RING;
 
-/// Code lengths of the triangle symbols (spec §8.3).
-pub const TRIANGLE_CODE: [u8; EDGE_RING + 1] = [5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 1];
-/// Code lengths of the corner symbols (spec §8.3).
-pub const CORNER_CODE: [u8; INDEX + 1] = [4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5];
+/// Code lengths of the triangle symbols: Huffman lengths of their frequencies over the bunny, the
+/// gargoyle and the CT head (`cargo bench --bench format3` prints them), each mesh weighted alike.
+pub const TRIANGLE_CODE: [u8; EDGE_RING + 1] = [1, 2, 5, 4, 6, 6, 7, 6, 8, 7, 8, 7, 8, 8, 8, 8, 4];
+/// Code lengths of the corner symbols, made as [`TRIANGLE_CODE`]'s.
+pub const CORNER_CODE: [u8; INDEX + 1] = [1, 4, 5, 3, 12, 12, 11, 10, 10, 10, 10, 10, 9, 9, 9, 8, 8, 8, 8, 8, 2];
 
 fn codes() -> &'static (PrefixCode, PrefixCode) {
     static CODES: OnceLock<(PrefixCode, PrefixCode)> = OnceLock::new();
@@ -160,67 +161,134 @@ enum Pred {
 
 const NONE: u32 = u32::MAX;
 
-/// What both sides keep, in stored indices: the rings, and for each vertex the next and previous
-/// vertex along the border of the decoded region (directed edges with no decoded twin), as last
-/// linked.
+/// What both sides keep, in stored indices: the border of the decoded region as loops of open
+/// edges (directed edges of decoded triangles whose twin is not decoded, each linked to the next
+/// and previous along its loop, as Edgebreaker's front), a ring of the newest open edges and a
+/// ring of the newest vertices named.
 struct Rings {
-    edges: [(u32, u32, u32); EDGE_RING],
+    from: Vec<u32>,
+    to: Vec<u32>,
+    /// The third vertex of the triangle that made the edge: the parallelogram's far corner.
+    opp: Vec<u32>,
+    next: Vec<u32>,
+    prev: Vec<u32>,
+    alive: Vec<bool>,
+    edges: [u32; EDGE_RING],
     edge_head: usize,
     vertices: [u32; VERTEX_RING],
     vertex_head: usize,
-    next: Vec<u32>,
-    prev: Vec<u32>,
 }
 
 impl Rings {
-    fn new(vertices: usize) -> Self {
+    fn new(faces: usize) -> Self {
+        let cap = 3 * faces;
         Rings {
-            edges: [(NONE, NONE, NONE); EDGE_RING],
+            from: Vec::with_capacity(cap),
+            to: Vec::with_capacity(cap),
+            opp: Vec::with_capacity(cap),
+            next: Vec::with_capacity(cap),
+            prev: Vec::with_capacity(cap),
+            alive: Vec::with_capacity(cap),
+            edges: [NONE; EDGE_RING],
             edge_head: 0,
             vertices: [NONE; VERTEX_RING],
             vertex_head: 0,
-            next: vec![NONE; vertices],
-            prev: vec![NONE; vertices],
         }
     }
 
-    /// After triangle `(b, a, c)` across the open edge `(a, b)`: its edges that close no border
-    /// edge become open edges and border links.
+    /// The open edge `j` places back in the ring, if it is still open.
     #[inline]
-    fn advance(&mut self, a: u32, b: u32, c: u32) {
-        let right = self.next[b as usize] == c;
-        let left = self.prev[a as usize] == c;
-        if !left {
-            self.next[a as usize] = c;
-            self.prev[c as usize] = a;
-            self.push_edge((a, c, b));
-        }
-        if !right {
-            self.next[c as usize] = b;
-            self.prev[b as usize] = c;
-            self.push_edge((c, b, a));
-        }
+    fn edge(&self, j: usize) -> Option<u32> {
+        let e = self.edges[(self.edge_head + EDGE_RING - j) % EDGE_RING];
+        (e != NONE && self.alive[e as usize]).then_some(e)
     }
 
-    /// After a triangle `s` that shares no open edge.
+    /// Start, end and far corner of open edge `e`.
     #[inline]
-    fn start(&mut self, s: [u32; 3]) {
-        for k in 0..3 {
-            let (x, y) = (s[k], s[(k + 1) % 3]);
-            self.next[x as usize] = y;
-            self.prev[y as usize] = x;
-            self.push_edge((x, y, s[(k + 2) % 3]));
-        }
+    fn ends(&self, e: u32) -> (u32, u32, u32) {
+        let e = e as usize;
+        (self.from[e], self.to[e], self.opp[e])
     }
+
+    /// The vertex after edge `e` along its loop (`RIGHT`) and the one before it (`LEFT`).
     #[inline]
-    fn edge(&self, j: usize) -> (u32, u32, u32) {
-        self.edges[(self.edge_head + EDGE_RING - j) % EDGE_RING]
+    fn sides(&self, e: u32) -> [u32; 2] {
+        [self.to[self.next[e as usize] as usize], self.from[self.prev[e as usize] as usize]]
     }
+
     #[inline]
-    fn push_edge(&mut self, e: (u32, u32, u32)) {
+    fn make(&mut self, a: u32, b: u32, o: u32) -> u32 {
+        let e = self.from.len() as u32;
+        self.from.push(a);
+        self.to.push(b);
+        self.opp.push(o);
+        self.next.push(NONE);
+        self.prev.push(NONE);
+        self.alive.push(true);
         self.edge_head = (self.edge_head + 1) % EDGE_RING;
         self.edges[self.edge_head] = e;
+        e
     }
+
+    #[inline]
+    fn link(&mut self, x: u32, y: u32) {
+        self.next[x as usize] = y;
+        self.prev[y as usize] = x;
+    }
+
+    /// After triangle `(b, a, c)` across open edge `e = (a, b)`: `e` closes, and so does the edge
+    /// before or after it when `c` is that edge's far end; the triangle's other edges open.
+    #[inline]
+    fn advance(&mut self, e: u32, c: u32) {
+        let (a, b, _) = self.ends(e);
+        let (l, r) = (self.prev[e as usize], self.next[e as usize]);
+        let right = self.to[r as usize] == c;
+        let left = self.from[l as usize] == c;
+        self.alive[e as usize] = false;
+        match (left, right) {
+            (false, false) => {
+                let x = self.make(a, c, b);
+                let y = self.make(c, b, a);
+                self.link(l, x);
+                self.link(x, y);
+                self.link(y, r);
+            }
+            (false, true) => {
+                self.alive[r as usize] = false;
+                let after = self.next[r as usize];
+                let x = self.make(a, c, b);
+                self.link(l, x);
+                self.link(x, if after == e { l } else { after });
+            }
+            (true, false) => {
+                self.alive[l as usize] = false;
+                let before = self.prev[l as usize];
+                let y = self.make(c, b, a);
+                self.link(if before == e { r } else { before }, y);
+                self.link(y, r);
+            }
+            (true, true) => {
+                self.alive[l as usize] = false;
+                self.alive[r as usize] = false;
+                let (before, after) = (self.prev[l as usize], self.next[r as usize]);
+                if l != r && before != r && self.alive[before as usize] && self.alive[after as usize] {
+                    self.link(before, after);
+                }
+            }
+        }
+    }
+
+    /// After a triangle `s` that shares no open edge: a loop of its three edges.
+    #[inline]
+    fn start(&mut self, s: [u32; 3]) {
+        let x = self.make(s[0], s[1], s[2]);
+        let y = self.make(s[1], s[2], s[0]);
+        let z = self.make(s[2], s[0], s[1]);
+        self.link(x, y);
+        self.link(y, z);
+        self.link(z, x);
+    }
+
     #[inline]
     fn vertex(&self, j: usize) -> u32 {
         self.vertices[(self.vertex_head + VERTEX_RING - j) % VERTEX_RING]
@@ -414,7 +482,7 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         st: States::new(),
         stored: vec![NONE; n],
         order: Order { faces: Vec::with_capacity(nf), rotation: Vec::with_capacity(nf), vertices: Vec::with_capacity(n) },
-        rings: Rings::new(n),
+        rings: Rings::new(nf),
     };
 
     e.st.meta.put(&mut e.w, g.material_ranges.len() as u32);
@@ -473,12 +541,10 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         let (start, end) = (run[0], run[1]);
         let mut cursor = start;
         for _ in start..end {
-            let mut hit = None;
+            let mut hit: Option<(usize, u32, u32)> = None;
             for j in 0..EDGE_RING {
-                let (a, b, o) = e.rings.edge(j);
-                if a == NONE {
-                    continue;
-                }
+                let Some(edge) = e.rings.edge(j) else { continue };
+                let (a, b, _) = e.rings.ends(edge);
                 let key = ((e.input(b) as u64) << 32) | e.input(a) as u64;
                 let from = directed.partition_point(|x| x.0 < key);
                 if let Some(&(_, f)) = directed[from..]
@@ -486,12 +552,21 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                     .take_while(|x| x.0 == key)
                     .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
                 {
-                    hit = Some((j, f, a, b, o));
-                    break;
+                    let t = &g.indices[3 * f as usize..3 * f as usize + 3];
+                    let third = t.iter().copied().find(|&v| v != e.input(a) as u32 && v != e.input(b) as u32).unwrap_or(t[0]);
+                    let c = e.stored[third as usize];
+                    let closes = c != NONE && e.rings.sides(edge).contains(&c);
+                    if hit.is_none() || closes {
+                        hit = Some((j, f, edge));
+                    }
+                    if closes {
+                        break;
+                    }
                 }
             }
             match hit {
-                Some((j, f, a, b, o)) => {
+                Some((j, f, edge)) => {
+                    let (a, b, o) = e.rings.ends(edge);
                     let mark = e.w.len();
                     triangle_code.put(&mut e.w, j);
                     e.stats.bits[0] += e.w.len() - mark;
@@ -501,14 +576,15 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                     let k = (0..3).find(|&k| t[k] == b_in && t[(k + 1) % 3] == e.input(a) as u32).expect("the edge's face holds it");
                     let third = t[(k + 2) % 3];
                     let c = e.stored[third as usize];
-                    let c = if c != NONE && c == e.rings.next[b as usize] {
+                    let [right, left] = e.rings.sides(edge);
+                    let c = if c != NONE && c == right {
                         e.side(RIGHT, c)
-                    } else if c != NONE && c == e.rings.prev[a as usize] {
+                    } else if c != NONE && c == left {
                         e.side(LEFT, c)
                     } else {
                         e.corner(third, Pred::Edge(a, b, o))
                     };
-                    e.rings.advance(a, b, c);
+                    e.rings.advance(edge, c);
                     done[f as usize] = true;
                     e.order.faces.push(f);
                     e.order.rotation.push(k as u8);
@@ -688,7 +764,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     }
 
     let (triangle_code, corner_code) = codes();
-    let mut rings = Rings::new(nv);
+    let mut rings = Rings::new(nf);
     d.points.reserve(nv);
     d.indices.reserve(3 * nf);
     if x.colors {
@@ -700,118 +776,113 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     let shift = lat.shift;
     for _ in 0..nf {
         let t = triangle_code.get(&mut r);
-        let corner =
-            |d: &mut Decoded, r: &mut BitReader, rings: &mut Rings, st: &mut States, pred: Pred| -> std::result::Result<u32, Fault> {
-                let c = corner_code.get(r);
-                let fault = |r: &BitReader, m: String| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize, m);
-                if c <= NEW_BORDER {
-                    let s = d.points.len() as u32;
-                    if s as usize >= nv {
-                        return Err(fault(r, format!("more than the node's {nv} vertices")));
-                    }
-                    let p = match pred {
+        let corner = |d: &mut Decoded,
+                      r: &mut BitReader,
+                      rings: &mut Rings,
+                      st: &mut States,
+                      pred: Pred,
+                      sides: [u32; 2]|
+         -> std::result::Result<u32, Fault> {
+            let c = corner_code.get(r);
+            let fault = |r: &BitReader, m: String| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize, m);
+            if c <= NEW_BORDER {
+                let s = d.points.len() as u32;
+                if s as usize >= nv {
+                    return Err(fault(r, format!("more than the node's {nv} vertices")));
+                }
+                let p = match pred {
+                    Pred::Edge(a, b, o) => parallelogram(
+                        d.points[a as usize].map(|v| v as i64),
+                        d.points[b as usize].map(|v| v as i64),
+                        d.points[o as usize].map(|v| v as i64),
+                        0,
+                        top,
+                    ),
+                    Pred::Jump(Some(prev)) => d.points[prev as usize].map(|v| v as i64),
+                    Pred::Jump(None) => [0; 3],
+                };
+                let mut g = [0i64; 3];
+                for k in 0..3 {
+                    g[k] = match pred {
+                        Pred::Jump(_) => p[k] + st.jump[k].get_signed(r) as i64,
+                        Pred::Edge(..) if c == NEW_BORDER => p[k] + st.border[k].get_signed(r) as i64,
+                        Pred::Edge(..) => (lattice_of(p[k], shift) + st.lattice[k].get_signed(r) as i64) << shift,
+                    };
+                }
+                if g.iter().any(|&v| v < 0 || v > top) {
+                    return Err(fault(r, format!("vertex {s} lies off the grid")));
+                }
+                d.points.push(g.map(|v| v as u32));
+                if x.colors {
+                    let pc = match pred {
                         Pred::Edge(a, b, o) => parallelogram(
-                            d.points[a as usize].map(|v| v as i64),
-                            d.points[b as usize].map(|v| v as i64),
-                            d.points[o as usize].map(|v| v as i64),
+                            d.colors[a as usize].map(|v| v as i64),
+                            d.colors[b as usize].map(|v| v as i64),
+                            d.colors[o as usize].map(|v| v as i64),
                             0,
-                            top,
+                            255,
                         ),
-                        Pred::Jump(Some(prev)) => d.points[prev as usize].map(|v| v as i64),
-                        Pred::Jump(None) => [0; 3],
+                        Pred::Jump(Some(prev)) => d.colors[prev as usize].map(|v| v as i64),
+                        Pred::Jump(None) => [0; 4],
                     };
-                    let mut g = [0i64; 3];
-                    for k in 0..3 {
-                        g[k] = match pred {
-                            Pred::Jump(_) => p[k] + st.jump[k].get_signed(r) as i64,
-                            Pred::Edge(..) if c == NEW_BORDER => p[k] + st.border[k].get_signed(r) as i64,
-                            Pred::Edge(..) => (lattice_of(p[k], shift) + st.lattice[k].get_signed(r) as i64) << shift,
-                        };
+                    let mut col = [0u8; 4];
+                    for k in 0..4 {
+                        col[k] = (pc[k] + st.color[k].get_signed(r) as i64) as u8;
                     }
-                    if g.iter().any(|&v| v < 0 || v > top) {
-                        return Err(fault(r, format!("vertex {s} lies off the grid")));
-                    }
-                    d.points.push(g.map(|v| v as u32));
-                    if x.colors {
-                        let pc = match pred {
-                            Pred::Edge(a, b, o) => parallelogram(
-                                d.colors[a as usize].map(|v| v as i64),
-                                d.colors[b as usize].map(|v| v as i64),
-                                d.colors[o as usize].map(|v| v as i64),
-                                0,
-                                255,
-                            ),
-                            Pred::Jump(Some(prev)) => d.colors[prev as usize].map(|v| v as i64),
-                            Pred::Jump(None) => [0; 4],
-                        };
-                        let mut col = [0u8; 4];
-                        for k in 0..4 {
-                            col[k] = (pc[k] + st.color[k].get_signed(r) as i64) as u8;
-                        }
-                        d.colors.push(col);
-                    }
-                    if x.uvs {
-                        let pu = match pred {
-                            Pred::Edge(a, b, o) => {
-                                parallelogram(d.uvs[a as usize], d.uvs[b as usize], d.uvs[o as usize], -UV_LIMIT, UV_LIMIT)
-                            }
-                            Pred::Jump(Some(prev)) => d.uvs[prev as usize],
-                            Pred::Jump(None) => [0; 2],
-                        };
-                        let mut uv = [0i64; 2];
-                        for k in 0..2 {
-                            uv[k] = pu[k] + st.uv[k].get_signed(r) as i64;
-                        }
-                        d.uvs.push(uv);
-                    }
-                    rings.push_vertex(s);
-                    return Ok(s);
+                    d.colors.push(col);
                 }
-                if c == RIGHT || c == LEFT {
-                    let s = match pred {
-                        Pred::Edge(a, b, _) => {
-                            if c == RIGHT {
-                                rings.next[b as usize]
-                            } else {
-                                rings.prev[a as usize]
-                            }
-                        }
-                        Pred::Jump(_) => NONE,
+                if x.uvs {
+                    let pu = match pred {
+                        Pred::Edge(a, b, o) => parallelogram(d.uvs[a as usize], d.uvs[b as usize], d.uvs[o as usize], -UV_LIMIT, UV_LIMIT),
+                        Pred::Jump(Some(prev)) => d.uvs[prev as usize],
+                        Pred::Jump(None) => [0; 2],
                     };
-                    if s == NONE {
-                        return Err(fault(r, "a border corner with no border vertex there".into()));
+                    let mut uv = [0i64; 2];
+                    for k in 0..2 {
+                        uv[k] = pu[k] + st.uv[k].get_signed(r) as i64;
                     }
-                    return Ok(s);
+                    d.uvs.push(uv);
                 }
-                if c < INDEX {
-                    let s = rings.vertex(c - RING);
-                    if s == NONE {
-                        return Err(fault(r, format!("corner names vertex ring slot {} before it is filled", c - RING)));
-                    }
-                    return Ok(s);
-                }
-                let back = st.index.get(r) as u64;
-                let next = d.points.len() as u64;
-                if back + 1 > next {
-                    return Err(fault(r, format!("corner names vertex {} back of {next}", back + 1)));
-                }
-                let s = (next - 1 - back) as u32;
                 rings.push_vertex(s);
-                Ok(s)
-            };
-        if t < MISS {
-            let (a, b, o) = rings.edge(t);
-            if a == NONE {
-                return Err((at(&r), format!("triangle names edge ring slot {t} before it is filled")));
+                return Ok(s);
             }
-            let c = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Edge(a, b, o))?;
+            if c == RIGHT || c == LEFT {
+                let s = sides[c - RIGHT];
+                if s == NONE {
+                    return Err(fault(r, "a border corner with no border vertex there".into()));
+                }
+                return Ok(s);
+            }
+            if c < INDEX {
+                let s = rings.vertex(c - RING);
+                if s == NONE {
+                    return Err(fault(r, format!("corner names vertex ring slot {} before it is filled", c - RING)));
+                }
+                return Ok(s);
+            }
+            let back = st.index.get(r) as u64;
+            let next = d.points.len() as u64;
+            if back + 1 > next {
+                return Err(fault(r, format!("corner names vertex {} back of {next}", back + 1)));
+            }
+            let s = (next - 1 - back) as u32;
+            rings.push_vertex(s);
+            Ok(s)
+        };
+        if t < MISS {
+            let Some(edge) = rings.edge(t) else {
+                return Err((at(&r), format!("triangle names edge ring slot {t}, which holds no open edge")));
+            };
+            let (a, b, o) = rings.ends(edge);
+            let sides = rings.sides(edge);
+            let c = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Edge(a, b, o), sides)?;
             d.indices.extend_from_slice(&[b, a, c]);
-            rings.advance(a, b, c);
+            rings.advance(edge, c);
         } else {
             let mut s = [0u32; 3];
             for k in 0..3 {
                 let prev = if k > 0 { Some(s[k - 1]) } else { (d.points.len() as u32).checked_sub(1) };
-                s[k] = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Jump(prev))?;
+                s[k] = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Jump(prev), [NONE; 2])?;
             }
             d.indices.extend_from_slice(&s);
             rings.start(s);
@@ -988,7 +1059,9 @@ mod tests {
             let half = g.indices.len() / 6;
             assert!(order.faces[..half].iter().all(|&f| (f as usize) < half));
             if shift > 0 {
-                assert!(payload.len() < encode(&sample(17, 0).0, Lattice { shift: 0, ..lat }, 16).unwrap().0.len());
+                let position_bits = |g: &GeometryCodes, lat| encode_with_stats(g, lat, 16).unwrap().2.bits[3];
+                let (fine, fine_lat) = sample(17, 0);
+                assert!(position_bits(&g, lat) < position_bits(&fine, fine_lat), "a coarser lattice costs fewer bits");
             }
         }
     }

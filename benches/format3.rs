@@ -1,0 +1,162 @@
+//! Format 3 (issue 15, in progress) against format 2, converted from the same meshes in the same
+//! run: bytes per input face (all levels, as `strata convert` reports), where format 3's bits go,
+//! how often each connectivity symbol occurs, and how fast each format's node geometry decodes
+//! (one core, positions, normals and indices into arrays, from bytes in memory). The goal of issue
+//! 15 is 4.0 bytes per input face and 50M faces/s; Corto (Nexus) reaches 4.48 on the CT head.
+//!
+//! `cargo bench --bench format3 [-- mesh ...]`; without arguments the bunny, the gargoyle and the
+//! CT head of ../shared/meshes when present, else the noisy-sphere fixture.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use strata::format::geom::{self, v2::GeometryCodes, v3, NodeContext};
+use strata::format::Reader;
+use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::write::{Encoding, Precision};
+
+fn write(input: &Path, encoding: Encoding, tag: &str) -> (PathBuf, strata::format::WriteSummary) {
+    let name = input.file_stem().unwrap().to_string_lossy();
+    let out = std::env::temp_dir().join(format!("strata-format3-{name}-{tag}-{}.strata", std::process::id()));
+    let opts = ConvertOptions { encoding, ..ConvertOptions::default() };
+    let s = convert(input, &Default::default(), &out, &opts, &mut Silent).expect("convert").summary;
+    (out, s)
+}
+
+/// Decode every node `rounds` times; faces of all levels per second.
+fn decode_rate(path: &Path, rounds: usize) -> f64 {
+    let rd = Reader::open_path(path).expect("open");
+    let chunks: Vec<Vec<u8>> = rd.nodes().iter().map(|n| rd.read_at(n.offset, n.size as u64).expect("read")).collect();
+    let faces: u64 = rd.nodes().iter().map(|n| n.faces as u64).sum();
+    let start = Instant::now();
+    for _ in 0..rounds {
+        for (i, bytes) in chunks.iter().enumerate() {
+            let ctx = NodeContext { path, index: i as u32, record: &rd.nodes()[i], header: rd.header() };
+            std::hint::black_box(geom::decode(&ctx, bytes).expect("decode"));
+        }
+    }
+    (faces * rounds as u64) as f64 / start.elapsed().as_secs_f64()
+}
+
+/// Symbol counts of every node re-encoded from its decoded codes, level 0 and the others apart.
+fn symbols(path: &Path) -> [v3::Stats; 2] {
+    let rd = Reader::open_path(path).expect("open");
+    let h = rd.header();
+    let mut out = [v3::Stats::default(), v3::Stats::default()];
+    for (i, n) in rd.nodes().iter().enumerate() {
+        let bytes = rd.read_at(n.offset, n.size as u64).expect("read");
+        let x = v3::Expect {
+            faces: n.faces,
+            vertices: n.vertices,
+            bits: h.grid.bits,
+            materials: h.materials,
+            normals: h.attributes.normals,
+            uvs: h.attributes.uvs,
+            colors: h.attributes.colors,
+            clusters: n.level == 0,
+        };
+        let d = v3::decode_codes(&bytes[16..bytes.len() - 4], x).unwrap_or_else(|e| panic!("node {i}: {e:?}"));
+        let lat = d.lattice.expect("decoded");
+        let s = (1u64 << lat.uv_bits) as f64;
+        let g = GeometryCodes {
+            points: d.points,
+            normals: d.normals.iter().map(|q| q.map(|c| c as i16)).collect(),
+            uvs: d.uvs.iter().map(|q| q.map(|c| ((c as f64 / s) as f32).to_bits())).collect(),
+            colors: d.colors,
+            indices: d.indices,
+            material_ranges: d.material_ranges,
+            clusters: (n.level == 0).then_some((d.cluster_shift, d.clusters)),
+            lattice: lat,
+        };
+        let (_, _, st) = v3::encode_with_stats(&g, lat, h.grid.bits).expect("re-encode");
+        let t = &mut out[(n.level > 0) as usize];
+        for (a, b) in t.triangle_symbols.iter_mut().zip(st.triangle_symbols) {
+            *a += b;
+        }
+        for (a, b) in t.corner_symbols.iter_mut().zip(st.corner_symbols) {
+            *a += b;
+        }
+        for (a, b) in t.bits.iter_mut().zip(st.bits) {
+            *a += b;
+        }
+    }
+    out
+}
+
+fn entropy(counts: &[u64]) -> f64 {
+    let n: u64 = counts.iter().sum();
+    counts.iter().filter(|&&c| c > 0).map(|&c| -(c as f64 / n as f64) * (c as f64 / n as f64).log2()).sum()
+}
+
+fn main() {
+    let mut inputs: Vec<PathBuf> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).map(PathBuf::from).collect();
+    if inputs.is_empty() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let shared = root.join("../shared/meshes");
+        for m in ["scans/stanford_bun_zipper.ply", "scans/3dhop_gargo.ply", "large/cthead_skin_native.ply"] {
+            if shared.join(m).exists() {
+                inputs.push(shared.join(m));
+            }
+        }
+        if inputs.is_empty() {
+            println!("../shared/meshes not found: the noisy-sphere fixture only");
+            inputs.push(root.join("fixtures/noisy_sphere.ply"));
+        }
+    }
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
+    let d = Precision::default();
+    let p = Precision {
+        grid_bits: env("STRATA_GRID_BITS").map_or(d.grid_bits, |v| v as u32),
+        lattice: env("STRATA_LATTICE").unwrap_or(d.lattice),
+        normal_bits: env("STRATA_NORMAL_BITS").map_or(d.normal_bits, |v| v as u32),
+        uv_bits: d.uv_bits,
+    };
+    println!(
+        "format 3 at grid {} bits, lattice {} of the error, normals {} bits, UVs {} bits",
+        p.grid_bits, p.lattice, p.normal_bits, p.uv_bits
+    );
+    for input in &inputs {
+        let name = input.file_name().unwrap().to_string_lossy();
+        let (f2, s2) = write(input, Encoding::V2, "2");
+        let (f3, s3) = write(input, Encoding::V3(p), "3");
+        let faces = s3.input_faces as f64;
+        println!("\n{name}: {} input faces, {} nodes", s3.input_faces, s3.nodes);
+        println!(
+            "  bytes per input face: format 2 {:.2}, format 3 {:.2} ({:.2}×; skeleton {:.2})",
+            s2.bytes_per_face(),
+            s3.bytes_per_face(),
+            s2.bytes_per_face() / s3.bytes_per_face(),
+            s3.skeleton_bytes as f64 / faces
+        );
+        if let Some(bits) = s3.geometry_bits {
+            let parts: Vec<String> = v3::STAT_NAMES
+                .iter()
+                .zip(bits)
+                .filter(|(_, b)| *b > 0)
+                .map(|(n, b)| format!("{n} {:.2}", b as f64 / 8.0 / faces))
+                .collect();
+            println!("  format 3 geometry, bytes per input face: {}", parts.join(", "));
+        }
+        let rounds = (2_000_000.0 / faces).ceil().max(1.0) as usize;
+        let (r2, r3) = (decode_rate(&f2, rounds), decode_rate(&f3, rounds));
+        println!("  decode, M faces/s (one core): format 2 {:.1}, format 3 {:.1}", r2 / 1e6, r3 / 1e6);
+        for (k, st) in symbols(&f3).iter().enumerate() {
+            let tri: u64 = st.triangle_symbols.iter().sum();
+            let parts: Vec<String> = v3::STAT_NAMES
+                .iter()
+                .zip(st.bits)
+                .filter(|(_, b)| *b > 0)
+                .map(|(n, b)| format!("{n} {:.2}", b as f64 / tri.max(1) as f64))
+                .collect();
+            println!("  {}: bits per stored face: {}", if k == 0 { "level 0" } else { "levels 1+" }, parts.join(", "));
+            println!(
+                "  {} triangles {tri}: edge slots {:?} (entropy {:.2} bits); corners {:?} (entropy {:.2} bits)",
+                if k == 0 { "level 0" } else { "levels 1+" },
+                st.triangle_symbols,
+                entropy(&st.triangle_symbols),
+                st.corner_symbols,
+                entropy(&st.corner_symbols)
+            );
+        }
+        let _ = (std::fs::remove_file(&f2), std::fs::remove_file(&f3));
+    }
+}
