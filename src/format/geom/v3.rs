@@ -30,8 +30,10 @@ pub const VERTEX_RING: usize = 16;
 /// Bytes before the bit stream: lattice shift, normal bits, UV bits, reserved.
 pub const PAYLOAD_HEADER_BYTES: usize = 4;
 
-/// Triangle symbols: `0..16` names an edge of the ring (0 the newest), [`MISS`] none.
+/// Triangle symbols: `0..16` names an edge of the ring (0 the newest), [`MISS`] none, [`FAR`] an
+/// open edge older than the ring, by how many edges back it was made.
 const MISS: usize = EDGE_RING;
+const FAR: usize = EDGE_RING + 1;
 /// Corner symbols: a new vertex inside the node, a new border vertex, the vertex after the shared
 /// edge's end along the decoded region's border, the vertex before its start, a ring vertex
 /// (`RING..RING+16`, 0 the newest), an index.
@@ -44,7 +46,7 @@ const INDEX: usize = RING + VERTEX_RING;
 
 /// Code lengths of the triangle symbols: Huffman lengths of their frequencies over the bunny, the
 /// gargoyle and the CT head (`cargo bench --bench format3` prints them), each mesh weighted alike.
-pub const TRIANGLE_CODE: [u8; EDGE_RING + 1] = [1, 2, 5, 4, 6, 6, 7, 6, 8, 7, 8, 7, 8, 8, 8, 8, 4];
+pub const TRIANGLE_CODE: [u8; EDGE_RING + 2] = [1, 2, 5, 4, 6, 6, 7, 6, 8, 7, 8, 7, 8, 8, 8, 8, 5, 5];
 /// Code lengths of the corner symbols, made as [`TRIANGLE_CODE`]'s.
 pub const CORNER_CODE: [u8; INDEX + 1] = [1, 4, 5, 3, 12, 12, 11, 10, 10, 10, 10, 10, 9, 9, 9, 8, 8, 8, 8, 8, 2];
 
@@ -120,6 +122,7 @@ struct States {
     border: [Rice; 3],
     jump: [Rice; 3],
     index: Rice,
+    far: Rice,
     color: [Rice; 4],
     uv: [Rice; 2],
     normal: [Rice; 2],
@@ -133,6 +136,7 @@ impl States {
             border: [Rice::new(6); 3],
             jump: [Rice::new(12); 3],
             index: Rice::new(4),
+            far: Rice::new(5),
             color: [Rice::new(2); 4],
             uv: [Rice::new(6); 2],
             normal: [Rice::new(1); 2],
@@ -316,7 +320,7 @@ pub struct Stats {
     /// Bits of triangle symbols, corner symbols, vertex indices, positions, colors, UVs,
     /// normals, and material ranges with clusters.
     pub bits: [u64; 8],
-    pub triangle_symbols: [u64; EDGE_RING + 1],
+    pub triangle_symbols: [u64; EDGE_RING + 2],
     pub corner_symbols: [u64; INDEX + 1],
 }
 
@@ -542,6 +546,7 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         let mut cursor = start;
         for _ in start..end {
             let mut hit: Option<(usize, u32, u32)> = None;
+            let mut best = 3;
             for j in 0..EDGE_RING {
                 let Some(edge) = e.rings.edge(j) else { continue };
                 let (a, b, _) = e.rings.ends(edge);
@@ -555,12 +560,40 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                     let t = &g.indices[3 * f as usize..3 * f as usize + 3];
                     let third = t.iter().copied().find(|&v| v != e.input(a) as u32 && v != e.input(b) as u32).unwrap_or(t[0]);
                     let c = e.stored[third as usize];
-                    let closes = c != NONE && e.rings.sides(edge).contains(&c);
-                    if hit.is_none() || closes {
+                    // Rank: closing against the border (0), a new vertex (1), any other (2).
+                    let rank = if c == NONE {
+                        1
+                    } else if e.rings.sides(edge).contains(&c) {
+                        0
+                    } else {
+                        2
+                    };
+                    if hit.is_none() || rank < best {
                         hit = Some((j, f, edge));
+                        best = rank;
                     }
-                    if closes {
+                    if rank == 0 {
                         break;
+                    }
+                }
+            }
+            if hit.is_none() {
+                let across = |edge: u32, rings: &Rings| {
+                    let (a, b, _) = rings.ends(edge);
+                    let key = ((rings_input(&e.order, b) as u64) << 32) | rings_input(&e.order, a) as u64;
+                    let from = directed.partition_point(|x| x.0 < key);
+                    directed[from..]
+                        .iter()
+                        .take_while(|x| x.0 == key)
+                        .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
+                        .map(|x| x.1)
+                };
+                for edge in (0..e.rings.from.len() as u32).rev() {
+                    if e.rings.alive[edge as usize] {
+                        if let Some(f) = across(edge, &e.rings) {
+                            hit = Some((FAR, f, edge));
+                            break;
+                        }
                     }
                 }
             }
@@ -569,6 +602,9 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                     let (a, b, o) = e.rings.ends(edge);
                     let mark = e.w.len();
                     triangle_code.put(&mut e.w, j);
+                    if j == FAR {
+                        e.st.far.put(&mut e.w, e.rings.from.len() as u32 - 1 - edge);
+                    }
                     e.stats.bits[0] += e.w.len() - mark;
                     e.stats.triangle_symbols[j] += 1;
                     let t = &g.indices[3 * f as usize..3 * f as usize + 3];
@@ -629,6 +665,11 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     let mut payload = vec![lat.shift as u8, lat.normal_bits as u8, lat.uv_bits as u8, 0];
     payload.extend(e.w.finish());
     Ok((payload, e.order, e.stats))
+}
+
+/// The input vertex stored as `s`.
+fn rings_input(order: &Order, s: u32) -> u32 {
+    order.vertices[s as usize]
 }
 
 /// The stored index array of `order`.
@@ -869,9 +910,24 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
             rings.push_vertex(s);
             Ok(s)
         };
-        if t < MISS {
-            let Some(edge) = rings.edge(t) else {
-                return Err((at(&r), format!("triangle names edge ring slot {t}, which holds no open edge")));
+        if t != MISS {
+            let edge = if t == FAR {
+                let back = st.far.get(&mut r) as usize;
+                let made = rings.from.len();
+                match made.checked_sub(back + 1) {
+                    Some(edge) if rings.alive[edge] => edge as u32,
+                    _ => {
+                        return Err((
+                            at(&r),
+                            format!("triangle names the open edge made {} edges back of {made}, which is not open", back + 1),
+                        ))
+                    }
+                }
+            } else {
+                let Some(edge) = rings.edge(t) else {
+                    return Err((at(&r), format!("triangle names edge ring slot {t}, which holds no open edge")));
+                };
+                edge
             };
             let (a, b, o) = rings.ends(edge);
             let sides = rings.sides(edge);
