@@ -97,20 +97,46 @@ pub fn predict_octa(x: f64, y: f64, z: f64, scale: i32) -> [i32; 2] {
     [(px * s + 0.5).floor() as i32, (py * s + 0.5).floor() as i32]
 }
 
-/// Area-weighted vertex normals of grid points `p` and triangles `t`, summed exactly (every term
-/// is an integer below 2^53), predicted as octahedral codes at `scale`.
+/// `atan(x)` for `x ≥ 0` from IEEE-exact operations only, within 0.005 rad: the same bits in every
+/// reader, unlike a library `atan`.
+#[inline]
+fn atan_approx(x: f64) -> f64 {
+    let f = |t: f64| t * (std::f64::consts::FRAC_PI_4 + 0.273 * (1.0 - t));
+    if x <= 1.0 {
+        f(x)
+    } else {
+        std::f64::consts::FRAC_PI_2 - f(1.0 / x)
+    }
+}
+
+/// Vertex normals of grid points `p` and triangles `t`, each face's normal weighted by its angle at
+/// the vertex (as strata computes normals), predicted as octahedral codes at `scale`. The sums use
+/// f64 operations in a fixed order (faces in order, corners in order), so every reader gets the
+/// same bits.
 fn predicted_normals(p: &[[u32; 3]], t: &[u32], scale: i32) -> Vec<[i32; 2]> {
     let mut sum = vec![[0f64; 3]; p.len()];
     for f in t.chunks_exact(3) {
-        let [a, b, c] = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
-        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let q = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
+        let sub = |x: [f64; 3], y: [f64; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+        let (u, v) = (sub(q[1], q[0]), sub(q[2], q[0]));
         let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-        for &i in f {
-            let s = &mut sum[i as usize];
-            s[0] += n[0];
-            s[1] += n[1];
-            s[2] += n[2];
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if len == 0.0 {
+            continue;
+        }
+        for k in 0..3 {
+            let (e1, e2) = (sub(q[(k + 1) % 3], q[k]), sub(q[(k + 2) % 3], q[k]));
+            let l1 = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt();
+            let l2 = (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]).sqrt();
+            let dot = e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2];
+            let den = l1 * l2 + dot;
+            // The angle at the corner is 2·atan(|e1 × e2| / (|e1||e2| + e1·e2)); |e1 × e2| = len.
+            let angle = if den > 0.0 { 2.0 * atan_approx(len / den) } else { std::f64::consts::PI };
+            let w = angle / len;
+            let s = &mut sum[f[k] as usize];
+            s[0] += n[0] * w;
+            s[1] += n[1] * w;
+            s[2] += n[2] * w;
         }
     }
     sum.iter().map(|s| predict_octa(s[0], s[1], s[2], scale)).collect()
@@ -125,7 +151,10 @@ struct States {
     far: Rice,
     color: [Rice; 4],
     uv: [Rice; 2],
+    /// Normals of vertices inside the node, and of vertices on an open edge, whose prediction
+    /// sees only part of their fan.
     normal: [Rice; 2],
+    normal_border: [Rice; 2],
     meta: Rice,
 }
 
@@ -140,6 +169,7 @@ impl States {
             color: [Rice::new(2); 4],
             uv: [Rice::new(6); 2],
             normal: [Rice::new(1); 2],
+            normal_border: [Rice::new(4); 2],
             meta: Rice::new(4),
         }
     }
@@ -291,6 +321,19 @@ impl Rings {
         self.link(x, y);
         self.link(y, z);
         self.link(z, x);
+    }
+
+    /// Which of `n` vertices lie on an edge still open: once every triangle is decoded, the node's
+    /// border (and edges whose twin is missing or doubled).
+    fn open_vertices(&self, n: usize) -> Vec<bool> {
+        let mut open = vec![false; n];
+        for (e, &alive) in self.alive.iter().enumerate() {
+            if alive {
+                open[self.from[e] as usize] = true;
+                open[self.to[e] as usize] = true;
+            }
+        }
+        open
     }
 
     #[inline]
@@ -654,10 +697,12 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         let points: Vec<[u32; 3]> = e.order.vertices.iter().map(|&v| g.points[v as usize]).collect();
         let tris = stored_indices(g, &e.order, &e.stored);
         let pred = predicted_normals(&points, &tris, normal_scale(lat.normal_bits));
+        let open = e.rings.open_vertices(points.len());
         for (s, &v) in e.order.vertices.iter().enumerate() {
             let q = g.normals[v as usize];
+            let states = if open[s] { &mut e.st.normal_border } else { &mut e.st.normal };
             for k in 0..2 {
-                e.st.normal[k].put_signed(&mut e.w, q[k] as i32 - pred[s][k]);
+                states[k].put_signed(&mut e.w, q[k] as i32 - pred[s][k]);
             }
         }
     }
@@ -950,9 +995,11 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     if x.normals {
         let scale = normal_scale(lat.normal_bits);
         let pred = predicted_normals(&d.points, &d.indices, scale);
+        let open = rings.open_vertices(nv);
         d.normals.reserve(nv);
         for (v, p) in pred.iter().enumerate() {
-            let q = [p[0] + st.normal[0].get_signed(&mut r), p[1] + st.normal[1].get_signed(&mut r)];
+            let states = if open[v] { &mut st.normal_border } else { &mut st.normal };
+            let q = [p[0] + states[0].get_signed(&mut r), p[1] + states[1].get_signed(&mut r)];
             if q.iter().any(|c| c.abs() > scale) {
                 return Err((at(&r), format!("normal {v} exceeds the {}-bit scale", lat.normal_bits)));
             }
