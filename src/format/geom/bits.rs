@@ -137,8 +137,13 @@ impl Rice {
     /// The parameter: the smallest `k` with `count · 2^k ≥ sum`, at most [`RICE_MAX_K`].
     #[inline]
     pub fn k(&self) -> u32 {
-        let mut k = 0;
-        while k < RICE_MAX_K && ((self.count as u64) << k) < self.sum {
+        // Start from the difference of bit lengths, at most one off the answer either way.
+        let count = self.count as u64;
+        let mut k = (64 - self.sum.leading_zeros()).saturating_sub(64 - count.leading_zeros()).min(RICE_MAX_K);
+        while k > 0 && (count << (k - 1)) >= self.sum {
+            k -= 1;
+        }
+        while k < RICE_MAX_K && (count << k) < self.sum {
             k += 1;
         }
         k
@@ -278,6 +283,20 @@ mod tests {
         r.get(32);
         r.get(32);
         assert!(r.overrun());
+    }
+
+    #[test]
+    fn the_rice_parameter_is_the_smallest_that_covers_the_mean() {
+        for sum in 0..5000u64 {
+            for count in 1..40u32 {
+                let r = Rice { sum, count };
+                let mut k = 0;
+                while k < RICE_MAX_K && ((count as u64) << k) < sum {
+                    k += 1;
+                }
+                assert_eq!(r.k(), k, "sum {sum} count {count}");
+            }
+        }
     }
 
     #[test]

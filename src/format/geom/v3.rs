@@ -118,19 +118,21 @@ fn predicted_normals(p: &[[u32; 3]], t: &[u32], scale: i32) -> Vec<[i32; 2]> {
     for f in t.chunks_exact(3) {
         let q = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
         let sub = |x: [f64; 3], y: [f64; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
-        let (u, v) = (sub(q[1], q[0]), sub(q[2], q[0]));
-        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+        // Edge k runs from corner k to corner k + 1.
+        let e = [sub(q[1], q[0]), sub(q[2], q[1]), sub(q[0], q[2])];
+        let n = [e[0][1] * e[2][2] - e[0][2] * e[2][1], e[0][2] * e[2][0] - e[0][0] * e[2][2], e[0][0] * e[2][1] - e[0][1] * e[2][0]];
+        let n = n.map(|c| -c);
+        let len = dot(n, n).sqrt();
         if len == 0.0 {
             continue;
         }
+        let l = e.map(|x| dot(x, x).sqrt());
         for k in 0..3 {
-            let (e1, e2) = (sub(q[(k + 1) % 3], q[k]), sub(q[(k + 2) % 3], q[k]));
-            let l1 = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt();
-            let l2 = (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]).sqrt();
-            let dot = e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2];
-            let den = l1 * l2 + dot;
-            // The angle at the corner is 2·atan(|e1 × e2| / (|e1||e2| + e1·e2)); |e1 × e2| = len.
+            // The angle at corner k, between edge k and the reversed edge k − 1, is
+            // 2·atan(|n| / (|e_k||e_{k−1}| − e_k·e_{k−1})).
+            let before = (k + 2) % 3;
+            let den = l[k] * l[before] - dot(e[k], e[before]);
             let angle = if den > 0.0 { 2.0 * atan_approx(len / den) } else { std::f64::consts::PI };
             let w = angle / len;
             let s = &mut sum[f[k] as usize];
@@ -140,6 +142,41 @@ fn predicted_normals(p: &[[u32; 3]], t: &[u32], scale: i32) -> Vec<[i32; 2]> {
         }
     }
     sum.iter().map(|s| predict_octa(s[0], s[1], s[2], scale)).collect()
+}
+
+/// What the decoded geometry predicts of each culling cluster (`counts` faces each, in order):
+/// its cone axis, the octahedral code (16 bits) of the sum of its faces' normals, and its center,
+/// the mean of its faces' corners relative to the node's base in units of `2^shift` grid steps.
+/// Integer arithmetic and exact f64 sums, so every reader predicts the same.
+fn cluster_predictions(p: &[[u32; 3]], t: &[u32], counts: &[u32], shift: u32) -> Vec<[i32; 5]> {
+    let (base, _) = base_and_span(p);
+    let mut out = Vec::with_capacity(counts.len());
+    let mut first = 0usize;
+    for &n in counts {
+        let faces = &t[3 * first..3 * (first + n as usize)];
+        first += n as usize;
+        let mut normal = [0f64; 3];
+        let mut sum = [0u64; 3];
+        for f in faces.chunks_exact(3) {
+            let q = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
+            let u = [q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]];
+            let v = [q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]];
+            normal[0] += u[1] * v[2] - u[2] * v[1];
+            normal[1] += u[2] * v[0] - u[0] * v[2];
+            normal[2] += u[0] * v[1] - u[1] * v[0];
+            for &i in f {
+                for k in 0..3 {
+                    sum[k] += p[i as usize][k] as u64;
+                }
+            }
+        }
+        let axis = predict_octa(normal[0], normal[1], normal[2], i16::MAX as i32);
+        let corners = faces.len().max(1) as u64;
+        let center: [i32; 3] =
+            std::array::from_fn(|k| ((sum[k] / corners).saturating_sub(base[k] as u64) >> shift).min(u16::MAX as u64) as i32);
+        out.push([axis[0], axis[1], center[0], center[1], center[2]]);
+    }
+    out
 }
 
 /// Rice states, one per kind of residual, with their first parameters (spec §8.4).
@@ -156,6 +193,8 @@ struct States {
     normal: [Rice; 2],
     normal_border: [Rice; 2],
     meta: Rice,
+    /// Cluster axes and centers against their predictions.
+    cluster: [Rice; 3],
 }
 
 impl States {
@@ -171,6 +210,7 @@ impl States {
             normal: [Rice::new(1); 2],
             normal_border: [Rice::new(4); 2],
             meta: Rice::new(4),
+            cluster: [Rice::new(6), Rice::new(6), Rice::new(2)],
         }
     }
 }
@@ -546,27 +586,11 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         Some((shift, records)) => {
             e.st.meta.put(&mut e.w, records.len() as u32);
             e.st.meta.put(&mut e.w, *shift);
-            let mut prev = ClusterCodes::default();
             let mut first = 0usize;
             for c in records {
                 cuts.push(first);
                 first += c.faces as usize;
                 e.st.meta.put(&mut e.w, c.faces as u32);
-                let fields = |c: &ClusterCodes| {
-                    [
-                        c.axis[0] as i32,
-                        c.axis[1] as i32,
-                        c.half_angle as i32,
-                        c.center[0] as i32,
-                        c.center[1] as i32,
-                        c.center[2] as i32,
-                        c.radius as i32,
-                    ]
-                };
-                for (x, p) in fields(c).into_iter().zip(fields(&prev)) {
-                    e.st.meta.put_signed(&mut e.w, x - p);
-                }
-                prev = *c;
             }
         }
     }
@@ -693,9 +717,25 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     }
 
     let mark = e.w.len();
+    let points: Vec<[u32; 3]> = e.order.vertices.iter().map(|&v| g.points[v as usize]).collect();
+    let tris = stored_indices(g, &e.order, &e.stored);
+    if let Some((shift, records)) = &g.clusters {
+        let counts: Vec<u32> = records.iter().map(|c| c.faces as u32).collect();
+        let pred = cluster_predictions(&points, &tris, &counts, *shift);
+        let mut prev = [0i32; 2];
+        for (c, p) in records.iter().zip(&pred) {
+            let actual = [c.axis[0] as i32, c.axis[1] as i32, c.center[0] as i32, c.center[1] as i32, c.center[2] as i32];
+            for k in 0..5 {
+                e.st.cluster[k.min(2)].put_signed(&mut e.w, actual[k] - p[k]);
+            }
+            e.st.meta.put_signed(&mut e.w, c.half_angle as i32 - prev[0]);
+            e.st.meta.put_signed(&mut e.w, c.radius as i32 - prev[1]);
+            prev = [c.half_angle as i32, c.radius as i32];
+        }
+    }
+    e.stats.bits[7] += e.w.len() - mark;
+    let mark = e.w.len();
     if lat.normal_bits > 0 {
-        let points: Vec<[u32; 3]> = e.order.vertices.iter().map(|&v| g.points[v as usize]).collect();
-        let tris = stored_indices(g, &e.order, &e.stored);
         let pred = predicted_normals(&points, &tris, normal_scale(lat.normal_bits));
         let open = e.rings.open_vertices(points.len());
         for (s, &v) in e.order.vertices.iter().enumerate() {
@@ -821,28 +861,14 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
         if d.cluster_shift > x.bits {
             return Err((at(&r), format!("cluster shift {} exceeds the {} grid bits", d.cluster_shift, x.bits)));
         }
-        let mut prev = [0i64; 7];
         let mut total = 0u64;
         for k in 0..count {
             let faces = st.meta.get(&mut r) as u64;
-            let mut f = [0i64; 7];
-            for (i, v) in f.iter_mut().enumerate() {
-                *v = prev[i] + st.meta.get_signed(&mut r) as i64;
-            }
-            let i16s = |v: i64| (i16::MIN as i64..=i16::MAX as i64).contains(&v);
-            let u16s = |v: i64| (0..=u16::MAX as i64).contains(&v);
-            if faces == 0 || faces > u16::MAX as u64 || !i16s(f[0]) || !i16s(f[1]) || !f[2..].iter().all(|&v| u16s(v)) {
-                return Err((at(&r), format!("cluster {k}: {faces} faces or a field out of range")));
+            if faces == 0 || faces > u16::MAX as u64 {
+                return Err((at(&r), format!("cluster {k} has {faces} faces")));
             }
             total += faces;
-            d.clusters.push(ClusterCodes {
-                axis: [f[0] as i16, f[1] as i16],
-                half_angle: f[2] as u16,
-                faces: faces as u16,
-                center: [f[3] as u16, f[4] as u16, f[5] as u16],
-                radius: f[6] as u16,
-            });
-            prev = f;
+            d.clusters.push(ClusterCodes { faces: faces as u16, ..ClusterCodes::default() });
         }
         if total != nf as u64 {
             return Err((at(&r), format!("clusters cover {total} of {nf} faces")));
@@ -992,6 +1018,30 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     if d.points.len() != nv {
         return Err((at(&r), format!("{} vertices decoded; the node has {nv}", d.points.len())));
     }
+    if !d.clusters.is_empty() {
+        let counts: Vec<u32> = d.clusters.iter().map(|c| c.faces as u32).collect();
+        let pred = cluster_predictions(&d.points, &d.indices, &counts, d.cluster_shift);
+        let mut prev = [0i64; 2];
+        for (k, p) in pred.iter().enumerate() {
+            let mut f = [0i64; 5];
+            for (i, v) in f.iter_mut().enumerate() {
+                *v = p[i] as i64 + st.cluster[i.min(2)].get_signed(&mut r) as i64;
+            }
+            let half_angle = prev[0] + st.meta.get_signed(&mut r) as i64;
+            let radius = prev[1] + st.meta.get_signed(&mut r) as i64;
+            prev = [half_angle, radius];
+            let i16s = |v: i64| (i16::MIN as i64..=i16::MAX as i64).contains(&v);
+            let u16s = |v: i64| (0..=u16::MAX as i64).contains(&v);
+            if !(i16s(f[0]) && i16s(f[1]) && f[2..].iter().all(|&v| u16s(v)) && u16s(half_angle) && u16s(radius)) {
+                return Err((at(&r), format!("cluster {k}: a field out of range")));
+            }
+            let c = &mut d.clusters[k];
+            c.axis = [f[0] as i16, f[1] as i16];
+            c.center = [f[2] as u16, f[3] as u16, f[4] as u16];
+            c.half_angle = half_angle as u16;
+            c.radius = radius as u16;
+        }
+    }
     if x.normals {
         let scale = normal_scale(lat.normal_bits);
         let pred = predicted_normals(&d.points, &d.indices, scale);
@@ -1036,18 +1086,18 @@ pub fn decode(ctx: &NodeContext, payload: &[u8]) -> Result<NodeGeometry> {
             format!("{}: node {}: {msg}", chunk::name(&id::GEOM, rec.offset), ctx.index),
         )
     })?;
-    Ok(geometry(&d, ctx))
+    Ok(geometry(d, ctx))
 }
 
 /// Decoded codes as floats.
-fn geometry(d: &Decoded, ctx: &NodeContext) -> NodeGeometry {
+fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
     let grid = ctx.header.grid;
     let lat = d.lattice.expect("decoded");
     let mut g = NodeGeometry {
         positions: d.points.iter().map(|&p| grid.decode(p)).collect(),
-        indices: d.indices.clone(),
-        material_ranges: d.material_ranges.clone(),
-        colors: d.colors.clone(),
+        indices: d.indices,
+        material_ranges: d.material_ranges,
+        colors: d.colors,
         ..NodeGeometry::default()
     };
     if lat.normal_bits > 0 {
