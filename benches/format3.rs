@@ -37,6 +37,20 @@ fn decode_rate(path: &Path, rounds: usize) -> f64 {
     (faces * rounds as u64) as f64 / start.elapsed().as_secs_f64()
 }
 
+/// Level 0 of a file drawn at `size`² from the default view of `strata render`.
+fn level0_image(path: &Path, size: u32) -> strata::render::Image {
+    let rd = Reader::open_path(path).expect("open");
+    let (min, max) = (rd.header().min, rd.header().max);
+    let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+    let camera = strata::camera::Camera::framing(center, radius, glam::Vec3::new(0.3, 0.4, 1.0), 45f32.to_radians(), size, size);
+    let mut image = strata::render::Image::new(size, size);
+    for node in rd.level_nodes(0) {
+        let g = rd.read_node(node).expect("node");
+        image.draw(&camera, &g.positions, &g.normals, &g.indices, [200, 200, 200, 255]);
+    }
+    image
+}
+
 /// Symbol counts of every node re-encoded from its decoded codes, level 0 and the others apart.
 fn symbols(path: &Path) -> [v3::Stats; 2] {
     let rd = Reader::open_path(path).expect("open");
@@ -119,7 +133,8 @@ fn main() {
         let (f2, s2) = write(input, Encoding::V2, "2");
         let (f3, s3) = write(input, Encoding::V3(p), "3");
         let faces = s3.input_faces as f64;
-        println!("\n{name}: {} input faces, {} nodes", s3.input_faces, s3.nodes);
+        let bits = Reader::open_path(&f3).expect("open").header().grid.bits;
+        println!("\n{name}: {} input faces, {} nodes, format 3 grid {bits} bits", s3.input_faces, s3.nodes);
         println!(
             "  bytes per input face: format 2 {:.2}, format 3 {:.2} ({:.2}×; skeleton {:.2})",
             s2.bytes_per_face(),
@@ -136,6 +151,13 @@ fn main() {
                 .collect();
             println!("  format 3 geometry, bytes per input face: {}", parts.join(", "));
         }
+        let (i2, i3) = (level0_image(&f2, 1024), level0_image(&f3, 1024));
+        println!(
+            "  level 0 drawn at 1024²: covered pixels changed by more than 2, 8, 32 of 255: {:.3} %, {:.3} %, {:.3} %",
+            100.0 * strata::render::changed_share(&i2, &i3, 2),
+            100.0 * strata::render::changed_share(&i2, &i3, 8),
+            100.0 * strata::render::changed_share(&i2, &i3, 32)
+        );
         let rounds = (2_000_000.0 / faces).ceil().max(1.0) as usize;
         let (r2, r3) = (decode_rate(&f2, rounds), decode_rate(&f3, rounds));
         println!("  decode, M faces/s (one core): format 2 {:.1}, format 3 {:.1}", r2 / 1e6, r3 / 1e6);

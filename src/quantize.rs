@@ -23,6 +23,32 @@ pub fn model_grid(lv: &LevelMeshes, bits: u32) -> Grid {
     Grid::fit(lo, hi, bits)
 }
 
+/// Grid steps per median edge that [`auto_grid_bits`] keeps.
+pub const STEPS_PER_EDGE: f64 = 64.0;
+
+/// Format 3's default precision: the fewest grid bits (8..=21) whose step is at most
+/// 1/[`STEPS_PER_EDGE`] of the median edge of `mesh` (sampled over up to 65,536 faces), so that
+/// quantization moves a vertex by a small fraction of its edges whatever the model's size.
+pub fn auto_grid_bits(mesh: &Mesh) -> u32 {
+    let Some((lo, hi)) = mesh.bounds() else { return 14 };
+    let extent = (hi - lo).as_dvec3().max_element();
+    let stride = (mesh.face_count() / 65_536).max(1);
+    let mut edges: Vec<f64> = mesh
+        .triangles
+        .iter()
+        .step_by(stride)
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| mesh.positions[a as usize].as_dvec3().distance(mesh.positions[b as usize].as_dvec3()))
+        .filter(|d| *d > 0.0 && d.is_finite())
+        .collect();
+    if edges.is_empty() || extent <= 0.0 {
+        return 14;
+    }
+    let mid = edges.len() / 2;
+    let median = *edges.select_nth_unstable_by(mid, f64::total_cmp).1;
+    ((extent * STEPS_PER_EDGE / median).log2().ceil() as u32).clamp(8, crate::format::MAX_GRID_BITS)
+}
+
 /// A level mesh's positions on the grid: grid points and the positions they decode to.
 pub struct Quantized {
     pub points: Vec<[u32; 3]>,

@@ -16,7 +16,7 @@ use crate::format::{
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
 use crate::mesh::{Material, Mesh};
-use crate::quantize::{model_grid, Quantized};
+use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
@@ -51,7 +51,8 @@ pub enum Encoding {
 /// on lattices tied to their error, normals and UVs to stated bits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Precision {
-    /// Grid bits per axis over the model's largest extent (level 0's precision), 1..=21.
+    /// Grid bits per axis over the model's largest extent (level 0's precision), 1..=21; 0 picks
+    /// them from the mesh ([`crate::quantize::auto_grid_bits`]: a 64th of the median edge).
     pub grid_bits: u32,
     /// A node's lattice is the largest power-of-two number of grid steps not above this fraction of
     /// its error before quantization, so quantization adds at most `√3/2` of the fraction to it.
@@ -65,7 +66,7 @@ pub struct Precision {
 
 impl Default for Precision {
     fn default() -> Self {
-        Precision { grid_bits: 14, lattice: 0.25, normal_bits: 10, uv_bits: 16 }
+        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 10, uv_bits: 16 }
     }
 }
 
@@ -121,7 +122,12 @@ fn write_named<W: Write>(
         Encoding::V2 => None,
         Encoding::V3(p) => Some(check_precision(p).map_err(bad)?),
     };
-    let grid = model_grid(lv, precision.map_or(GRID_BITS, |p| p.grid_bits));
+    let bits = match precision {
+        None => GRID_BITS,
+        Some(p) if p.grid_bits == 0 => auto_grid_bits(&lv.levels[0].mesh),
+        Some(p) => p.grid_bits,
+    };
+    let grid = model_grid(lv, bits);
     let mut quant = Vec::with_capacity(lv.levels.len());
     quant.push(Quantized::distinct(&grid, &lv.levels[0].mesh).map_err(bad)?);
     quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(&grid, &l.mesh)));
@@ -174,14 +180,14 @@ fn write_named<W: Write>(
 }
 
 fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
-    let valid = (1..=MAX_GRID_BITS).contains(&p.grid_bits)
+    let valid = (0..=MAX_GRID_BITS).contains(&p.grid_bits)
         && (2..=16).contains(&p.normal_bits)
         && (1..=24).contains(&p.uv_bits)
         && p.lattice.is_finite()
         && p.lattice >= 0.0;
     if !valid {
         return Err(format!(
-            "precision {p:?}: grid bits must be 1..={MAX_GRID_BITS}, normal bits 2..=16, UV bits 1..=24, the lattice fraction finite and ≥ 0"
+            "precision {p:?}: grid bits must be 0 (automatic) or 1..={MAX_GRID_BITS}, normal bits 2..=16, UV bits 1..=24, the lattice fraction finite and ≥ 0"
         ));
     }
     Ok(p)
