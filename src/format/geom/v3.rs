@@ -823,6 +823,12 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
         return Err((3, format!("reserved byte {}; must be 0", payload[3])));
     }
     let data = &payload[PAYLOAD_HEADER_BYTES..];
+    // Every face and every vertex takes at least one bit: a count beyond that is refused before
+    // anything is allocated for it.
+    let bits = 8 * data.len() as u64;
+    if x.faces as u64 > bits || x.vertices as u64 > bits {
+        return Err((0, format!("{} faces and {} vertices cannot fit in {} bytes", x.faces, x.vertices, data.len())));
+    }
     let mut r = BitReader::new(data);
     let at = |r: &BitReader| PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize;
     let mut st = States::new();
@@ -1241,5 +1247,7 @@ mod tests {
             }
         }
         assert!(errors > 2000, "{errors} of 4000 damaged payloads refused");
+        let huge = Expect { faces: u32::MAX, vertices: u32::MAX, ..x };
+        assert!(decode_codes(&payload, huge).unwrap_err().1.contains("cannot fit"));
     }
 }
