@@ -214,9 +214,12 @@ impl<W: Write> Writer<W> {
         if faces > (u32::MAX / 3) as usize || vertices > u32::MAX as usize {
             return Err(bad(format!("level {l} node {}: {faces} faces in one node", node.key)));
         }
+        let mut vertices = vertices;
         let payload = if self.opts.major == 3 {
-            let (payload, _, stats) =
+            let (payload, order, stats) =
                 v3::encode_with_stats(g, g.lattice, self.opts.grid.bits).map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
+            // Format 3 stores the vertices its faces use.
+            vertices = order.vertices.len();
             let sum = self.geometry_bits.get_or_insert([0; 8]);
             for (s, b) in sum.iter_mut().zip(stats.bits) {
                 *s += b;

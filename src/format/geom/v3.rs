@@ -34,6 +34,9 @@ pub const PAYLOAD_HEADER_BYTES: usize = 4;
 /// open edge older than the ring, by how many edges back it was made.
 const MISS: usize = EDGE_RING;
 const FAR: usize = EDGE_RING + 1;
+/// How many of the newest edges the encoder searches for a `FAR` one (bounding its cost per
+/// triangle); older open edges are left to `MISS`.
+const FAR_SCAN: u32 = 1024;
 /// Corner symbols: a new vertex inside the node, a new border vertex, the vertex after the shared
 /// edge's end along the decoded region's border, the vertex before its start, a ring vertex
 /// (`RING..RING+16`, 0 the newest), an index.
@@ -511,7 +514,7 @@ impl Enc<'_> {
         if !self.g.uvs.is_empty() {
             let uv = |s: u32| self.uvq[self.input(s)];
             let pu = match pred {
-                Pred::Edge(a, b, o) => parallelogram(uv(a), uv(b), uv(o), -UV_LIMIT, UV_LIMIT),
+                Pred::Edge(a, b, o) => parallelogram(uv(a), uv(b), uv(o), 1 - UV_LIMIT, UV_LIMIT - 1),
                 Pred::Jump(Some(prev)) => uv(prev),
                 Pred::Jump(None) => [0; 2],
             };
@@ -524,7 +527,7 @@ impl Enc<'_> {
     }
 }
 
-/// Quantized UVs lie within ±2^30 steps.
+/// Quantized UVs lie strictly within ±2^30 steps.
 const UV_LIMIT: i64 = 1 << 30;
 
 /// Encode a node's geometry at lattice `lat` on a grid of `bits` bits. Vertices on multiples of
@@ -540,6 +543,31 @@ pub fn encode(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::result::Result
 pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::result::Result<(Vec<u8>, Order, Stats), String> {
     let n = g.points.len();
     let nf = g.indices.len() / 3;
+    if lat.shift >= bits.max(1) {
+        return Err(format!("lattice shift {} on a {bits}-bit grid", lat.shift));
+    }
+    if (lat.normal_bits > 0) == g.normals.is_empty() || (lat.normal_bits > 0 && !(2..=16).contains(&lat.normal_bits)) {
+        return Err(format!("{} normals at {} bits (2..=16 with normals, 0 without)", g.normals.len(), lat.normal_bits));
+    }
+    if (lat.uv_bits > 0) == g.uvs.is_empty() || lat.uv_bits > 24 {
+        return Err(format!("{} UVs at {} bits (1..=24 with UVs, 0 without)", g.uvs.len(), lat.uv_bits));
+    }
+    let mut next = 0u64;
+    for r in &g.material_ranges {
+        if r.first_index as u64 != next || r.index_count == 0 || r.index_count % 3 != 0 {
+            return Err(format!("material range {r:?} does not continue at index {next} with whole faces"));
+        }
+        next += r.index_count as u64;
+    }
+    if next != g.indices.len() as u64 || g.indices.len() % 3 != 0 {
+        return Err(format!("material ranges cover {next} of {} indices", g.indices.len()));
+    }
+    if let Some((_, records)) = &g.clusters {
+        let covered: u64 = records.iter().map(|c| c.faces as u64).sum();
+        if records.is_empty() || records.iter().any(|c| c.faces == 0) || covered != nf as u64 {
+            return Err(format!("clusters cover {covered} of {nf} faces"));
+        }
+    }
     let mask = (1u32 << lat.shift) - 1;
     let border: Vec<bool> = g.points.iter().map(|p| p.iter().any(|&x| x & mask != 0)).collect();
     if lat.normal_bits > 0 {
@@ -552,7 +580,7 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     let mut uvq = Vec::with_capacity(g.uvs.len());
     for (v, uv) in g.uvs.iter().enumerate() {
         let q = uv.map(|b| f32::from_bits(b) as f64 * s);
-        if q.iter().any(|&x| x.fract() != 0.0 || x.abs() > UV_LIMIT as f64) {
+        if q.iter().any(|&x| x.fract() != 0.0 || x.is_nan() || x.abs() >= UV_LIMIT as f64) {
             return Err(format!("UV {v} is not a multiple of 2^-{} within ±2^30 of them", lat.uv_bits));
         }
         uvq.push(q.map(|x| x as i64));
@@ -655,7 +683,8 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                         .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
                         .map(|x| x.1)
                 };
-                for edge in (0..e.rings.from.len() as u32).rev() {
+                let made = e.rings.from.len() as u32;
+                for edge in (made.saturating_sub(FAR_SCAN)..made).rev() {
                     if e.rings.alive[edge as usize] {
                         if let Some(f) = across(edge, &e.rings) {
                             hit = Some((FAR, f, edge));
@@ -826,11 +855,11 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     // Every face and every vertex takes at least one bit: a count beyond that is refused before
     // anything is allocated for it.
     let bits = 8 * data.len() as u64;
-    if x.faces as u64 > bits || x.vertices as u64 > bits {
+    if x.faces as u64 > bits || x.vertices as u64 > bits || x.faces > u32::MAX / 3 {
         return Err((0, format!("{} faces and {} vertices cannot fit in {} bytes", x.faces, x.vertices, data.len())));
     }
     let mut r = BitReader::new(data);
-    let at = |r: &BitReader| PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize;
+    let at = |r: &BitReader| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize).min(payload.len());
     let mut st = States::new();
     let (nf, nv, top) = (x.faces as usize, x.vertices as usize, (1i64 << x.bits) - 1);
     let mut d = Decoded { lattice: Some(lat), ..Decoded::default() };
@@ -882,17 +911,22 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     }
 
     let (triangle_code, corner_code) = codes();
-    let mut rings = Rings::new(nf);
-    d.points.reserve(nv);
-    d.indices.reserve(3 * nf);
+    // Sized for what the bytes can hold at a few bits per face; the vectors grow if needed.
+    let (nv_hint, nf_hint) = (nv.min(data.len()), nf.min(2 * data.len()));
+    let mut rings = Rings::new(nf_hint);
+    d.points.reserve(nv_hint);
+    d.indices.reserve(3 * nf_hint);
     if x.colors {
-        d.colors.reserve(nv);
+        d.colors.reserve(nv_hint);
     }
     if x.uvs {
-        d.uvs.reserve(nv);
+        d.uvs.reserve(nv_hint);
     }
     let shift = lat.shift;
     for _ in 0..nf {
+        if r.overrun() {
+            return Err((payload.len(), "the bit stream ends early".into()));
+        }
         let t = triangle_code.get(&mut r);
         let corner = |d: &mut Decoded,
                       r: &mut BitReader,
@@ -902,7 +936,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
                       sides: [u32; 2]|
          -> std::result::Result<u32, Fault> {
             let c = corner_code.get(r);
-            let fault = |r: &BitReader, m: String| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize, m);
+            let fault = |r: &BitReader, m: String| ((PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize).min(payload.len()), m);
             if c <= NEW_BORDER {
                 let s = d.points.len() as u32;
                 if s as usize >= nv {
@@ -945,19 +979,28 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
                     };
                     let mut col = [0u8; 4];
                     for k in 0..4 {
-                        col[k] = (pc[k] + st.color[k].get_signed(r) as i64) as u8;
+                        let residual = st.color[k].get_signed(r);
+                        if !(-128..=127).contains(&residual) {
+                            return Err(fault(r, format!("vertex {s}: color residual {residual} beyond a byte")));
+                        }
+                        col[k] = (pc[k] + residual as i64) as u8;
                     }
                     d.colors.push(col);
                 }
                 if x.uvs {
                     let pu = match pred {
-                        Pred::Edge(a, b, o) => parallelogram(d.uvs[a as usize], d.uvs[b as usize], d.uvs[o as usize], -UV_LIMIT, UV_LIMIT),
+                        Pred::Edge(a, b, o) => {
+                            parallelogram(d.uvs[a as usize], d.uvs[b as usize], d.uvs[o as usize], 1 - UV_LIMIT, UV_LIMIT - 1)
+                        }
                         Pred::Jump(Some(prev)) => d.uvs[prev as usize],
                         Pred::Jump(None) => [0; 2],
                     };
                     let mut uv = [0i64; 2];
                     for k in 0..2 {
                         uv[k] = pu[k] + st.uv[k].get_signed(r) as i64;
+                        if uv[k].abs() >= UV_LIMIT {
+                            return Err(fault(r, format!("vertex {s}: UV beyond ±2^30 steps")));
+                        }
                     }
                     d.uvs.push(uv);
                 }
@@ -1027,6 +1070,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
     if !d.clusters.is_empty() {
         let counts: Vec<u32> = d.clusters.iter().map(|c| c.faces as u32).collect();
         let pred = cluster_predictions(&d.points, &d.indices, &counts, d.cluster_shift);
+        let base = base_and_span(&d.points).0;
         let mut prev = [0i64; 2];
         for (k, p) in pred.iter().enumerate() {
             let mut f = [0i64; 5];
@@ -1046,6 +1090,9 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
             c.center = [f[2] as u16, f[3] as u16, f[4] as u16];
             c.half_angle = half_angle as u16;
             c.radius = radius as u16;
+            if (0..3).any(|a| base[a] as u64 + ((c.center[a] as u64) << d.cluster_shift) > top as u64) {
+                return Err((at(&r), format!("cluster {k}'s center lies off the {}-bit grid", x.bits)));
+            }
         }
     }
     if x.normals {
@@ -1055,11 +1102,11 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
         d.normals.reserve(nv);
         for (v, p) in pred.iter().enumerate() {
             let states = if open[v] { &mut st.normal_border } else { &mut st.normal };
-            let q = [p[0] + states[0].get_signed(&mut r), p[1] + states[1].get_signed(&mut r)];
-            if q.iter().any(|c| c.abs() > scale) {
+            let q = [p[0] as i64 + states[0].get_signed(&mut r) as i64, p[1] as i64 + states[1].get_signed(&mut r) as i64];
+            if q.iter().any(|c| c.abs() > scale as i64) {
                 return Err((at(&r), format!("normal {v} exceeds the {}-bit scale", lat.normal_bits)));
             }
-            d.normals.push(q);
+            d.normals.push(q.map(|c| c as i32));
         }
     }
     if r.overrun() {
@@ -1249,5 +1296,20 @@ mod tests {
         assert!(errors > 2000, "{errors} of 4000 damaged payloads refused");
         let huge = Expect { faces: u32::MAX, vertices: u32::MAX, ..x };
         assert!(decode_codes(&payload, huge).unwrap_err().1.contains("cannot fit"));
+        // As many faces as bits: zeros read past the end would decode as faces; refused at the end.
+        let many = Expect { faces: 8 * (payload.len() as u32 - 4), vertices: 8 * (payload.len() as u32 - 4), ..x };
+        let (at, _) = decode_codes(&payload, many).unwrap_err();
+        assert!(at <= payload.len());
+    }
+
+    #[test]
+    fn a_normal_beyond_i32_is_refused() {
+        // Found by review: a residual taking a normal to i32::MIN wrapped past the range check.
+        let payload = [
+            0x00, 0x0a, 0x00, 0x00, 0x8c, 0x26, 0x36, 0x80, 0x04, 0x00, 0x20, 0x00, 0x8c, 0x88, 0x00, 0x80, 0x04, 0x63, 0xc6, 0x44, 0x00,
+            0x00, 0x00, 0x07, 0xff, 0xff, 0xff, 0xfc, 0x20, 0x00, 0x00, 0x11, 0x00, 0x00, 0x00, 0x80,
+        ];
+        let x = Expect { faces: 1, vertices: 3, bits: 16, materials: 1, normals: true, uvs: false, colors: false, clusters: false };
+        assert!(decode_codes(&payload, x).is_err());
     }
 }
