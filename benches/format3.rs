@@ -69,7 +69,7 @@ fn symbols(path: &Path) -> [v3::Stats; 2] {
             clusters: n.level == 0,
         };
         let d = v3::decode_codes(&bytes[16..bytes.len() - 4], x).unwrap_or_else(|e| panic!("node {i}: {e:?}"));
-        let lat = d.lattice.expect("decoded");
+        let lat = d.lattice;
         let s = (1u64 << lat.uv_bits) as f64;
         let g = GeometryCodes {
             points: d.points,

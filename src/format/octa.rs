@@ -34,11 +34,13 @@ fn unfold(n: Vec3) -> Vec2 {
 
 /// Decode a stored pair into a unit normal.
 pub fn decode(q: [i16; 2]) -> Vec3 {
-    decode_scaled(q, SCALE)
+    decode_at([q[0] as i32, q[1] as i32], SCALE)
 }
 
-fn decode_scaled(q: [i16; 2], scale: f32) -> Vec3 {
-    decode_at([q[0] as i32, q[1] as i32], scale)
+/// Steps per unit of the unfolded square for `bits` (2..=16) per coordinate: `2^(bits−1) − 1`
+/// ([`SCALE`] at 16).
+pub fn scale(bits: u32) -> i32 {
+    (1 << (bits - 1)) - 1
 }
 
 /// Decode a pair at `scale` steps per unit of the unfolded square (format 3: `2^(bits−1) − 1`).
@@ -57,7 +59,7 @@ pub fn encode(n: Vec3) -> [i16; 2] {
 
 /// Encode a normal with `bits` (2..=16) per coordinate, scale `2^(bits−1) − 1` (format 3).
 pub fn encode_bits(n: Vec3, bits: u32) -> [i16; 2] {
-    let scale = ((1u32 << (bits - 1)) - 1) as f32;
+    let scale = scale(bits) as f32;
     let p = unfold(n) * scale;
     let target = n.normalize_or(Vec3::Z);
     let mut best = [0i16; 2];
@@ -65,7 +67,7 @@ pub fn encode_bits(n: Vec3, bits: u32) -> [i16; 2] {
     for x in [p.x.floor(), p.x.ceil()] {
         for y in [p.y.floor(), p.y.ceil()] {
             let q = [x.clamp(-scale, scale) as i16, y.clamp(-scale, scale) as i16];
-            let gap = decode_scaled(q, scale).distance_squared(target);
+            let gap = decode_at([q[0] as i32, q[1] as i32], scale).distance_squared(target);
             if gap < best_gap {
                 best_gap = gap;
                 best = q;

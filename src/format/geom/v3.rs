@@ -15,7 +15,7 @@
 //! use; [`encode`] returns the payload and the order it chose.
 
 use super::bits::{BitReader, BitWriter, PrefixCode, Rice};
-use super::v2::{base_and_span, cluster_shift, ClusterCodes, GeometryCodes};
+use super::v2::{base_and_span, ClusterCodes, GeometryCodes};
 use super::NodeContext;
 use crate::error::{Error, Result};
 use crate::format::chunk;
@@ -67,11 +67,6 @@ pub struct Lattice {
     pub normal_bits: u32,
     /// UVs are multiples of `2^−uv_bits`; 0 without UVs.
     pub uv_bits: u32,
-}
-
-/// The scale of an octahedral code of `bits` bits.
-pub fn normal_scale(bits: u32) -> i32 {
-    (1 << (bits - 1)) - 1
 }
 
 /// The lattice point nearest `g` for `shift`, kept below `2^bits`.
@@ -395,6 +390,17 @@ fn lattice_of(p: i64, shift: u32) -> i64 {
     (p + ((1i64 << shift) >> 1)) >> shift
 }
 
+/// What `pred` predicts of an attribute that `get` reads per stored vertex: the parallelogram,
+/// clamped to `lo..=hi`, the vertex before, or zero. Encoder and decoder share it.
+#[inline]
+fn predict<const N: usize>(pred: Pred, get: impl Fn(u32) -> [i64; N], lo: i64, hi: i64) -> [i64; N] {
+    match pred {
+        Pred::Edge(a, b, o) => parallelogram(get(a), get(b), get(o), lo, hi),
+        Pred::Jump(Some(prev)) => get(prev),
+        Pred::Jump(None) => [0; N],
+    }
+}
+
 #[inline]
 fn parallelogram<const N: usize>(a: [i64; N], b: [i64; N], o: [i64; N], lo: i64, hi: i64) -> [i64; N] {
     std::array::from_fn(|k| (a[k] + b[k] - o[k]).clamp(lo, hi))
@@ -477,12 +483,7 @@ impl Enc<'_> {
 
     fn new_vertex(&mut self, v: usize, border: bool, pred: Pred) {
         let top = (1i64 << self.bits) - 1;
-        let point = |s: u32| self.g.points[self.order.vertices[s as usize] as usize].map(|x| x as i64);
-        let p = match pred {
-            Pred::Edge(a, b, o) => parallelogram(point(a), point(b), point(o), 0, top),
-            Pred::Jump(Some(prev)) => point(prev),
-            Pred::Jump(None) => [0; 3],
-        };
+        let p = predict(pred, |s| self.g.points[self.input(s)].map(|x| x as i64), 0, top);
         let g = self.g.points[v].map(|x| x as i64);
         let mark = self.w.len();
         for k in 0..3 {
@@ -498,12 +499,7 @@ impl Enc<'_> {
         self.stats.bits[3] += self.w.len() - mark;
         let mark = self.w.len();
         if !self.g.colors.is_empty() {
-            let color = |s: u32| self.g.colors[self.input(s)].map(|x| x as i64);
-            let pc = match pred {
-                Pred::Edge(a, b, o) => parallelogram(color(a), color(b), color(o), 0, 255),
-                Pred::Jump(Some(prev)) => color(prev),
-                Pred::Jump(None) => [0; 4],
-            };
+            let pc = predict(pred, |s| self.g.colors[self.input(s)].map(|x| x as i64), 0, 255);
             let c = self.g.colors[v];
             for k in 0..4 {
                 self.st.color[k].put_signed(&mut self.w, (c[k] as i64 - pc[k]) as i8 as i32);
@@ -512,12 +508,7 @@ impl Enc<'_> {
         self.stats.bits[4] += self.w.len() - mark;
         let mark = self.w.len();
         if !self.g.uvs.is_empty() {
-            let uv = |s: u32| self.uvq[self.input(s)];
-            let pu = match pred {
-                Pred::Edge(a, b, o) => parallelogram(uv(a), uv(b), uv(o), 1 - UV_LIMIT, UV_LIMIT - 1),
-                Pred::Jump(Some(prev)) => uv(prev),
-                Pred::Jump(None) => [0; 2],
-            };
+            let pu = predict(pred, |s| self.uvq[self.input(s)], 1 - UV_LIMIT, UV_LIMIT - 1);
             let q = self.uvq[v];
             for k in 0..2 {
                 self.st.uv[k].put_signed(&mut self.w, (q[k] - pu[k]) as i32);
@@ -571,7 +562,7 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     let mask = (1u32 << lat.shift) - 1;
     let border: Vec<bool> = g.points.iter().map(|p| p.iter().any(|&x| x & mask != 0)).collect();
     if lat.normal_bits > 0 {
-        let scale = normal_scale(lat.normal_bits);
+        let scale = octa::scale(lat.normal_bits);
         if let Some(v) = g.normals.iter().position(|q| q.iter().any(|&c| (c as i32).abs() > scale)) {
             return Err(format!("normal {v} exceeds the {}-bit scale", lat.normal_bits));
         }
@@ -642,16 +633,20 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         for _ in start..end {
             let mut hit: Option<(usize, u32, u32)> = None;
             let mut best = 3;
-            for j in 0..EDGE_RING {
-                let Some(edge) = e.rings.edge(j) else { continue };
+            let across = |e: &Enc, edge: u32| {
                 let (a, b, _) = e.rings.ends(edge);
                 let key = ((e.input(b) as u64) << 32) | e.input(a) as u64;
                 let from = directed.partition_point(|x| x.0 < key);
-                if let Some(&(_, f)) = directed[from..]
+                directed[from..]
                     .iter()
                     .take_while(|x| x.0 == key)
                     .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
-                {
+                    .map(|x| x.1)
+            };
+            for j in 0..EDGE_RING {
+                let Some(edge) = e.rings.edge(j) else { continue };
+                if let Some(f) = across(&e, edge) {
+                    let (a, b, _) = e.rings.ends(edge);
                     let t = &g.indices[3 * f as usize..3 * f as usize + 3];
                     let third = t.iter().copied().find(|&v| v != e.input(a) as u32 && v != e.input(b) as u32).unwrap_or(t[0]);
                     let c = e.stored[third as usize];
@@ -673,20 +668,10 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
                 }
             }
             if hit.is_none() {
-                let across = |edge: u32, rings: &Rings| {
-                    let (a, b, _) = rings.ends(edge);
-                    let key = ((rings_input(&e.order, b) as u64) << 32) | rings_input(&e.order, a) as u64;
-                    let from = directed.partition_point(|x| x.0 < key);
-                    directed[from..]
-                        .iter()
-                        .take_while(|x| x.0 == key)
-                        .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
-                        .map(|x| x.1)
-                };
                 let made = e.rings.from.len() as u32;
                 for edge in (made.saturating_sub(FAR_SCAN)..made).rev() {
                     if e.rings.alive[edge as usize] {
-                        if let Some(f) = across(edge, &e.rings) {
+                        if let Some(f) = across(&e, edge) {
                             hit = Some((FAR, f, edge));
                             break;
                         }
@@ -765,7 +750,7 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     e.stats.bits[7] += e.w.len() - mark;
     let mark = e.w.len();
     if lat.normal_bits > 0 {
-        let pred = predicted_normals(&points, &tris, normal_scale(lat.normal_bits));
+        let pred = predicted_normals(&points, &tris, octa::scale(lat.normal_bits));
         let open = e.rings.open_vertices(points.len());
         for (s, &v) in e.order.vertices.iter().enumerate() {
             let q = g.normals[v as usize];
@@ -779,11 +764,6 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
     let mut payload = vec![lat.shift as u8, lat.normal_bits as u8, lat.uv_bits as u8, 0];
     payload.extend(e.w.finish());
     Ok((payload, e.order, e.stats))
-}
-
-/// The input vertex stored as `s`.
-fn rings_input(order: &Order, s: u32) -> u32 {
-    order.vertices[s as usize]
 }
 
 /// The stored index array of `order`.
@@ -801,7 +781,7 @@ fn stored_indices(g: &GeometryCodes, order: &Order, stored: &[u32]) -> Vec<u32> 
 /// The decoded codes of a node, before positions and normals become floats.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Decoded {
-    pub lattice: Option<Lattice>,
+    pub lattice: Lattice,
     pub points: Vec<[u32; 3]>,
     /// Octahedral codes at the lattice's normal scale.
     pub normals: Vec<[i32; 2]>,
@@ -859,10 +839,11 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
         return Err((0, format!("{} faces and {} vertices cannot fit in {} bytes", x.faces, x.vertices, data.len())));
     }
     let mut r = BitReader::new(data);
+    // The payload byte a reader has reached, for errors.
     let at = |r: &BitReader| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize).min(payload.len());
     let mut st = States::new();
     let (nf, nv, top) = (x.faces as usize, x.vertices as usize, (1i64 << x.bits) - 1);
-    let mut d = Decoded { lattice: Some(lat), ..Decoded::default() };
+    let mut d = Decoded { lattice: lat, ..Decoded::default() };
 
     let ranges = st.meta.get(&mut r) as usize;
     if ranges > nf.max(1) {
@@ -936,23 +917,13 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
                       sides: [u32; 2]|
          -> std::result::Result<u32, Fault> {
             let c = corner_code.get(r);
-            let fault = |r: &BitReader, m: String| ((PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize).min(payload.len()), m);
+            let fault = |r: &BitReader, m: String| (at(r), m);
             if c <= NEW_BORDER {
                 let s = d.points.len() as u32;
                 if s as usize >= nv {
                     return Err(fault(r, format!("more than the node's {nv} vertices")));
                 }
-                let p = match pred {
-                    Pred::Edge(a, b, o) => parallelogram(
-                        d.points[a as usize].map(|v| v as i64),
-                        d.points[b as usize].map(|v| v as i64),
-                        d.points[o as usize].map(|v| v as i64),
-                        0,
-                        top,
-                    ),
-                    Pred::Jump(Some(prev)) => d.points[prev as usize].map(|v| v as i64),
-                    Pred::Jump(None) => [0; 3],
-                };
+                let p = predict(pred, |s| d.points[s as usize].map(|v| v as i64), 0, top);
                 let mut g = [0i64; 3];
                 for k in 0..3 {
                     g[k] = match pred {
@@ -966,17 +937,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
                 }
                 d.points.push(g.map(|v| v as u32));
                 if x.colors {
-                    let pc = match pred {
-                        Pred::Edge(a, b, o) => parallelogram(
-                            d.colors[a as usize].map(|v| v as i64),
-                            d.colors[b as usize].map(|v| v as i64),
-                            d.colors[o as usize].map(|v| v as i64),
-                            0,
-                            255,
-                        ),
-                        Pred::Jump(Some(prev)) => d.colors[prev as usize].map(|v| v as i64),
-                        Pred::Jump(None) => [0; 4],
-                    };
+                    let pc = predict(pred, |s| d.colors[s as usize].map(|v| v as i64), 0, 255);
                     let mut col = [0u8; 4];
                     for k in 0..4 {
                         let residual = st.color[k].get_signed(r);
@@ -988,13 +949,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
                     d.colors.push(col);
                 }
                 if x.uvs {
-                    let pu = match pred {
-                        Pred::Edge(a, b, o) => {
-                            parallelogram(d.uvs[a as usize], d.uvs[b as usize], d.uvs[o as usize], 1 - UV_LIMIT, UV_LIMIT - 1)
-                        }
-                        Pred::Jump(Some(prev)) => d.uvs[prev as usize],
-                        Pred::Jump(None) => [0; 2],
-                    };
+                    let pu = predict(pred, |s| d.uvs[s as usize], 1 - UV_LIMIT, UV_LIMIT - 1);
                     let mut uv = [0i64; 2];
                     for k in 0..2 {
                         uv[k] = pu[k] + st.uv[k].get_signed(r) as i64;
@@ -1096,7 +1051,7 @@ pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, F
         }
     }
     if x.normals {
-        let scale = normal_scale(lat.normal_bits);
+        let scale = octa::scale(lat.normal_bits);
         let pred = predicted_normals(&d.points, &d.indices, scale);
         let open = rings.open_vertices(nv);
         d.normals.reserve(nv);
@@ -1145,7 +1100,7 @@ pub fn decode(ctx: &NodeContext, payload: &[u8]) -> Result<NodeGeometry> {
 /// Decoded codes as floats.
 fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
     let grid = ctx.header.grid;
-    let lat = d.lattice.expect("decoded");
+    let lat = d.lattice;
     let mut g = NodeGeometry {
         positions: d.points.iter().map(|&p| grid.decode(p)).collect(),
         indices: d.indices,
@@ -1154,7 +1109,7 @@ fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
         ..NodeGeometry::default()
     };
     if lat.normal_bits > 0 {
-        let scale = normal_scale(lat.normal_bits);
+        let scale = octa::scale(lat.normal_bits);
         g.normals = d.normals.iter().map(|&q| octa::decode_at(q, scale as f32)).collect();
     }
     if lat.uv_bits > 0 {
@@ -1165,8 +1120,8 @@ fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
         let (base, _) = base_and_span(&d.points);
         let mut first = 0u32;
         for c in &d.clusters {
-            let center: [u32; 3] =
-                std::array::from_fn(|a| (base[a] as u64 + ((c.center[a] as u64) << d.cluster_shift)).min(grid.last() as u64) as u32);
+            // On the grid: decode_codes checked it.
+            let center: [u32; 3] = std::array::from_fn(|a| base[a] + ((c.center[a] as u32) << d.cluster_shift));
             g.clusters.push(Cluster {
                 cone: Cone { axis: octa::decode(c.axis), half_angle: angle_decode(c.half_angle) },
                 center: grid.decode(center),
@@ -1180,11 +1135,6 @@ fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
     g
 }
 
-/// The cluster shift a writer uses for `points` (as format 2).
-pub fn writer_cluster_shift(points: &[[u32; 3]], bits: u32) -> u32 {
-    cluster_shift(base_and_span(points).1, bits)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1193,7 +1143,7 @@ mod tests {
     fn sample(n: u32, shift: u32) -> (GeometryCodes, Lattice) {
         let lat = Lattice { shift, normal_bits: 10, uv_bits: 12 };
         let mut g = GeometryCodes { lattice: lat, ..GeometryCodes::default() };
-        let scale = normal_scale(lat.normal_bits);
+        let scale = octa::scale(lat.normal_bits);
         for y in 0..n {
             for x in 0..n {
                 let inner = x > 0 && y > 0 && x + 1 < n && y + 1 < n;
