@@ -93,3 +93,28 @@ fn damaged_format_3_files_are_reported_not_panicked_on() {
         "every flipped geometry byte is caught (by a reader: CRC or codec; padding by verify)"
     );
 }
+
+#[test]
+fn the_cli_reads_format_3_and_names_damage() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sphere.strata");
+    convert_to(&fixture("colored_sphere.ply"), &path, Encoding::V3(Precision::default()));
+    let strata = |args: &[&str]| std::process::Command::new(env!("CARGO_BIN_EXE_strata")).args(args).output().expect("run strata");
+    let p = path.to_str().unwrap();
+    let ok = strata(&["verify", p]);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let ply = dir.path().join("level0.ply");
+    let out = strata(&["extract", p, "--level", "0", "-o", ply.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let mut bytes = std::fs::read(&path).unwrap();
+    let node = Reader::open(std::io::Cursor::new(bytes.clone())).unwrap().nodes()[0];
+    let at = node.offset as usize + 16 + 5;
+    bytes[at] ^= 0x40;
+    let damaged = dir.path().join("damaged.strata");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let bad = strata(&["verify", damaged.to_str().unwrap()]);
+    let said = format!("{}{}", String::from_utf8_lossy(&bad.stdout), String::from_utf8_lossy(&bad.stderr));
+    assert!(!bad.status.success(), "{said}");
+    assert!(said.contains("damaged.strata") && said.contains("byte"), "the error names the file and the byte: {said}");
+}
