@@ -56,7 +56,7 @@ fn draw_front<S: strata::format::ByteSource>(s: &Streamer<S>, front: &[u32], cam
         .iter()
         .filter_map(|&i| {
             let g = s.geometry(i)?;
-            Some(Part { positions: &g.positions, normals: &g.normals, indices: &g.indices, color: [200, 200, 200, 255] })
+            Some(Part::new(&g.positions, &g.normals, &g.indices, [200, 200, 200, 255]))
         })
         .collect();
     image.draw_parts(camera, &parts);

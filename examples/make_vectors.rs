@@ -35,6 +35,7 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
         tool: "strata vectors".into(),
         georef,
         encoding: strata::write::Encoding::V2,
+        images: Vec::new(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
     out.into_inner()
@@ -53,8 +54,8 @@ fn sphere() -> Vec<u8> {
     let mut mesh = strata::fixtures::colored_sphere(1);
     mesh.uvs = mesh.normals.iter().map(|n| Vec2::new(0.5 + 0.5 * n.x, 0.5 + 0.5 * n.y)).collect();
     mesh.materials = vec![
-        Material { name: "south".into(), base_color: [0.2, 0.4, 0.8, 1.0], texture: None },
-        Material { name: "north".into(), base_color: [0.9, 0.5, 0.1, 1.0], texture: Some("north.png".into()) },
+        Material { name: "south".into(), base_color: [0.2, 0.4, 0.8, 1.0], texture: None, ..Material::default() },
+        Material { name: "north".into(), base_color: [0.9, 0.5, 0.1, 1.0], texture: Some("north.png".into()), ..Material::default() },
     ];
     mesh.face_materials = mesh.face_normals.iter().map(|n| u32::from(n.z > 0.0)).collect();
     let params = HierarchyParams { cluster_faces: 4, leaf_faces: 10, growth: 2, top_groups: 2, ..HierarchyParams::default() };

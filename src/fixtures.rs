@@ -22,8 +22,8 @@ pub fn two_material_box() -> Mesh {
     let mut m = box_mesh(DVec3::new(-1.0, -0.5, 0.0), DVec3::new(1.0, 0.5, 0.5));
     m.face_materials = m.face_normals.iter().map(|n| u32::from(n.z > 0.5)).collect();
     m.materials = vec![
-        Material { name: "sides".into(), base_color: [0.6, 0.6, 0.65, 1.0], texture: None },
-        Material { name: "top".into(), base_color: [0.8, 0.25, 0.1, 1.0], texture: None },
+        Material { name: "sides".into(), base_color: [0.6, 0.6, 0.65, 1.0], texture: None, ..Material::default() },
+        Material { name: "top".into(), base_color: [0.8, 0.25, 0.1, 1.0], texture: None, ..Material::default() },
     ];
     finish(m)
 }

@@ -39,6 +39,7 @@ pub mod quantize;
 pub mod render;
 pub mod simplify;
 pub mod stream;
+pub mod texture;
 pub mod write;
 
 pub use error::{Error, Location, Result};

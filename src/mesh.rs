@@ -50,6 +50,8 @@ pub struct Mesh {
     /// Material id per face, indexing `materials`.
     pub face_materials: Vec<u32>,
     pub materials: Vec<Material>,
+    /// The images materials' maps index ([`Material::maps`]), as their source files held them.
+    pub images: Vec<crate::texture::SourceImage>,
     /// Unit normal per face (zero for a degenerate face), from the positions.
     pub face_normals: Vec<Vec3>,
     /// Area per face.
@@ -217,6 +219,7 @@ impl Mesh {
             colors: corners_of(&self.colors, &keep),
             face_materials: keep.iter().map(|&f| self.face_materials[f]).collect(),
             materials: self.materials,
+            images: self.images,
             positions,
             triangles,
             face_normals: Vec::new(),

@@ -1,5 +1,5 @@
-//! The conversion, top-down in one place: import → normals (if missing) → group → simplify per
-//! level → write.
+//! The conversion, top-down in one place: import → normals (if missing) → texture levels → group →
+//! simplify per level → write.
 
 use crate::error::Result;
 use crate::format::WriteSummary;
@@ -65,6 +65,8 @@ impl Progress for Silent {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
     pub import_ms: f64,
+    /// Decoding the images and making their levels.
+    pub texture_ms: f64,
     pub group_ms: f64,
     pub simplify_ms: f64,
     pub write_ms: f64,
@@ -105,9 +107,16 @@ pub fn convert(
         Normals::None => imported.mesh.normals.clear(),
         _ => {}
     }
-    let mesh = &imported.mesh;
     lap(&mut times.import_ms);
 
+    let textured = imported.mesh.images.len() as u64;
+    progress.stage("textures", textured);
+    let images = crate::texture::pyramid::prepare(&mut imported.mesh, &mut imported.warnings, &mut || progress.step());
+    // The levels hold the images from here on.
+    imported.mesh.images.clear();
+    lap(&mut times.texture_ms);
+
+    let mesh = &imported.mesh;
     progress.stage("group", 0);
     let adjacency = Adjacency::build(mesh);
     let mut h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
@@ -126,6 +135,7 @@ pub fn convert(
         level_ratio: opts.levels.ratio,
         georef,
         encoding: opts.encoding,
+        images,
         ..WriteOptions::default()
     };
     let summary = write::write(output, &h, &lv, &write_opts)?;

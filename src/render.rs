@@ -15,7 +15,8 @@
 use crate::atomic::write_file;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use glam::{Vec3, Vec4};
+use crate::texture::sample::MipChain;
+use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::Path;
@@ -54,13 +55,28 @@ pub struct Image {
 pub const BATCH_FACES: usize = 8192;
 
 /// One mesh to draw: triangles (3 indices per face) over positions, optional per-vertex normals,
-/// one color.
+/// one color, and optionally a texture over per-vertex UVs (texel × color, each channel over 255).
 #[derive(Clone, Copy, Debug)]
 pub struct Part<'a> {
     pub positions: &'a [Vec3],
     pub normals: &'a [Vec3],
     pub indices: &'a [u32],
     pub color: [u8; 4],
+    /// Per vertex, as positions; empty without a texture.
+    pub uvs: &'a [Vec2],
+    pub texture: Option<&'a MipChain>,
+}
+
+impl<'a> Part<'a> {
+    /// An untextured part.
+    pub fn new(positions: &'a [Vec3], normals: &'a [Vec3], indices: &'a [u32], color: [u8; 4]) -> Part<'a> {
+        Part { positions, normals, indices, color, uvs: &[], texture: None }
+    }
+
+    /// This part with `texture` sampled at `uvs` (one per position; otherwise drawn untextured).
+    pub fn textured(self, uvs: &'a [Vec2], texture: &'a MipChain) -> Part<'a> {
+        Part { uvs, texture: (uvs.len() == self.positions.len() && !texture.is_empty()).then_some(texture), ..self }
+    }
 }
 
 /// A face ready to fill: fixed-point screen vertices with positive area, and linear depth and
@@ -79,13 +95,33 @@ struct Setup {
     z: [f32; 3],
     shade: [f32; 3],
     color: [u8; 4],
+    /// Textured faces: u/w, v/w and 1/w over the screen (perspective-correct UVs), the part
+    /// (index in the batch) whose texture it samples, and the level chosen for the face.
+    tex: Option<TexSetup>,
 }
 
-/// A clip-space vertex with its shade.
+#[derive(Clone, Copy)]
+struct TexSetup {
+    uw: [f32; 3],
+    vw: [f32; 3],
+    iw: [f32; 3],
+    part: u32,
+    level: u32,
+}
+
+/// A clip-space vertex with its shade and UV.
 #[derive(Clone, Copy)]
 struct ClipVertex {
     p: Vec4,
     shade: f32,
+    uv: Vec2,
+}
+
+/// What a face's setup needs of its part's texture: the part's index in the batch and the chain.
+#[derive(Clone, Copy)]
+struct FaceTexture<'a> {
+    part: u32,
+    chain: &'a MipChain,
 }
 
 impl Image {
@@ -114,7 +150,7 @@ impl Image {
     /// camera's own size only sets its aspect ratio. Returns the number of faces drawn (not
     /// culled/clipped away, and reaching at least one pixel center within their bounds).
     pub fn draw(&mut self, camera: &Camera, positions: &[Vec3], normals: &[Vec3], indices: &[u32], color: [u8; 4]) -> usize {
-        self.draw_parts(camera, &[Part { positions, normals, indices, color }])
+        self.draw_parts(camera, &[Part::new(positions, normals, indices, color)])
     }
 
     /// [`Image::draw`] for many meshes at once (a streamed front's nodes): parts are gathered into
@@ -152,7 +188,8 @@ impl Image {
         let chunks: Vec<(Vec<Setup>, usize)> = work
             .par_iter()
             .map_init(Clip::default, |clip, &(k, c)| {
-                let Part { positions, indices, color, .. } = parts[k];
+                let Part { positions, indices, color, uvs, texture, .. } = parts[k];
+                let tex = texture.map(|chain| FaceTexture { part: k as u32, chain });
                 let vertex_shade = &vertex_shades[k];
                 let face_count = indices.len() / 3;
                 let mut out = Vec::new();
@@ -171,10 +208,11 @@ impl Image {
                     } else {
                         tri.map(|i| vertex_shade[i as usize])
                     };
+                    let uv = |k: usize| if tex.is_some() { uvs[tri[k] as usize] } else { Vec2::ZERO };
                     let corners: [ClipVertex; 3] =
-                        std::array::from_fn(|k| ClipVertex { p: view_projection * p[k].extend(1.0), shade: shade[k] });
+                        std::array::from_fn(|k| ClipVertex { p: view_projection * p[k].extend(1.0), shade: shade[k], uv: uv(k) });
                     let before = out.len();
-                    setup_face(corners, width, height, color, &mut out, clip);
+                    setup_face(corners, width, height, color, tex, &mut out, clip);
                     drawn += (out.len() > before) as usize;
                 }
                 (out, drawn)
@@ -196,7 +234,7 @@ impl Image {
                 let first_row = band as u32 * BAND_ROWS;
                 let last_row = (first_row + BAND_ROWS).min(height) - 1;
                 for &i in list {
-                    fill(&faces[i as usize], width, first_row, last_row, rgba, depth);
+                    fill(&faces[i as usize], width, first_row, last_row, rgba, depth, parts);
                 }
             },
         );
@@ -292,7 +330,8 @@ impl StripFrame<'_> {
         if slot.index != i || slot.generation != cache.generation {
             let (p, row) = self.transform(part.positions[i as usize]);
             let shade = if smooth { self.lit(part.normals[i as usize]) } else { 0.0 };
-            *slot = Corner { clip: ClipVertex { p, shade }, row, index: i, generation: cache.generation };
+            let uv = if part.texture.is_some() { part.uvs[i as usize] } else { Vec2::ZERO };
+            *slot = Corner { clip: ClipVertex { p, shade, uv }, row, index: i, generation: cache.generation };
         }
         *slot
     }
@@ -334,7 +373,8 @@ impl StripFrame<'_> {
         let (lo, hi) = (first as i32, last as i32);
         let mut drawn = 0;
         let mut block = 0;
-        for part in self.parts {
+        for (part_index, part) in self.parts.iter().enumerate() {
+            let tex = part.texture.map(|chain| FaceTexture { part: part_index as u32, chain });
             let count = (part.indices.len() / 3).div_ceil(BLOCK_FACES);
             let ranges = &blocks[block..block + count];
             block += count;
@@ -374,13 +414,13 @@ impl StripFrame<'_> {
                         }
                     }
                     s.setups.clear();
-                    setup_face(corners, width, height, part.color, &mut s.setups, &mut s.clip);
+                    setup_face(corners, width, height, part.color, tex, &mut s.setups, &mut s.clip);
                     if s.setups.iter().map(|f| f.y0).min().is_some_and(|top| top / STRIP_ROWS == strip) {
                         drawn += 1;
                     }
                     for f in &s.setups {
                         if f.y1 >= first && f.y0 <= last {
-                            fill(f, width, first, last, rgba, depth);
+                            fill(f, width, first, last, rgba, depth, self.parts);
                         }
                     }
                 }
@@ -411,7 +451,7 @@ struct VertexCache {
 
 impl Default for VertexCache {
     fn default() -> Self {
-        let none = Corner { clip: ClipVertex { p: Vec4::ZERO, shade: 0.0 }, row: BAD_ROW, index: 0, generation: 0 };
+        let none = Corner { clip: ClipVertex { p: Vec4::ZERO, shade: 0.0, uv: Vec2::ZERO }, row: BAD_ROW, index: 0, generation: 0 };
         VertexCache { entries: vec![none; CACHE_SIZE], generation: 0 }
     }
 }
@@ -534,8 +574,8 @@ impl Strips {
     }
 }
 
-/// A screen vertex: x right and y down in pixels, depth z/w, shade.
-type Screen = (f32, f32, f32, f32);
+/// A screen vertex: x right and y down in pixels, depth z/w, shade, and u/w, v/w, 1/w.
+type Screen = (f32, f32, f32, f32, [f32; 3]);
 
 /// Reusable buffers of [`setup_face`]'s clipping, so that drawing allocates nothing per face.
 #[derive(Default)]
@@ -548,7 +588,15 @@ struct Clip {
 
 /// Clip a face, cull it if it faces away, and append its fill setups (none, or one per triangle of
 /// the clipped polygon).
-fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4], out: &mut Vec<Setup>, clip: &mut Clip) {
+fn setup_face(
+    corners: [ClipVertex; 3],
+    width: u32,
+    height: u32,
+    color: [u8; 4],
+    tex: Option<FaceTexture>,
+    out: &mut Vec<Setup>,
+    clip: &mut Clip,
+) {
     if !corners.iter().all(|c| c.p.is_finite()) {
         return;
     }
@@ -565,13 +613,14 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
     // Screen space: x right, y down, pixel (i, j) covers [i, i+1) × [j, j+1); z is depth.
     let to_screen = |v: &ClipVertex| {
         let n = v.p.truncate() / v.p.w;
-        ((n.x + 1.0) * 0.5 * w, (1.0 - n.y) * 0.5 * h, n.z, v.shade)
+        let iw = 1.0 / v.p.w;
+        ((n.x + 1.0) * 0.5 * w, (1.0 - n.y) * 0.5 * h, n.z, v.shade, [v.uv.x * iw, v.uv.y * iw, iw])
     };
     let finite = |s: &Screen| s.0.is_finite() && s.1.is_finite() && s.2.is_finite();
     if PLANES.iter().all(|plane| corners.iter().all(|c| plane.dot(c.p) >= 0.0)) {
         let screen = corners.map(|c| to_screen(&c));
         if screen.iter().all(finite) {
-            out.extend(setup_triangle(screen, width, height, color));
+            out.extend(setup_triangle(screen, width, height, color, tex));
         }
         return;
     }
@@ -598,6 +647,7 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
                 clipped.push(ClipVertex {
                     p: polygon[i].p.lerp(polygon[j].p, t),
                     shade: polygon[i].shade + (polygon[j].shade - polygon[i].shade) * t,
+                    uv: polygon[i].uv.lerp(polygon[j].uv, t),
                 });
             }
         }
@@ -609,17 +659,18 @@ fn setup_face(corners: [ClipVertex; 3], width: u32, height: u32, color: [u8; 4],
         return;
     }
     for k in 1..screen.len().saturating_sub(1) {
-        out.extend(setup_triangle([screen[0], screen[k], screen[k + 1]], width, height, color));
+        out.extend(setup_triangle([screen[0], screen[k], screen[k + 1]], width, height, color, tex));
     }
 }
 
 /// Snap a screen triangle to the fixed-point grid; `None` if it faces away, has no area, or lies
 /// outside the image.
-fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4]) -> Option<Setup> {
+fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4], tex: Option<FaceTexture>) -> Option<Setup> {
     let mut x = v.map(|s| (s.0 * SUBPIXEL).round() as i64);
     let mut y = v.map(|s| (s.1 * SUBPIXEL).round() as i64);
     let mut z = v.map(|s| s.2);
     let mut shade = v.map(|s| s.3);
+    let mut persp = v.map(|s| s.4);
     let area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
     // Counter-clockwise with y up is negative area with y down; reorder it to positive.
     if area >= 0 {
@@ -629,6 +680,7 @@ fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4]) -> Op
     y.swap(1, 2);
     z.swap(1, 2);
     shade.swap(1, 2);
+    persp.swap(1, 2);
     // Pixels whose centers (i + ½) lie within the vertices' bounds.
     let half = 1i64 << (SUBPIXEL_BITS - 1);
     let first = |lo: i64| (lo - half + (1 << SUBPIXEL_BITS) - 1).div_euclid(1 << SUBPIXEL_BITS).max(0);
@@ -648,11 +700,25 @@ fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4]) -> Op
         [v[0], (d1 * by - d2 * ay) / area, (d2 * ax - d1 * bx) / area]
     };
     let (x0, x1, y0, y1) = (x0 as u32, x1 as u32, y0 as u32, y1 as u32);
-    Some(Setup { x, y, x0, x1, y0, y1, origin: [fx[0], fy[0]], z: plane(z), shade: plane(shade), color })
+    let tex = tex.map(|t| {
+        // The level where a texel is about a pixel: the face's full-resolution texels over its pixels.
+        let uv = persp.map(|p| Vec2::new(p[0], p[1]) / p[2]);
+        let texels = 0.5 * ((uv[1] - uv[0]).perp_dot(uv[2] - uv[0])).abs() as f64 * t.chain.full_texels();
+        let pixels = 0.5 * area.abs() as f64;
+        TexSetup {
+            uw: plane(persp.map(|p| p[0])),
+            vw: plane(persp.map(|p| p[1])),
+            iw: plane(persp.map(|p| p[2])),
+            part: t.part,
+            level: t.chain.choose(texels, pixels) as u32,
+        }
+    });
+    Some(Setup { x, y, x0, x1, y0, y1, origin: [fx[0], fy[0]], z: plane(z), shade: plane(shade), color, tex })
 }
 
 /// Fill the rows `first_row ..= last_row` of a face into a band of the image.
-fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32]) {
+fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32], parts: &[Part<'_>]) {
+    let texture = s.tex.and_then(|t| Some((t, parts.get(t.part as usize)?.texture?)));
     let (y0, y1) = (s.y0.max(first_row), s.y1.min(last_row));
     let step = 1i64 << SUBPIXEL_BITS;
     // Edge k runs from vertex k to k + 1; on a top edge (horizontal, going right) or a left edge
@@ -680,7 +746,17 @@ fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], d
                 if z < depth[i] {
                     depth[i] = z;
                     let l = (s.shade[0] + s.shade[1] * cx + s.shade[2] * cy).clamp(0.0, 1.0);
-                    rgba[4 * i..4 * i + 4].copy_from_slice(&[(r * l) as u8, (g * l) as u8, (b * l) as u8, a as u8]);
+                    let px = match texture {
+                        None => [(r * l) as u8, (g * l) as u8, (b * l) as u8, a as u8],
+                        Some((t, chain)) => {
+                            let at = |p: [f32; 3]| p[0] + p[1] * cx + p[2] * cy;
+                            let iw = at(t.iw);
+                            let texel = chain.sample(t.level as usize, at(t.uw) / iw, at(t.vw) / iw);
+                            let k = l / 255.0;
+                            [(texel[0] as f32 * r * k) as u8, (texel[1] as f32 * g * k) as u8, (texel[2] as f32 * b * k) as u8, a as u8]
+                        }
+                    };
+                    rgba[4 * i..4 * i + 4].copy_from_slice(&px);
                 }
             }
             for (k, ek) in e.iter_mut().enumerate() {
@@ -819,10 +895,7 @@ mod tests {
         let drawn = one_by_one.draw(&ortho(), &left, &[], &indices, [255, 0, 0, 255])
             + one_by_one.draw(&ortho(), &right, &[], &indices, [0, 0, 255, 255]);
         let mut batched = Image::new(100, 100);
-        let parts = [
-            Part { positions: &left, normals: &[], indices: &indices, color: [255, 0, 0, 255] },
-            Part { positions: &right, normals: &[], indices: &indices, color: [0, 0, 255, 255] },
-        ];
+        let parts = [Part::new(&left, &[], &indices, [255, 0, 0, 255]), Part::new(&right, &[], &indices, [0, 0, 255, 255])];
         assert_eq!(batched.draw_parts(&ortho(), &parts), drawn);
         assert_eq!(batched.rgba, one_by_one.rgba);
         assert_eq!(batched.depth, one_by_one.depth);
@@ -854,11 +927,11 @@ mod tests {
         bad.extend([0, 1, u32::MAX, 5]);
         let nan = [Vec3::NAN, Vec3::X, Vec3::Y, Vec3::new(0.0, 1.0, 0.1)];
         let parts = [
-            Part { positions: &left, normals: &normals, indices: &indices, color: palette(1) },
-            Part { positions: &right, normals: &[], indices: &bad, color: palette(2) },
-            Part { positions: &far, normals: &normals, indices: &indices, color: palette(3) },
-            Part { positions: &nan, normals: &[], indices: &[0, 1, 2, 1, 2, 3], color: palette(4) },
-            Part { positions: &[], normals: &[], indices: &[], color: palette(5) },
+            Part::new(&left, &normals, &indices, palette(1)),
+            Part::new(&right, &[], &bad, palette(2)),
+            Part::new(&far, &normals, &indices, palette(3)),
+            Part::new(&nan, &[], &[0, 1, 2, 1, 2, 3], palette(4)),
+            Part::new(&[], &[], &[], palette(5)),
         ];
         let perspective = |eye: Vec3, target: Vec3, width, height| Camera {
             eye,

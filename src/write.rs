@@ -9,6 +9,7 @@ use crate::bounds;
 use crate::error::{Error, Result};
 use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
 use crate::format::geom::v3::Lattice;
+use crate::format::texture::ImageIn;
 use crate::format::{
     octa, Attributes, Georef, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, GRID_BITS, MAX_GRID_BITS, MAX_TOOL_BYTES,
     NO_PARENT,
@@ -36,6 +37,8 @@ pub struct WriteOptions {
     pub georef: Option<Georef>,
     /// How node geometry is stored.
     pub encoding: Encoding,
+    /// The images level 0's materials index, each with its levels ([`crate::texture::pyramid`]).
+    pub images: Vec<ImageIn>,
 }
 
 /// How node geometry is stored: format 2's fixed-width arrays on a 20-bit grid, or format 3's
@@ -88,6 +91,7 @@ impl Default for WriteOptions {
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
             georef: None,
             encoding: Encoding::V2,
+            images: Vec::new(),
         }
     }
 }
@@ -152,6 +156,7 @@ fn write_named<W: Write>(
         levels: h.levels.len() as u32,
         georef: opts.georef.clone(),
         major: opts.encoding.major(),
+        images: opts.images.clone(),
     };
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
     let top = h.levels.len() - 1;
@@ -165,6 +170,7 @@ fn write_named<W: Write>(
                 uv_bits: if attributes.uvs { p.uv_bits } else { 0 },
             });
             let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
+            let uv_density = if opts.images.is_empty() { 0.0 } else { uv_density(mesh, faces[l].get(g)) };
             writer.add(NodeIn {
                 level: l as u32,
                 key: g as u32,
@@ -172,6 +178,7 @@ fn write_named<W: Write>(
                 neighbors: hl.neighbors.get(g).to_vec(),
                 codes: b.codes,
                 error: b.error,
+                uv_density,
                 geometry,
             })?;
         }
@@ -201,6 +208,30 @@ fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
         return 0;
     }
     (steps.log2().floor() as u32).min(grid.bits - 1)
+}
+
+/// UV units per model unit over the faces of `faces` whose material has an image map: the square
+/// root of their UV area over their area (0 when there are none, or no UVs).
+fn uv_density(mesh: &Mesh, faces: &[u32]) -> f32 {
+    if mesh.uvs.is_empty() {
+        return 0.0;
+    }
+    let (mut uv_area, mut area) = (0f64, 0f64);
+    for &f in faces {
+        let f = f as usize;
+        let textured = mesh.materials.get(material_of(mesh, f) as usize).is_some_and(|m| m.maps.iter().any(Option::is_some));
+        if !textured {
+            continue;
+        }
+        let [a, b, c] = [0, 1, 2].map(|k| mesh.uvs[3 * f + k].as_dvec2());
+        uv_area += 0.5 * (b - a).perp_dot(c - a).abs();
+        area += mesh.face_areas.get(f).copied().unwrap_or(0.0) as f64;
+    }
+    if area > 0.0 && uv_area.is_finite() {
+        (uv_area / area).sqrt() as f32
+    } else {
+        0.0
+    }
 }
 
 /// The material table: level 0's, or one default material if it has none.

@@ -196,6 +196,7 @@ fn options() -> WriteOptions {
         tool: "strata test".into(),
         georef: None,
         encoding: strata::write::Encoding::V2,
+        images: Vec::new(),
     }
 }
 
@@ -210,11 +211,27 @@ const RADIUS: u16 = 1537 | 8 << 11;
 
 /// Build the example file by hand; `extra` inserts unknown chunks at every level of nesting.
 fn handmade(major: u16, minor: u16, extra: bool) -> Doc {
-    build(major, minor, extra, false)
+    build(major, minor, extra, false, None)
 }
 
-/// [`handmade`], with a `GEOR` chunk after `HEAD` when `geor` (spec §5.2): frame 2, UTM zone 13N.
-fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
+/// The image of the textured example: a 2 × 2 PNG and its 1 × 1 level, as files.
+struct Texturing {
+    full: Vec<u8>,
+    half: Vec<u8>,
+}
+
+impl Texturing {
+    fn new() -> Texturing {
+        use strata::texture::{encode, ImageCodec, Rgba8};
+        let full = Rgba8 { width: 2, height: 2, pixels: vec![255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 255] };
+        let half = strata::texture::pyramid::downsample(&full, strata::texture::pyramid::Filter::Srgb);
+        Texturing { full: encode(ImageCodec::Png, &full, 90).unwrap(), half: encode(ImageCodec::Png, &half, 90).unwrap() }
+    }
+}
+
+/// [`handmade`], with a `GEOR` chunk after `HEAD` when `geor` (spec §5.2): frame 2, UTM zone 13N;
+/// with UVs, an image and its chunks when `texturing` (§7.5).
+fn build(major: u16, minor: u16, extra: bool, geor: bool, texturing: Option<&Texturing>) -> Doc {
     let mut d = Doc::default();
     let p = example_params();
     // Prologue.
@@ -231,7 +248,11 @@ fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
     d.f64(1.0, "metres per unit");
     d.f32s(&[0.0, 0.0, 0.0], "bounds min");
     d.f32s(&[1.0, 1.0, 0.0], "bounds max");
-    d.u32(0, "attributes (none)");
+    if texturing.is_some() {
+        d.u32(2, "attributes (UVs)");
+    } else {
+        d.u32(0, "attributes (none)");
+    }
     d.u32(1, "levels");
     d.u32(1, "nodes");
     d.u32(1, "materials");
@@ -310,6 +331,29 @@ fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
     d.f32s(&[0.8, 0.8, 0.8, 1.0], "material 0: base color");
     d.u32(0, "material 0: texture length (none)");
     d.end();
+    if let Some(t) = texturing {
+        // §7.5: one image of two levels; entries by pixel count, so the 1 × 1 level first.
+        d.begin(b"TEXR", 0);
+        d.u32(1, "images");
+        d.u32(2, "level entries");
+        d.u32(5, "image 0: name length");
+        d.raw(b"t.png", "image 0: name");
+        d.raw(&[1, 2, 0, 0], "image 0: codec PNG, 2 levels, reserved");
+        d.u32s(&[0, 1, 1, 1], "entry 0: image 0 level 1, 1 × 1");
+        d.u32((20 + t.half.len()) as u32, "entry 0: TEXL bytes");
+        d.u32(crc32fast::hash(&t.half), "entry 0: TEXL CRC-32");
+        d.u32s(&[0, 0, 2, 2], "entry 1: image 0 level 0, 2 × 2");
+        d.u32((20 + t.full.len()) as u32, "entry 1: TEXL bytes");
+        d.u32(crc32fast::hash(&t.full), "entry 1: TEXL CRC-32");
+        d.u32(0, "material 0: base color image 0");
+        d.raw(&[0, 0, 0, 0], "material 0: base color wrap repeat, repeat");
+        for kind in ["normal", "metallic-roughness", "occlusion", "emissive"] {
+            d.u32(0xFFFF_FFFF, &format!("material 0: no {kind} map"));
+            d.raw(&[0, 0, 0, 0], "wrap, reserved");
+        }
+        d.u16(32768, "node 0: UV density code (1 UV unit per model unit)");
+        d.end();
+    }
     d.end();
 
     // GEOM of node 0.
@@ -328,6 +372,11 @@ fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
         d.note(s, &format!("vertex {k} (u24 offsets)"));
     }
     d.end();
+    if texturing.is_some() {
+        d.begin(b"VTEX", 0);
+        d.f32s(&[0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0], "UVs of vertices 0..4");
+        d.end();
+    }
     d.begin(b"INDX", 2);
     let s = d.bytes.len();
     for i in [0u16, 1, 2, 0, 2, 3] {
@@ -350,6 +399,14 @@ fn build(major: u16, minor: u16, extra: bool, geor: bool) -> Doc {
     d.end();
     let geom_span = 16 + u64::from_le_bytes(d.bytes[geom + 8..geom + 16].try_into().unwrap()) + 4;
     let geom_end = d.bytes.len() as u64;
+    if let Some(t) = texturing {
+        d.begin(b"TEXL", 0);
+        d.raw(&t.half, "image 0 level 1 (PNG)");
+        d.end();
+        d.begin(b"TEXL", 0);
+        d.raw(&t.full, "image 0 level 0 (PNG)");
+        d.end();
+    }
 
     if extra {
         d.chunk(b"XEND", b"trailing unknown chunk");
@@ -429,7 +486,7 @@ fn handmade_file_reads() {
 /// the same georeference, and is version 2.1; the writer writes 2.0 without it.
 #[test]
 fn georeference_chunk_follows_the_spec() {
-    let d = build(MAJOR, MINOR, false, true);
+    let d = build(MAJOR, 1, false, true, None);
     check_reads(&d.bytes);
     let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     let expect = format::Georef {
@@ -473,6 +530,80 @@ fn georeference_chunk_follows_the_spec() {
     bad[at + 62..at + 66].copy_from_slice(&crc.to_le_bytes());
     let e = Reader::open(Cursor::new(bad)).err().expect("refused").to_string();
     assert!(e.contains("chunk GEOR") && e.contains("unknown frame 9"), "{e}");
+}
+
+/// A file with an image built from spec §7.5 reads as the spec says, equals the writer's output for
+/// the same mesh and image, and is version 2.2; damage to its image levels is found.
+#[test]
+fn images_follow_the_spec() {
+    let t = Texturing::new();
+    let d = build(MAJOR, MINOR, false, false, Some(&t));
+    let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
+    assert_eq!((rd.header().major, rd.header().minor), (2, 2));
+    let tx = rd.textures();
+    assert_eq!(tx.images.len(), 1);
+    assert_eq!((tx.images[0].name.as_str(), tx.images[0].codec), ("t.png", format::ImageCodec::Png));
+    assert_eq!(tx.uv_density, vec![1.0]);
+    assert_eq!((tx.level(0, 0).unwrap().width, tx.level(0, 1).unwrap().width), (2, 1));
+    assert!(tx.level(0, 1).unwrap().offset < tx.level(0, 0).unwrap().offset, "the coarse level first");
+    assert_eq!(rd.read_image_level(0, 0).unwrap(), t.full);
+    assert_eq!(rd.read_image_level(0, 1).unwrap(), t.half);
+    let slot = format::TextureSlot { image: 0, wrap: [format::Wrap::Repeat; 2] };
+    assert_eq!(rd.materials()[0].map(format::MapKind::BaseColor), Some(slot));
+    assert_eq!(rd.materials()[0].map(format::MapKind::Normal), None);
+    let g = rd.read_node(0).expect("node");
+    assert_eq!(g.uvs, vec![glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::ONE, glam::Vec2::Y]);
+    let v = format::verify(Cursor::new(&d.bytes), std::path::Path::new("textured"));
+    assert!(v.is_sound(), "{:?}", v.problems);
+
+    let mut mesh = quad();
+    mesh.uvs = [0, 1, 2, 0, 2, 3].iter().map(|&v| g.uvs[v]).collect();
+    mesh.materials[0].maps[0] = Some(slot);
+    let lv = LevelMeshes { levels: vec![LevelMesh { mesh, face_group: vec![0, 0], group_error: vec![0.0] }] };
+    let level = |b: &[u8], w: u32| strata::format::texture::LevelIn { width: w, height: w, bytes: b.to_vec() };
+    let image = strata::format::texture::ImageIn {
+        name: "t.png".into(),
+        codec: format::ImageCodec::Png,
+        levels: vec![level(&t.full, 2), level(&t.half, 1)],
+    };
+    let mut cur = Cursor::new(Vec::new());
+    let opts = WriteOptions { images: vec![image], ..options() };
+    strata::write::write_to(&mut cur, &hierarchy(), &lv, &opts).expect("write");
+    assert_eq!(cur.into_inner(), d.bytes, "the writer follows §7.5");
+
+    // A level whose header says 3 pixels wide, every checksum resealed, so that only the rule
+    // against the entry catches it.
+    let mut bad = d.bytes.clone();
+    let start = bad.windows(8).rposition(|w| w == b"\x89PNG\r\n\x1a\n").expect("the full level");
+    bad[start + 19] = 3;
+    let end = start + t.full.len();
+    let (old, new) = (crc32fast::hash(&t.full), crc32fast::hash(&bad[start..end]));
+    bad[end..end + 4].copy_from_slice(&new.to_le_bytes());
+    let entry = bad.windows(4).position(|w| w == old.to_le_bytes()).expect("the entry's CRC");
+    bad[entry..entry + 4].copy_from_slice(&new.to_le_bytes());
+    reseal_skeleton(&mut bad);
+    let rd = Reader::open(Cursor::new(&bad)).expect("the skeleton opens");
+    let e = rd.read_image_level(0, 0).unwrap_err().to_string();
+    assert!(e.contains("chunk TEXL") && e.contains("the image is 3 × 2, the entry says 2 × 2"), "{e}");
+    let v = format::verify(Cursor::new(&bad), std::path::Path::new("bad"));
+    assert!(v.problems.iter().any(|p| p.to_string().contains("the image is 3 × 2")), "{:?}", v.problems);
+}
+
+/// Recompute the CRCs of `SKEL`'s sub-chunks and of `SKEL` itself (the chunk after `HEAD`).
+fn reseal_skeleton(b: &mut [u8]) {
+    let size = |b: &[u8], at: usize| u64::from_le_bytes(b[at + 8..at + 16].try_into().unwrap()) as usize;
+    let skel = (16 + 20 + size(b, 16) + 7) & !7;
+    assert_eq!(&b[skel..skel + 4], b"SKEL");
+    let end = skel + 16 + size(b, skel);
+    let mut at = skel + 16;
+    while at < end {
+        let n = size(b, at);
+        let crc = crc32fast::hash(&b[at + 16..at + 16 + n]);
+        b[at + 16 + n..at + 20 + n].copy_from_slice(&crc.to_le_bytes());
+        at = (at + 20 + n + 7) & !7;
+    }
+    let crc = crc32fast::hash(&b[skel + 16..end]);
+    b[end..end + 4].copy_from_slice(&crc.to_le_bytes());
 }
 
 #[test]

@@ -74,14 +74,22 @@ pub fn run(a: Args) -> Result<()> {
     for l in s.levels.iter().rev() {
         println!("{:>6} {:>7} {:>9} {:>11}", l.level, l.nodes, l.faces, l.bytes);
     }
+    if s.image_bytes > 0 {
+        println!(
+            "images: {} bytes in their levels, {:.1} % of the file",
+            s.image_bytes,
+            100.0 * s.image_bytes as f64 / s.file_bytes.max(1) as f64
+        );
+    }
     let t = c.times;
     println!(
-        "time: import {:.0} ms, group {:.0} ms, simplify {:.0} ms, write {:.0} ms, total {:.0} ms",
+        "time: import {:.0} ms, textures {:.0} ms, group {:.0} ms, simplify {:.0} ms, write {:.0} ms, total {:.0} ms",
         t.import_ms,
+        t.texture_ms,
         t.group_ms,
         t.simplify_ms,
         t.write_ms,
-        t.import_ms + t.group_ms + t.simplify_ms + t.write_ms
+        t.import_ms + t.texture_ms + t.group_ms + t.simplify_ms + t.write_ms
     );
     Ok(())
 }

@@ -46,6 +46,11 @@ pub fn run(a: Args) -> Result<()> {
     for l in v.levels.iter().rev() {
         println!("  GEOM x{} level {} at {}..{} ({} bytes)", l.nodes, l.level, l.start, l.end, l.bytes);
     }
+    let texl: usize = v.images.iter().map(|i| i.levels.len()).sum();
+    if texl > 0 {
+        let (start, end) = (v.images.iter().map(|i| i.start).min().unwrap_or(0), v.images.iter().map(|i| i.end).max().unwrap_or(0));
+        println!("  TEXL x{texl} ({} images) at {start}..{end}", v.images.len());
+    }
     println!(
         "{:>5} {:>6} {:>10} {:>10} {:>11} {:>10} {:>9} {:>10}",
         "level", "nodes", "faces", "vertices", "bytes", "bytes/face", "cone max", "error max"
@@ -61,6 +66,19 @@ pub fn run(a: Args) -> Result<()> {
             l.bytes as f64 / l.faces.max(1) as f64,
             l.cone_deg_max,
             l.error_max
+        );
+    }
+    for im in &v.images {
+        let sizes: Vec<String> = im.levels.iter().map(|l| format!("{}×{}", l[0], l[1])).collect();
+        let bytes: u64 = im.levels.iter().map(|l| l[2]).sum();
+        println!(
+            "image {:>3} {:?} {} levels {} ({} bytes) used by {}",
+            im.image,
+            im.name,
+            im.codec.extension(),
+            sizes.join(" "),
+            bytes,
+            if im.uses.is_empty() { "nothing".into() } else { im.uses.join(", ") }
         );
     }
     if !v.nodes.is_empty() {

@@ -28,8 +28,9 @@ pub struct Args {
     /// "0.3,0.4,1.0", and for terrain (y up) "0,1,0.8": from the south, 50° above the horizon.
     #[arg(long, allow_hyphen_values = true)]
     view_dir: Option<String>,
-    /// Color by: one plain color, each node (strata files), or the level (strata files).
-    #[arg(long, value_enum, default_value_t = RenderColor::Plain)]
+    /// Color by: materials (base color and base color texture; the default for textured models),
+    /// one plain color (the default otherwise), each node (strata files), or the level (strata files).
+    #[arg(long, value_enum, default_value_t = RenderColor::Auto)]
     color: RenderColor,
     /// Level of a strata file to draw (0 = full detail).
     #[arg(long, default_value_t = 0)]
@@ -40,13 +41,17 @@ pub struct Args {
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum RenderColor {
+    Auto,
+    Materials,
     Plain,
     Groups,
     Levels,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    use strata::render::{palette, Image};
+    use strata::format::MapKind;
+    use strata::render::{palette, Image, Part};
+    use strata::texture::draw::{node_parts, read_base_color_chains, source_chain, srgb_color};
     anyhow::ensure!(a.width > 0 && a.height > 0, "--width and --height must be positive");
     strata::atomic::protect(&a.input);
     strata::atomic::check_output(&a.output)?;
@@ -59,24 +64,89 @@ pub fn run(a: Args) -> Result<()> {
         let levels = rd.header().levels;
         anyhow::ensure!(a.level < levels, "--level {}: {} has levels 0..{}", a.level, a.input.display(), levels.saturating_sub(1));
         let camera = render_camera(&a, rd.header().min, rd.header().max, rd.georef().is_some())?;
+        let color = match a.color {
+            RenderColor::Auto if !rd.textures().is_empty() => RenderColor::Materials,
+            RenderColor::Auto => RenderColor::Plain,
+            c => c,
+        };
+        let chains = if color == RenderColor::Materials { read_base_color_chains(&rd)? } else { Vec::new() };
         for node in rd.level_nodes(a.level) {
             let g = rd.read_node(node)?;
-            let color = match a.color {
-                RenderColor::Plain => plain,
-                RenderColor::Groups => palette(node),
-                RenderColor::Levels => palette(a.level),
+            let parts = match color {
+                RenderColor::Materials => node_parts(&g, rd.materials(), &chains),
+                c => {
+                    let color = match c {
+                        RenderColor::Groups => palette(node),
+                        RenderColor::Levels => palette(a.level),
+                        _ => plain,
+                    };
+                    vec![Part::new(&g.positions, &g.normals, &g.indices, color)]
+                }
             };
             let start = Instant::now();
-            drawn += image.draw(&camera, &g.positions, &g.normals, &g.indices, color);
+            drawn += image.draw_parts(&camera, &parts);
             draw_ms += start.elapsed().as_secs_f64() * 1e3;
             faces += g.face_count();
         }
     } else {
-        anyhow::ensure!(a.color == RenderColor::Plain, "--color groups and levels need a .strata file");
+        anyhow::ensure!(
+            matches!(a.color, RenderColor::Plain | RenderColor::Auto | RenderColor::Materials),
+            "--color groups and levels need a .strata file"
+        );
         let imported = load(&MeshInput { mesh: a.input.clone(), format: None, allow_outside_files: false, dem: a.dem.clone() })?;
         let m = imported.mesh;
         let (min, max) = m.bounds().context("empty mesh")?;
         let camera = render_camera(&a, min, max, imported.georef.is_some())?;
+        let textured = !m.uvs.is_empty() && m.materials.iter().any(|x| x.map(MapKind::BaseColor).is_some());
+        if a.color == RenderColor::Materials || (a.color == RenderColor::Auto && textured) {
+            let corners: Vec<glam::Vec3> =
+                m.triangles.iter().flatten().map(|&v| m.positions.get(v as usize).copied().unwrap_or(glam::Vec3::NAN)).collect();
+            let mut chains: Vec<Option<strata::texture::sample::MipChain>> = vec![None; m.images.len()];
+            for mat in &m.materials {
+                if let Some(slot) = mat.map(MapKind::BaseColor) {
+                    if chains[slot.image as usize].is_none() {
+                        match source_chain(&m.images[slot.image as usize], MapKind::BaseColor) {
+                            Ok(mut c) => {
+                                c.wrap = slot.wrap;
+                                chains[slot.image as usize] = Some(c);
+                            }
+                            Err(e) => eprintln!("warning: {}: {}: {e}", a.input.display(), m.images[slot.image as usize].name),
+                        }
+                    }
+                }
+            }
+            let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); m.materials.len().max(1)];
+            for f in 0..m.face_count() {
+                let id = m.face_materials.get(f).copied().unwrap_or(0) as usize;
+                let last = by_material.len() - 1;
+                by_material[id.min(last)].extend([3 * f as u32, 3 * f as u32 + 1, 3 * f as u32 + 2]);
+            }
+            let parts: Vec<Part> = by_material
+                .iter()
+                .enumerate()
+                .filter(|(_, i)| !i.is_empty())
+                .map(|(id, indices)| {
+                    let mat = m.materials.get(id);
+                    let part = Part::new(&corners, &m.normals, indices, mat.map_or(plain, |x| srgb_color(x.base_color)));
+                    match mat.and_then(|x| x.map(MapKind::BaseColor)).and_then(|s| chains[s.image as usize].as_ref()) {
+                        Some(c) => part.textured(&m.uvs, c),
+                        None => part,
+                    }
+                })
+                .collect();
+            let start = Instant::now();
+            drawn = image.draw_parts(&camera, &parts);
+            draw_ms = start.elapsed().as_secs_f64() * 1e3;
+            image.write_png(&a.output)?;
+            println!(
+                "drew {drawn} of {} faces at {}x{} in {draw_ms:.1} ms, wrote {}",
+                m.face_count(),
+                a.width,
+                a.height,
+                a.output.display()
+            );
+            return Ok(());
+        }
         // Corner normals become vertices of their own; without them, faces are flat.
         let (positions, normals, indices): (Vec<_>, Vec<_>, Vec<u32>) = if m.normals.is_empty() {
             (m.positions.clone(), Vec::new(), m.triangles.iter().flatten().copied().collect())

@@ -57,7 +57,7 @@ pub fn write_obj<W: Write>(mut out: W, mesh: &Mesh, mtllib: Option<&str>) -> io:
     };
     let (uv_of_corner, firsts) = dedup(mesh.uvs.iter().map(|t| t.to_array().map(f32::to_bits)));
     for c in firsts {
-        writeln!(out, "vt {} {}", Num(mesh.uvs[c].x), Num(mesh.uvs[c].y))?;
+        writeln!(out, "vt {} {}", Num(mesh.uvs[c].x), Num(1.0 - mesh.uvs[c].y))?;
     }
     let (normal_of_corner, firsts) = dedup(mesh.normals.iter().map(|n| n.to_array().map(f32::to_bits)));
     for c in firsts {
@@ -216,7 +216,7 @@ mod tests {
                 let idx: Vec<usize> = corner.split('/').map(|s| s.parse().unwrap()).collect();
                 let c = 3 * f + k;
                 assert_eq!(v[idx[0] - 1], m.positions[m.triangles[f][k] as usize].to_array());
-                assert_eq!(vt[idx[1] - 1], m.uvs[c].to_array());
+                assert_eq!(vt[idx[1] - 1], [m.uvs[c].x, 1.0 - m.uvs[c].y], "OBJ's v runs up");
                 assert_eq!(vn[idx[2] - 1], m.normals[c].to_array());
             }
         }

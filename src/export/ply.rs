@@ -53,7 +53,7 @@ pub fn write_ply<W: Write>(mut out: W, mesh: &Mesh) -> io::Result<()> {
             record.extend(mesh.colors[c]);
         }
         if uvs {
-            record.extend(mesh.uvs[c].to_array().map(f32::to_le_bytes).as_flattened());
+            record.extend([mesh.uvs[c].x, 1.0 - mesh.uvs[c].y].map(f32::to_le_bytes).as_flattened());
         }
         out.write_all(&record)?;
     }

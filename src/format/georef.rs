@@ -130,7 +130,7 @@ mod tests {
         let mut bad = p.clone();
         bad[0] = 7;
         refuse(&bad, 1, "unknown frame 7");
-        refuse(&bad, 2, "newer than this reader");
+        refuse(&bad, MINOR + 1, "newer than this reader");
         let mut bad = p.clone();
         bad[8..16].copy_from_slice(&200f64.to_le_bytes());
         refuse(&bad, 1, "out of range");
@@ -140,7 +140,7 @@ mod tests {
         let mut longer = p.clone();
         longer.push(0);
         refuse(&longer, 1, "1 bytes after the CRS string");
-        assert_eq!(decode(Path::new("t"), 2, &longer, 0).unwrap(), g);
+        assert_eq!(decode(Path::new("t"), MINOR + 1, &longer, 0).unwrap(), g);
         refuse(&p[..GEOR_FIXED_BYTES - 1], 1, "fewer than");
         refuse(&p[..p.len() - 1], 1, "needs 9 more bytes");
     }

@@ -87,6 +87,23 @@ pub struct Inspection {
     /// Finest level first.
     pub levels: Vec<LevelView>,
     pub nodes: Vec<NodeView>,
+    /// The images materials use (`TEXR`, `TEXL`), empty without.
+    pub images: Vec<ImageView>,
+}
+
+/// One image and its levels.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ImageView {
+    pub image: u32,
+    pub name: String,
+    pub codec: super::ImageCodec,
+    /// Width, height and chunk bytes (ID through CRC) of each level, finest first.
+    pub levels: Vec<[u64; 3]>,
+    /// Where its `TEXL` chunks lie: the first offset and the byte after the last.
+    pub start: u64,
+    pub end: u64,
+    /// `material: map` for every material slot that samples it.
+    pub uses: Vec<String>,
 }
 
 /// Describe an open file; nodes as `select` asks.
@@ -152,6 +169,34 @@ pub fn inspect<S: ByteSource>(rd: &Reader<S>, select: Selection) -> Result<Inspe
         v.chunks = rd.node_chunks(i)?;
         nodes.push(v);
     }
+    let t = rd.textures();
+    let images = t
+        .images
+        .iter()
+        .enumerate()
+        .map(|(i, im)| {
+            let lv: Vec<&super::ImageLevel> = im.levels.iter().map(|&e| &t.levels[e as usize]).collect();
+            let uses = rd
+                .materials()
+                .iter()
+                .flat_map(|m| {
+                    super::MapKind::ALL
+                        .into_iter()
+                        .filter(|&k| m.map(k).is_some_and(|s| s.image == i as u32))
+                        .map(|k| format!("{}: {}", m.name, k.name()))
+                })
+                .collect();
+            ImageView {
+                image: i as u32,
+                name: im.name.clone(),
+                codec: im.codec,
+                levels: lv.iter().map(|l| [l.width as u64, l.height as u64, l.size as u64]).collect(),
+                start: lv.iter().map(|l| l.offset).min().unwrap_or(0),
+                end: lv.iter().map(|l| l.offset + l.size as u64).max().unwrap_or(0),
+                uses,
+            }
+        })
+        .collect();
     Ok(Inspection {
         version: format!("{}.{}", h.major, h.minor),
         header,
@@ -159,6 +204,7 @@ pub fn inspect<S: ByteSource>(rd: &Reader<S>, select: Selection) -> Result<Inspe
         chunks: rd.skeleton_chunks().to_vec(),
         levels,
         nodes,
+        images,
     })
 }
 

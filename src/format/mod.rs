@@ -14,6 +14,7 @@
 //! - [`chunk`]: the frame every chunk shares (ID, flags, size, payload, CRC-32, padding);
 //! - [`codes`]: the position grid and the u16 codes of angles and radii; [`octa`]: normals;
 //! - [`skeleton`]: `HEAD` and `SKEL`, encoded and decoded; [`georef`]: `GEOR`, where terrain sits;
+//!   [`texture`]: `TEXR` and `TEXL`, the images materials use, as pyramids of resolutions;
 //! - [`geom`]: a node's geometry, one codec per format version ([`geom::v2`]);
 //! - [`source`]: [`ByteSource`], where bytes come from;
 //! - [`read`]: [`Reader`], the lazy reader; [`rules`]: what every reader checks (spec §10);
@@ -33,13 +34,17 @@ pub mod records;
 pub mod rules;
 pub mod skeleton;
 pub mod source;
+pub mod texture;
 pub mod verify;
 pub mod write;
 
 pub use codes::{angle_code, angle_decode, pack, radius_code, radius_decode, unpack, Grid, GRID_BITS, MAX_GRID_BITS};
 pub use georef::{GeoFrame, Georef};
 pub use read::Reader;
-pub use records::{Attributes, Cluster, Cone, Header, HierarchyParams, LevelRecord, Material, MaterialRange, NodeGeometry, NodeRecord};
+pub use records::{
+    Attributes, Cluster, Cone, Header, HierarchyParams, ImageCodec, ImageLevel, ImageRecord, LevelRecord, MapKind, Material, MaterialRange,
+    NodeGeometry, NodeRecord, TextureSlot, Textures, Wrap, MAP_KINDS,
+};
 pub use source::ByteSource;
 pub use verify::{verify, verify_path, Verification};
 pub use write::{LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
@@ -51,10 +56,11 @@ pub const MAJOR: u16 = 2;
 /// (format-spec/strata-v3.md).
 pub const NEWEST_MAJOR: u16 = 3;
 /// Minor format version this reader knows: a newer minor only adds chunk kinds, which older readers
-/// skip. Writers write the lowest minor that holds what a file carries: 1 with a `GEOR` chunk, else 0.
-pub const MINOR: u16 = 1;
+/// skip. Writers write the lowest minor that holds what a file carries: 2 with images (`TEXR`,
+/// `TEXL`), 1 with a `GEOR` chunk, else 0.
+pub const MINOR: u16 = 2;
 /// The format version as the spec writes it.
-pub const VERSION: &str = "2.1";
+pub const VERSION: &str = "2.2";
 
 /// The first 8 bytes of every strata file.
 pub const MAGIC: [u8; 8] = *b"\x89STRATA\n";
@@ -94,4 +100,6 @@ pub mod id {
     pub const INDX: [u8; 4] = *b"INDX";
     pub const MATR: [u8; 4] = *b"MATR";
     pub const CLUS: [u8; 4] = *b"CLUS";
+    pub const TEXR: [u8; 4] = *b"TEXR";
+    pub const TEXL: [u8; 4] = *b"TEXL";
 }

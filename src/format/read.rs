@@ -12,7 +12,10 @@ use super::georef::{self, Georef};
 use super::rules::{self, Sink};
 pub use super::skeleton::ChunkInfo;
 use super::skeleton::{self, Context, Skeleton};
-use super::{id, ByteSource, Header, LevelRecord, Material, NodeGeometry, NodeRecord, MAGIC, MAJOR, NEWEST_MAJOR, PROLOGUE_BYTES, VERSION};
+use super::texture;
+use super::{
+    id, ByteSource, Header, LevelRecord, Material, NodeGeometry, NodeRecord, Textures, MAGIC, MAJOR, NEWEST_MAJOR, PROLOGUE_BYTES, VERSION,
+};
 use crate::error::{Error, Result};
 use byteorder::{ByteOrder, LittleEndian as LE};
 use glam::Vec3;
@@ -78,6 +81,7 @@ impl<S: ByteSource> Reader<S> {
                 neighbors: Vec::new(),
                 materials: Vec::new(),
                 boxes: Vec::new(),
+                textures: Default::default(),
             },
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
@@ -179,6 +183,33 @@ impl<S: ByteSource> Reader<S> {
 
     pub fn materials(&self) -> &[Material] {
         &self.skeleton.materials
+    }
+
+    /// The images the materials use, their levels and each node's UV density (spec §7.5).
+    pub fn textures(&self) -> &Textures {
+        &self.skeleton.textures
+    }
+
+    /// Read level `level` (0 = full) of image `image`: the `TEXL` chunk is checked (ID, size,
+    /// CRC, the image header's size); returns the image file's bytes (PNG or JPEG).
+    pub fn read_image_level(&self, image: u32, level: u32) -> Result<Vec<u8>> {
+        let t = &self.skeleton.textures;
+        let (Some(rec), Some(lv)) = (t.images.get(image as usize), t.level(image, level)) else {
+            return Err(Error::at_element(
+                &self.path,
+                format!("image {image} level {level}"),
+                format!("no such image level; the file has {} images", t.images.len()),
+            ));
+        };
+        let mut bytes = self.read_at(lv.offset, lv.size as u64)?;
+        let payload = texture::check_level(lv, rec.codec, &bytes).map_err(|(at, m)| {
+            Error::at_byte(&self.path, at, format!("image {image} level {level}: {}: {m}", chunk::name(&id::TEXL, lv.offset)))
+        })?;
+        let range =
+            payload.as_ptr() as usize - bytes.as_ptr() as usize..payload.as_ptr() as usize - bytes.as_ptr() as usize + payload.len();
+        bytes.truncate(range.end);
+        bytes.drain(..range.start);
+        Ok(bytes)
     }
 
     /// Node `i`'s bounding box (min, max).

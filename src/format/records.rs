@@ -20,11 +20,175 @@ pub struct Material {
     pub base_color: [f32; 4],
     /// Path or URI of the base color texture, as written in the source file.
     pub texture: Option<String>,
+    /// The images the material's maps sample, by [`MapKind`] (spec §7.5, `TEXR`).
+    pub maps: [Option<TextureSlot>; MAP_KINDS],
 }
 
 impl Default for Material {
     fn default() -> Self {
-        Material { name: "default".into(), base_color: [0.8, 0.8, 0.8, 1.0], texture: None }
+        Material { name: "default".into(), base_color: [0.8, 0.8, 0.8, 1.0], texture: None, maps: [None; MAP_KINDS] }
+    }
+}
+
+impl Material {
+    /// The image map `kind` samples, if any.
+    pub fn map(&self, kind: MapKind) -> Option<TextureSlot> {
+        self.maps[kind as usize]
+    }
+}
+
+/// Kinds of image map a material can have, in the order of `TEXR`'s slots (spec §7.5); glTF's
+/// metallic-roughness model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum MapKind {
+    /// sRGB color (and alpha), multiplied by the base color.
+    BaseColor = 0,
+    /// Tangent-space normals, linear.
+    Normal = 1,
+    /// Roughness in green, metalness in blue, linear.
+    MetallicRoughness = 2,
+    /// Ambient occlusion in red, linear.
+    Occlusion = 3,
+    /// sRGB emitted color.
+    Emissive = 4,
+}
+
+/// Slots of map kinds per material.
+pub const MAP_KINDS: usize = 5;
+
+impl MapKind {
+    pub const ALL: [MapKind; MAP_KINDS] =
+        [MapKind::BaseColor, MapKind::Normal, MapKind::MetallicRoughness, MapKind::Occlusion, MapKind::Emissive];
+
+    /// Whether texels are sRGB-encoded colors (filtered in linear light), else linear data.
+    pub fn is_srgb(self) -> bool {
+        matches!(self, MapKind::BaseColor | MapKind::Emissive)
+    }
+
+    pub fn name(self) -> &'static str {
+        ["base color", "normal", "metallic-roughness", "occlusion", "emissive"][self as usize]
+    }
+}
+
+/// How UVs outside [0, 1] sample an image, per axis (glTF's sampler wrap modes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum Wrap {
+    #[default]
+    Repeat = 0,
+    Clamp = 1,
+    Mirror = 2,
+}
+
+impl Wrap {
+    pub fn from_code(c: u8) -> Option<Wrap> {
+        [Wrap::Repeat, Wrap::Clamp, Wrap::Mirror].get(c as usize).copied()
+    }
+}
+
+/// A material's map: which image (an index into the file's images) and how it wraps in u and v.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TextureSlot {
+    pub image: u32,
+    pub wrap: [Wrap; 2],
+}
+
+/// How an image's levels are compressed: each level is a complete file of that kind.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum ImageCodec {
+    Png = 1,
+    Jpeg = 2,
+}
+
+impl ImageCodec {
+    pub fn from_code(c: u8) -> Option<ImageCodec> {
+        match c {
+            1 => Some(ImageCodec::Png),
+            2 => Some(ImageCodec::Jpeg),
+            _ => None,
+        }
+    }
+
+    /// The media type of the level files (for glTF's `mimeType` and HTTP).
+    pub fn mime(self) -> &'static str {
+        match self {
+            ImageCodec::Png => "image/png",
+            ImageCodec::Jpeg => "image/jpeg",
+        }
+    }
+
+    /// File name extension of a level file, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            ImageCodec::Png => "png",
+            ImageCodec::Jpeg => "jpg",
+        }
+    }
+}
+
+/// An image a material uses, stored as a pyramid of resolutions (spec §7.5): level 0 is the full
+/// image, each next level half the size (rounded up) of the one before.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ImageRecord {
+    /// As the source named it (a file name or URI, or "embedded image 3").
+    pub name: String,
+    pub codec: ImageCodec,
+    /// Index into [`Textures::levels`] of each level, finest (the full image) first.
+    pub levels: Vec<u32>,
+}
+
+/// One resolution of an image: a `TEXL` chunk after the geometry (spec §7.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageLevel {
+    pub image: u32,
+    /// 0 = the full image.
+    pub level: u32,
+    pub width: u32,
+    pub height: u32,
+    /// Where its `TEXL` chunk starts (not stored: the chunks follow the last `GEOM` in table
+    /// order), its bytes from ID through CRC (padding excluded), and the CRC of its payload.
+    pub offset: u64,
+    pub size: u32,
+    pub crc: u32,
+}
+
+impl ImageLevel {
+    /// Bytes of its pixels decoded as RGBA8, what a renderer holds.
+    pub fn decoded_bytes(&self) -> u64 {
+        4 * self.width as u64 * self.height as u64
+    }
+}
+
+/// The images of a file and what selects their levels: the `TEXR` chunk decoded. Empty for a
+/// file without images.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Textures {
+    pub images: Vec<ImageRecord>,
+    /// Every level of every image, in file order (coarsest first as writers lay them out).
+    pub levels: Vec<ImageLevel>,
+    /// Per node: UV units per model unit over its textured faces (0 for a node without), rounded
+    /// up, so that a level fine enough for it can be chosen from its projected size (selection.md).
+    pub uv_density: Vec<f32>,
+}
+
+impl Textures {
+    pub fn is_empty(&self) -> bool {
+        self.images.is_empty()
+    }
+
+    /// Level `level` of image `image` (0 = full), if it exists.
+    pub fn level(&self, image: u32, level: u32) -> Option<&ImageLevel> {
+        let i = *self.images.get(image as usize)?.levels.get(level as usize)?;
+        self.levels.get(i as usize)
+    }
+
+    /// Levels of image `image` (0 when there is no such image).
+    pub fn level_count(&self, image: u32) -> u32 {
+        self.images.get(image as usize).map_or(0, |i| i.levels.len() as u32)
+    }
+
+    /// Bytes of the `TEXL` chunks, padding included.
+    pub fn stored_bytes(&self) -> u64 {
+        self.levels.iter().map(|l| l.size as u64 + super::chunk::padding(l.offset + l.size as u64)).sum()
     }
 }
 

@@ -2,9 +2,10 @@
 //! [`Skeleton`], everything a viewer needs before reading any geometry, and encoded back.
 
 use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
+use super::texture;
 use super::{
     angle_decode, id, octa, pack, radius_decode, unpack, Attributes, Cone, Grid, Header, HierarchyParams, LevelRecord, Material,
-    NodeRecord, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR, NODE_RECORD_BYTES, NO_PARENT,
+    NodeRecord, Textures, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR, NODE_RECORD_BYTES, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use byteorder::{ByteOrder, LittleEndian as LE};
@@ -45,6 +46,8 @@ pub struct Skeleton {
     pub materials: Vec<Material>,
     /// Each node's box as packed grid points (min, max): 16 bytes a node, decoded on demand.
     pub boxes: Vec<[u64; 2]>,
+    /// The images the materials use and each node's UV density (`TEXR`); empty without images.
+    pub textures: Textures,
 }
 
 impl Skeleton {
@@ -383,13 +386,25 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
         let tex = f
             .string(len)
             .map_err(|_| f.error_at(at, format!("material {m}: texture of {len} bytes runs past the chunk or is not UTF-8")))?;
-        materials.push(Material { name, base_color, texture: (!tex.is_empty()).then_some(tex) });
+        materials.push(Material { name, base_color, texture: (!tex.is_empty()).then_some(tex), ..Material::default() });
     }
     if f.remaining() > 0 && h.minor.cmp(&MINOR).is_le() {
         return Err(f.error(format!("{} bytes after {} materials", f.remaining(), h.materials)));
     }
 
-    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes }, infos))
+    // TEXR (2.2), optional.
+    let mut found = subs.iter().filter(|s| s.frame.id == id::TEXR);
+    let textures = match (found.next(), found.next()) {
+        (_, Some(dup)) => return Err(ctx.err(dup.offset, &id::SKEL, pos, "has a second TEXR chunk")),
+        (None, None) => Textures::default(),
+        (Some(texr), None) => {
+            let levels_start = ctx.geometry_start + levels.iter().map(|l| l.bytes).sum::<u64>();
+            let cx = texture::TexrContext { nodes: h.nodes, levels_start, file_size: ctx.file_size };
+            texture::decode_texr(&mut fields(texr), &cx, &mut materials)?
+        }
+    };
+
+    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures }, infos))
 }
 
 /// The `HEAD` chunk.
@@ -429,13 +444,14 @@ pub fn encode_head(h: &Header) -> Vec<u8> {
     out
 }
 
-/// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`.
+/// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`, and `TEXR` when `texr` (its payload) is given.
 pub fn encode_skel(
     levels: &[LevelRecord],
     records: &[NodeRecord],
     codes: &[NodeCodes],
     neighbors: &[u32],
     materials: &[Material],
+    texr: Option<&[u8]>,
 ) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
@@ -488,6 +504,9 @@ pub fn encode_skel(
         p.extend_from_slice(tex.as_bytes());
     }
     chunk::put(&mut payload, id::MATL, 0, &p);
+    if let Some(t) = texr {
+        chunk::put(&mut payload, id::TEXR, 0, t);
+    }
 
     let mut out = Vec::with_capacity(payload.len() + 24);
     chunk::put(&mut out, id::SKEL, 0, &payload);

@@ -1,7 +1,7 @@
 //! Check a whole strata file: every chunk's frame, CRC and padding, the rules of the skeleton and of
 //! every node ([`rules`], which every reader checks too), and what only the whole file can tell:
-//! chunks laid out as the node table says, the cluster count, and level 0 covering every input
-//! face exactly once.
+//! chunks laid out as the node table and the image table say, every image level's header, the
+//! cluster count, and level 0 covering every input face exactly once.
 
 use super::chunk::{self, HEADER_BYTES, TRAILER_BYTES};
 use super::rules::{self, Sink};
@@ -72,11 +72,12 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     v.chunks = chunks.len();
     let strict = rd.header().minor.cmp(&MINOR).is_le();
     let mut geoms = Vec::new();
+    let mut texls = Vec::new();
     let mut seen_skel = false;
     for (k, c) in chunks.iter().enumerate() {
         let here = |msg: String| Error::at_byte(&path, c.offset, format!("chunk {} at offset {}: {msg}", c.id, c.offset));
         let end = c.offset + HEADER_BYTES + c.size + TRAILER_BYTES;
-        let known = [id::HEAD, id::GEOR, id::SKEL, id::GEOM].iter().any(|i| chunk::id_str(i) == c.id);
+        let known = [id::HEAD, id::GEOR, id::SKEL, id::GEOM, id::TEXL].iter().any(|i| chunk::id_str(i) == c.id);
         if known && c.flags != 0 && strict {
             v.push(here(format!("flags {:#x} should be 0", c.flags)));
         }
@@ -98,7 +99,12 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
                 v.push(here("GEOR after SKEL: it belongs between HEAD and SKEL".into()));
             }
         } else if c.id == "GEOM" {
+            if !texls.is_empty() {
+                v.push(here("a GEOM chunk after TEXL chunks: images follow the geometry".into()));
+            }
             geoms.push((c.offset, HEADER_BYTES + c.size + TRAILER_BYTES));
+        } else if c.id == "TEXL" {
+            texls.push((c.offset, HEADER_BYTES + c.size + TRAILER_BYTES));
         } else if !known {
             if let Err(e) = crc_of(rd, &c.id, c.offset, c.size) {
                 v.push(e);
@@ -106,9 +112,28 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
         }
     }
     // 2.1 adds only GEOR, and writers write 2.1 only for a file that has one (spec §0, §5.2): a
-    // 2.1 file without it lost it (its ID damaged into an unknown chunk's, say).
+    // 2.1 file without it lost it (its ID damaged into an unknown chunk's, say). Likewise 2.2 and
+    // images (§7.5).
     if rd.header().major == 2 && rd.header().minor == 1 && !chunks.iter().any(|c| c.id == "GEOR") {
         v.push(Error::invalid(&path, None, "format 2.1 without a GEOR chunk: 2.1 is written only for a file with one (spec §5.2)"));
+    }
+    if rd.header().major == 2 && rd.header().minor == 2 && rd.textures().is_empty() {
+        v.push(Error::invalid(&path, None, "format 2.2 without a TEXR chunk: 2.2 is written only for a file with images (spec §7.5)"));
+    }
+    let levels: Vec<(u64, u64)> = rd.textures().levels.iter().map(|l| (l.offset, l.size as u64)).collect();
+    if texls != levels {
+        let k = texls.iter().zip(&levels).position(|(a, b)| a != b).unwrap_or(texls.len().min(levels.len()));
+        v.push(Error::at_element(
+            &path,
+            format!("image level entry {k}"),
+            format!("the file holds {} TEXL chunks but TEXR lists {}, first differing at entry {k}", texls.len(), levels.len()),
+        ));
+    } else {
+        for l in &rd.textures().levels {
+            if let Err(e) = rd.read_image_level(l.image, l.level) {
+                v.push(e);
+            }
+        }
     }
     if let Some(last) = chunks.last() {
         let end = last.offset + HEADER_BYTES + last.size + TRAILER_BYTES;

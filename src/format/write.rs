@@ -14,6 +14,7 @@ use super::geom::v2::{self, GeometryCodes};
 use super::geom::v3;
 use super::georef::{self, Georef};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
+use super::texture::{self, ImageIn};
 use super::{
     angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC,
     MAX_TOOL_BYTES, MINOR, NO_PARENT,
@@ -48,6 +49,9 @@ pub struct WriterOptions {
     pub georef: Option<Georef>,
     /// The major format version to write: 2 (fixed-width arrays) or 3 (compressed node geometry).
     pub major: u16,
+    /// The images the materials' maps index, each as its levels, finest first; a file with images
+    /// is format 2.2 (spec §7.5).
+    pub images: Vec<ImageIn>,
 }
 
 /// One finished node.
@@ -66,6 +70,8 @@ pub struct NodeIn {
     pub codes: NodeCodes,
     /// Geometric error in model units, not below any child's.
     pub error: f32,
+    /// UV units per model unit over its textured faces, 0 without (spec §7.5).
+    pub uv_density: f32,
     pub geometry: GeometryCodes,
 }
 
@@ -94,6 +100,8 @@ pub struct WriteSummary {
     /// Format 3: bits of node geometry by kind ([`v3::STAT_NAMES`]), over all nodes.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub geometry_bits: Option<[u64; 8]>,
+    /// Bytes of the images' `TEXL` chunks, padding included.
+    pub image_bytes: u64,
 }
 
 impl WriteSummary {
@@ -143,6 +151,7 @@ struct Pending {
     neighbors: Vec<u32>,
     codes: NodeCodes,
     error: f32,
+    uv_density: u16,
     faces: u32,
     vertices: u32,
     /// Where its chunk (padded) lies in its level's spill, and its span from ID to CRC.
@@ -179,6 +188,7 @@ impl<W: Write> Writer<W> {
         if opts.levels == 0 || opts.levels == u32::MAX {
             return Err(bad(format!("{} levels", opts.levels)));
         }
+        check_images(&opts).map_err(bad)?;
         let mut spills = Vec::with_capacity(opts.levels as usize);
         for _ in 0..opts.levels {
             spills.push(match spill_dir {
@@ -240,6 +250,7 @@ impl<W: Write> Writer<W> {
             neighbors: node.neighbors,
             codes: node.codes,
             error: node.error,
+            uv_density: texture::density_code(node.uv_density),
             faces: faces as u32,
             vertices: vertices as u32,
             spill_at,
@@ -299,6 +310,7 @@ impl<W: Write> Writer<W> {
         // Records in file order, children ranges and neighbour lists.
         let mut records: Vec<NodeRecord> = Vec::with_capacity(total);
         let mut codes: Vec<NodeCodes> = Vec::with_capacity(total);
+        let mut density: Vec<u16> = Vec::with_capacity(total);
         let mut neighbors: Vec<u32> = Vec::new();
         let mut levels = vec![LevelRecord::default(); nl];
         for l in (0..nl).rev() {
@@ -344,6 +356,7 @@ impl<W: Write> Writer<W> {
                     crc: p.crc,
                 });
                 codes.push(p.codes);
+                density.push(p.uv_density);
                 let level = &mut levels[l];
                 level.faces += p.faces as u64;
                 level.vertices += p.vertices as u64;
@@ -372,8 +385,13 @@ impl<W: Write> Writer<W> {
 
         let top = level_first[nl - 1] as usize..(level_first[nl - 1] + levels[nl - 1].nodes) as usize;
         let grid = self.opts.grid;
-        // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2.
-        let minor = if self.opts.georef.is_some() && self.opts.major == 2 { MINOR } else { 0 };
+        // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images.
+        let images = &self.opts.images;
+        let minor = match (self.opts.major, images.is_empty(), self.opts.georef.is_some()) {
+            (2, false, _) => MINOR,
+            (2, true, true) => 1,
+            _ => 0,
+        };
         let mut header = Header {
             major: self.opts.major,
             minor,
@@ -393,10 +411,19 @@ impl<W: Write> Writer<W> {
             level_ratio: self.opts.level_ratio,
             tool: self.opts.tool.clone(),
         };
-        let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials);
+        let image_order = texture::layout_order(images);
+        let texr = (!images.is_empty()).then(|| texture::encode_texr(images, &image_order, &self.opts.materials, &density));
+        let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref());
         let geor = self.opts.georef.as_ref().map(georef::encode).unwrap_or_default();
         let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + geor.len() as u64 + skel.len() as u64;
-        header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>();
+        let image_bytes: u64 = image_order
+            .iter()
+            .map(|&(i, l)| {
+                let end = images[i as usize].levels[l as usize].bytes.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES;
+                end + chunk::padding(end)
+            })
+            .sum();
+        header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>() + image_bytes;
 
         let mut prologue = Vec::with_capacity(16);
         prologue.extend_from_slice(&MAGIC);
@@ -418,6 +445,11 @@ impl<W: Write> Writer<W> {
             }
             self.spills[l] = Spill::Memory(Vec::new());
         }
+        for &(i, l) in &image_order {
+            buf.clear();
+            chunk::put(&mut buf, id::TEXL, 0, &images[i as usize].levels[l as usize].bytes);
+            self.out.write_all(&buf).map_err(io)?;
+        }
         self.out.flush().map_err(io)?;
 
         Ok(WriteSummary {
@@ -432,6 +464,47 @@ impl<W: Write> Writer<W> {
                 .map(|(l, r)| LevelSummary { level: l as u32, nodes: r.nodes, faces: r.faces, vertices: r.vertices, bytes: r.bytes })
                 .collect(),
             geometry_bits: self.geometry_bits,
+            image_bytes,
         })
     }
+}
+
+/// Images are consistent: levels halve (rounding up) from the full image, at most
+/// [`texture::MAX_LEVELS`] of at most [`texture::MAX_SIDE`] a side, each level's header states its
+/// size, and every material slot names an image.
+fn check_images(opts: &WriterOptions) -> std::result::Result<(), String> {
+    if opts.images.len() > u32::MAX as usize - 1 {
+        return Err(format!("{} images", opts.images.len()));
+    }
+    for (i, im) in opts.images.iter().enumerate() {
+        let name = &im.name;
+        if im.levels.is_empty() || im.levels.len() > texture::MAX_LEVELS as usize || name.len() > texture::MAX_NAME_BYTES as usize {
+            return Err(format!("image {i} ({name}): {} levels, name of {} bytes", im.levels.len(), name.len()));
+        }
+        for (l, v) in im.levels.iter().enumerate() {
+            if v.width == 0 || v.height == 0 || v.width > texture::MAX_SIDE || v.height > texture::MAX_SIDE {
+                return Err(format!("image {i} ({name}) level {l}: {} × {}", v.width, v.height));
+            }
+            if l > 0 {
+                let p = &im.levels[l - 1];
+                if v.width != texture::half(p.width) || v.height != texture::half(p.height) || (p.width == 1 && p.height == 1) {
+                    return Err(format!("image {i} ({name}) level {l} does not halve level {}", l - 1));
+                }
+            }
+            match texture::image_size(im.codec, &v.bytes) {
+                Ok(s) if s == (v.width, v.height) => {}
+                Ok((w, h)) => return Err(format!("image {i} ({name}) level {l}: the file is {w} × {h}, not {} × {}", v.width, v.height)),
+                Err(m) => return Err(format!("image {i} ({name}) level {l}: {m}")),
+            }
+            if v.bytes.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES > u32::MAX as u64 {
+                return Err(format!("image {i} ({name}) level {l}: {} bytes", v.bytes.len()));
+            }
+        }
+    }
+    for (m, mat) in opts.materials.iter().enumerate() {
+        if let Some(s) = mat.maps.iter().flatten().find(|s| s.image as usize >= opts.images.len()) {
+            return Err(format!("material {m} names image {} of {}", s.image, opts.images.len()));
+        }
+    }
+    Ok(())
 }

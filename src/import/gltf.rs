@@ -18,11 +18,15 @@
 //! belong to another.
 //!
 //! External buffers are read only from the glTF file's folder, unless
-//! [`ImportOptions::allow_outside_files`]. Images are never read: materials keep their names.
+//! [`ImportOptions::allow_outside_files`]; so are images (files, `data:` URIs or buffer views, PNG
+//! or JPEG), which become the materials' maps (base color, normal, metallic-roughness, occlusion,
+//! emissive) on TEXCOORD_0. An image that cannot be read is a warning, and its maps are left out.
 
 use super::{ImportOptions, Raw};
 use crate::error::{Error, Result};
+use crate::format::{TextureSlot, Wrap, MAP_KINDS};
 use crate::mesh::{coordinate_problem, Material, Mesh};
+use crate::texture::SourceImage;
 use base64::Engine;
 use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -30,7 +34,7 @@ use gltf::json;
 use gltf::mesh::{Mode, Semantic};
 use std::borrow::Cow;
 use std::ops::Range;
-use std::path::{Component, Path};
+use std::path::Path;
 
 /// Required extensions whose data strata cannot decode.
 const UNDECODABLE: &[&str] = &["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression"];
@@ -70,7 +74,15 @@ fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -
         warnings.push(format!("{skipped} point or line primitives skipped"));
     }
     let used = primitives.iter().map(|(_, p, _)| p);
-    let buffers = Buffers::load(path, &doc, bin, bytes.len(), used, options.allow_outside_files)?;
+    let maps = material_maps(&doc, warnings);
+    let image_buffers: Vec<usize> = maps
+        .iter()
+        .flatten()
+        .flatten()
+        .filter_map(|(image, _)| doc.as_json().images.get(*image as usize)?.buffer_view)
+        .filter_map(|view| Some(doc.views().nth(view.value())?.buffer().index()))
+        .collect();
+    let buffers = Buffers::load(path, &doc, bin, bytes.len(), used, &image_buffers, options.allow_outside_files)?;
 
     let mut builder = Builder::new(&doc);
     for (mesh_index, prim, world) in &primitives {
@@ -79,8 +91,103 @@ fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -
     if builder.mesh.triangles.is_empty() {
         return Err(Error::invalid(path, None, "no triangles in the imported scene"));
     }
-    Ok(builder.finish(warnings))
+    let mut mesh = builder.finish(warnings);
+    load_images(path, &doc, &buffers, &maps, options.allow_outside_files, &mut mesh, warnings);
+    Ok(mesh)
 }
+
+/// A material's maps as glTF names them: per [`MapKind`] slot, the glTF image and the wrap modes.
+type GltfMaps = [Option<(u32, [Wrap; 2])>; MAP_KINDS];
+
+/// Each glTF material's maps that use TEXCOORD_0 (strata keeps one UV set); maps on other sets are
+/// left out with a warning.
+fn material_maps(doc: &gltf::Document, warnings: &mut Vec<String>) -> Vec<GltfMaps> {
+    let wrap = |m: gltf::texture::WrappingMode| match m {
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::Clamp,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::Mirror,
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    };
+    let mut other_sets = 0;
+    let out = doc
+        .materials()
+        .map(|m| {
+            let pbr = m.pbr_metallic_roughness();
+            let slots: [Option<(gltf::Texture, u32)>; MAP_KINDS] = [
+                pbr.base_color_texture().map(|i| (i.texture(), i.tex_coord())),
+                m.normal_texture().map(|i| (i.texture(), i.tex_coord())),
+                pbr.metallic_roughness_texture().map(|i| (i.texture(), i.tex_coord())),
+                m.occlusion_texture().map(|i| (i.texture(), i.tex_coord())),
+                m.emissive_texture().map(|i| (i.texture(), i.tex_coord())),
+            ];
+            slots.map(|slot| {
+                let (t, set) = slot?;
+                if set != 0 {
+                    other_sets += 1;
+                    return None;
+                }
+                let s = t.sampler();
+                Some((t.source().index() as u32, [wrap(s.wrap_s()), wrap(s.wrap_t())]))
+            })
+        })
+        .collect();
+    if other_sets > 0 {
+        warnings.push(format!("{other_sets} material maps on a UV set other than TEXCOORD_0 left out (strata keeps one UV set)"));
+    }
+    out
+}
+
+/// Read the images the materials' maps use (files beside the model, `data:` URIs, buffer views)
+/// into `mesh.images` and set each material's maps. An image that cannot be read or is neither PNG
+/// nor JPEG is a warning naming it; the maps using it are left out.
+fn load_images(
+    path: &Path,
+    doc: &gltf::Document,
+    buffers: &Buffers,
+    maps: &[GltfMaps],
+    allow_outside: bool,
+    mesh: &mut Mesh,
+    warnings: &mut Vec<String>,
+) {
+    let json = doc.as_json();
+    let mut loaded: Vec<Option<Option<u32>>> = vec![None; json.images.len()];
+    for (m, slots) in maps.iter().enumerate() {
+        for (k, slot) in slots.iter().enumerate() {
+            let Some((image, wrap)) = *slot else { continue };
+            let index = *loaded.get_mut(image as usize).expect("validated image index").get_or_insert_with(|| {
+                let element = format!("image {image}");
+                let im = &json.images[image as usize];
+                let name = match im.uri.as_deref() {
+                    Some(uri) if !uri.starts_with("data:") => uri.to_string(),
+                    _ => format!("embedded image {image}"),
+                };
+                let bytes = match (&im.uri, im.buffer_view) {
+                    (Some(uri), _) => load_uri(path, &element, uri, allow_outside, MAX_IMAGE_FILE).map_err(|e| e.to_string()),
+                    (None, Some(view)) => match doc.views().nth(view.value()) {
+                        Some(v) => buffers.view(&v).map(<[u8]>::to_vec).map_err(|e| e.to_string()),
+                        None => Err(format!("{element}: no buffer view {}", view.value())),
+                    },
+                    (None, None) => Err(format!("{element}: neither a uri nor a bufferView")),
+                };
+                match bytes.and_then(|b| SourceImage::new(name.clone(), b).map_err(|e| format!("{element} ({name}): {e}"))) {
+                    Ok(source) => {
+                        mesh.images.push(source);
+                        Some(mesh.images.len() as u32 - 1)
+                    }
+                    Err(e) => {
+                        warnings.push(format!("texture left out: {e}"));
+                        None
+                    }
+                }
+            });
+            if let (Some(index), Some(mat)) = (index, mesh.materials.get_mut(m)) {
+                mat.maps[k] = Some(TextureSlot { image: index, wrap });
+            }
+        }
+    }
+}
+
+/// Largest image file read.
+const MAX_IMAGE_FILE: u64 = 1 << 30;
 
 fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(bytes.get(at..at.checked_add(4)?)?.try_into().ok()?))
@@ -252,9 +359,15 @@ impl<'a> Buffers<'a> {
         bin: Option<&'a [u8]>,
         file_size: usize,
         primitives: impl Iterator<Item = &'d gltf::Primitive<'d>>,
+        also: &[usize],
         allow_outside: bool,
     ) -> Result<Self> {
         let mut needed = vec![false; doc.buffers().count()];
+        for &b in also {
+            if let Some(n) = needed.get_mut(b) {
+                *n = true;
+            }
+        }
         for prim in primitives {
             let semantics = [Semantic::Positions, Semantic::Normals, Semantic::TexCoords(0), Semantic::Colors(0)];
             for a in semantics.iter().filter_map(|s| prim.get(s)).chain(prim.indices()) {
@@ -516,7 +629,7 @@ fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool, max_len:
     }
     let name = String::from_utf8(percent_decode(uri)).unwrap_or_else(|_| uri.to_string());
     let folder = path.parent().unwrap_or(Path::new(""));
-    if !allow_outside && !stays_inside(Path::new(&name)) {
+    if !allow_outside && !super::stays_inside(Path::new(&name)) {
         let decoded = if name == uri { String::new() } else { format!(" ({name})") };
         let shown = if folder.as_os_str().is_empty() { Path::new(".") } else { folder };
         return Err(Error::at_element(
@@ -532,25 +645,6 @@ fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool, max_len:
     let file = folder.join(name);
     let cannot = |e: &dyn std::fmt::Display| Error::at_element(path, element, format!("cannot read {}: {e}", file.display()));
     super::read_regular_file(&file, max_len).map_err(|e| cannot(&e))
-}
-
-/// Whether a relative file name stays inside the folder it is resolved against, by its text alone:
-/// no root or drive, and no `..` that climbs above the folder. Links inside the folder are
-/// followed: placing them there is the folder owner's choice.
-fn stays_inside(name: &Path) -> bool {
-    let mut depth = 0usize;
-    for part in name.components() {
-        match part {
-            Component::Prefix(_) | Component::RootDir => return false,
-            Component::ParentDir => match depth.checked_sub(1) {
-                Some(d) => depth = d,
-                None => return false,
-            },
-            Component::Normal(_) => depth += 1,
-            Component::CurDir => {}
-        }
-    }
-    true
 }
 
 /// Decode `%XX` escapes; anything else passes through.
@@ -624,7 +718,7 @@ impl Builder {
                     .then(|| Affine2::from_scale_angle_translation(Vec2::from(t.scale()), t.rotation(), Vec2::from(t.offset())))
             });
             let name = m.name().map_or_else(|| format!("material {}", materials.len()), str::to_string);
-            materials.push(Material { name, base_color: pbr.base_color_factor(), texture });
+            materials.push(Material { name, base_color: pbr.base_color_factor(), texture, ..Material::default() });
             uv_transforms.push(transform);
         }
         Builder {
@@ -1085,10 +1179,10 @@ mod tests {
     #[test]
     fn file_names_climbing_out_of_the_folder_are_recognised_by_their_text() {
         for inside in ["a.bin", "./a.bin", "sub/a.bin", "sub/../a.bin", "sub/./../sub/a.bin", "..a.bin", "a..b"] {
-            assert!(stays_inside(Path::new(inside)), "{inside}");
+            assert!(crate::import::stays_inside(Path::new(inside)), "{inside}");
         }
         for outside in ["../a.bin", "sub/../../a.bin", "./../a.bin", "/etc/hostname", "sub/../../sub/a.bin"] {
-            assert!(!stays_inside(Path::new(outside)), "{outside}");
+            assert!(!crate::import::stays_inside(Path::new(outside)), "{outside}");
         }
     }
 

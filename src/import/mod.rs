@@ -21,7 +21,7 @@ use crate::format::Georef;
 use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
 use glam::Vec2;
 pub use heightfield::{DemCrs, DemEncoding, DemOptions, GridSummary};
-use std::path::Path;
+use std::path::{Component, Path};
 use std::time::Instant;
 
 /// A mesh file format strata reads: its name on the command line, the file name extensions that
@@ -162,7 +162,7 @@ fn open_regular(path: &Path) -> Result<(std::fs::File, u64)> {
 }
 
 /// Read at most `max_len` bytes of the regular file at `path` (see [`open_regular_io`]).
-fn read_regular_file(path: &Path, max_len: u64) -> std::io::Result<Vec<u8>> {
+pub(crate) fn read_regular_file(path: &Path, max_len: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
     let (file, len) = open_regular_io(path)?;
     let mut bytes = Vec::with_capacity(len.min(max_len) as usize);
@@ -264,6 +264,25 @@ fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
         1 => warnings.push("1 corner UV was NaN or infinite and got UV (0, 0)".into()),
         n => warnings.push(format!("{n} corner UVs were NaN or infinite and got UV (0, 0)")),
     }
+}
+
+/// Whether a relative file name stays inside the folder it is resolved against, by its text alone:
+/// no root or drive, and no `..` that climbs above the folder. Links inside the folder are
+/// followed: placing them there is the folder owner's choice.
+pub(crate) fn stays_inside(name: &Path) -> bool {
+    let mut depth = 0usize;
+    for part in name.components() {
+        match part {
+            Component::Prefix(_) | Component::RootDir => return false,
+            Component::ParentDir => match depth.checked_sub(1) {
+                Some(d) => depth = d,
+                None => return false,
+            },
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    true
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //!
 //! Polygons are fan-triangulated, every object and group lands in one mesh, `usemtl` names become
 //! per-face material ids (a missing or broken .mtl only costs the colors, with a warning), and
-//! per-corner normals, UVs (as written, v up) and vertex colors come along when the file has them.
+//! per-corner normals, UVs (v flipped to glTF's convention, origin at the image's top left) and vertex colors come along when the file has them.
 //!
 //! tobj reports errors without a line number, takes a zero texture or normal index for a missing
 //! one and, in builds with overflow checks, panics on a far-negative one. So the file is first
@@ -11,24 +11,26 @@
 
 use super::{ImportOptions, Raw};
 use crate::error::{Error, Result};
+use crate::format::{MapKind, TextureSlot, Wrap};
 use crate::mesh::{coordinate_problem, Material, Mesh};
+use crate::texture::SourceImage;
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::io::{Cursor, Read};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A material library name no file can have: tobj "loads" it from a leading virtual `mtllib` line,
 /// which gives every `usemtl` name its own material id even when no .mtl defines it.
 const USEMTL_TABLE: &str = "\0strata-usemtl-names";
 
 /// Read an OBJ file into a raw, uncleaned mesh.
-pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None, georef: None, grid: None })
+pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
+    read_mesh(path, options, warnings).map(|mesh| Raw { mesh, metres_per_unit: None, georef: None, grid: None })
 }
 
-fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
+fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
     let bytes = super::read_file(path)?;
     if let Some(why) = super::utf16_hint(&bytes) {
         return Err(Error::invalid(path, None, why));
@@ -48,24 +50,31 @@ fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
     let mut reader = Cursor::new(prefix.as_bytes()).chain(Cursor::new(text.as_bytes()));
 
     let mtl_warnings = RefCell::new(Vec::<String>::new());
+    // The folder of each loaded library and how many materials it gave, in load order: texture
+    // paths are relative to their library's folder.
+    let libraries = RefCell::new(Vec::<(PathBuf, usize)>::new());
     let dir = path.parent().unwrap_or(Path::new(""));
     let load_material_library = |lib: &Path| -> tobj::MTLLoadResult {
         if lib == Path::new(USEMTL_TABLE) {
             let materials: Vec<tobj::Material> =
                 scan.usemtl_names.iter().map(|n| tobj::Material { name: n.clone(), ..Default::default() }).collect();
             let map = scan.usemtl_names.iter().enumerate().map(|(i, n)| (n.clone(), i)).collect();
+            libraries.borrow_mut().push((dir.to_path_buf(), materials.len()));
             return Ok((materials, map));
         }
         let full = dir.join(lib);
         // Only a regular file: tobj reads a device such as /dev/zero without end.
         let result =
             if std::fs::metadata(&full).is_ok_and(|m| !m.is_file()) { Err(tobj::LoadError::OpenFileFailed) } else { tobj::load_mtl(&full) };
-        if let Err(e) = &result {
-            let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
-            let mut ws = mtl_warnings.borrow_mut();
-            if !ws.contains(&w) {
-                ws.push(w);
+        match &result {
+            Err(e) => {
+                let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
+                let mut ws = mtl_warnings.borrow_mut();
+                if !ws.contains(&w) {
+                    ws.push(w);
+                }
             }
+            Ok((m, _)) => libraries.borrow_mut().push((full.parent().unwrap_or(Path::new("")).to_path_buf(), m.len())),
         }
         result
     };
@@ -74,7 +83,106 @@ fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
         .map_err(|e| Error::invalid(path, None, format!("OBJ parse error: {e}")))?;
     warnings.extend(mtl_warnings.into_inner());
     let materials = materials.unwrap_or_default();
-    build_mesh(path, &scan, &models, &materials, warnings)
+    let (mut mesh, sources) = build_mesh(path, &scan, &models, &materials, warnings)?;
+    let folders = libraries.into_inner();
+    let folder_of = |tobj_id: usize| {
+        let mut first = 0;
+        folders.iter().find(|(_, n)| {
+            first += n;
+            tobj_id < first
+        })
+    };
+    let mut images = Images::default();
+    for (out, source) in sources.iter().enumerate() {
+        let (Some(id), Some(m)) = (*source, source.and_then(|i| materials.get(i))) else { continue };
+        let folder = folder_of(id).map_or(dir, |(f, _)| f.as_path());
+        let maps = [
+            (MapKind::BaseColor, m.diffuse_texture.as_deref()),
+            (MapKind::Normal, m.unknown_param.get("norm").map(String::as_str)),
+            (MapKind::Emissive, m.unknown_param.get("map_Ke").map(String::as_str)),
+        ];
+        for (kind, statement) in maps {
+            let Some(statement) = statement else { continue };
+            let (file, clamp) = texture_file(statement);
+            if let Some(image) = images.load(folder, &file, import.allow_outside_files, &mut mesh, warnings) {
+                let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
+                mesh.materials[out].maps[kind as usize] = Some(TextureSlot { image, wrap: [wrap; 2] });
+            }
+        }
+    }
+    Ok(mesh)
+}
+
+/// The file name of a map statement's value (`-s 1 1 1 -clamp on dir/file name.png`) and whether
+/// it asks for clamping: options and their arguments skipped, backslashes read as separators.
+fn texture_file(value: &str) -> (String, bool) {
+    let words: Vec<&str> = value.split_ascii_whitespace().collect();
+    let mut i = 0;
+    let mut clamp = false;
+    while i < words.len() && words[i].starts_with('-') && words[i].len() > 1 {
+        let option = words[i];
+        i += 1;
+        // Arguments: numbers, on/off, or a channel letter (-imfchan r).
+        let max = match option {
+            "-o" | "-s" | "-t" => 3,
+            "-mm" => 2,
+            _ => 1,
+        };
+        let mut taken = 0;
+        while taken < max && i < words.len() {
+            let w = words[i];
+            let argument = w.parse::<f64>().is_ok() || matches!(w, "on" | "off") || (option == "-imfchan" && w.len() == 1);
+            if !argument {
+                break;
+            }
+            if option == "-clamp" {
+                clamp = w == "on";
+            }
+            i += 1;
+            taken += 1;
+        }
+    }
+    (words[i..].join(" ").replace('\\', "/"), clamp)
+}
+
+/// Images read so far, by resolved path.
+#[derive(Default)]
+struct Images {
+    by_path: HashMap<PathBuf, Option<u32>>,
+}
+
+impl Images {
+    /// The image `file` (relative to `folder`) names, read once into `mesh.images`; a warning and
+    /// `None` when it is missing, unreadable, outside the folder without `allow_outside`, or
+    /// neither PNG nor JPEG.
+    fn load(&mut self, folder: &Path, file: &str, allow_outside: bool, mesh: &mut Mesh, warnings: &mut Vec<String>) -> Option<u32> {
+        if file.is_empty() {
+            return None;
+        }
+        let path = folder.join(file);
+        if let Some(&known) = self.by_path.get(&path) {
+            return known;
+        }
+        let result = if !allow_outside && !super::stays_inside(Path::new(file)) {
+            Err(format!("{file} lies outside the model's folder (--allow-outside-files reads it)"))
+        } else {
+            super::read_regular_file(&path, 1 << 30)
+                .map_err(|e| format!("{}: {e}", path.display()))
+                .and_then(|b| SourceImage::new(file.to_string(), b).map_err(|e| format!("{}: {e}", path.display())))
+        };
+        let index = match result {
+            Ok(image) => {
+                mesh.images.push(image);
+                Some(mesh.images.len() as u32 - 1)
+            }
+            Err(e) => {
+                warnings.push(format!("texture left out: {e}"));
+                None
+            }
+        };
+        self.by_path.insert(path, index);
+        index
+    }
 }
 
 /// The text tobj gets: line elements (`l`), which its fan triangulation would turn into polygons,
@@ -274,7 +382,14 @@ fn number<T: std::str::FromStr>(word: Option<&str>, element: &str, expected: &st
 }
 
 /// Concatenate tobj's models into one mesh, checking every index tobj produced.
-fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tobj::Material], warnings: &mut Vec<String>) -> Result<Mesh> {
+/// The mesh, and for each of its materials the tobj material it came from.
+fn build_mesh(
+    path: &Path,
+    scan: &Scan,
+    models: &[tobj::Model],
+    materials: &[tobj::Material],
+    warnings: &mut Vec<String>,
+) -> Result<(Mesh, Vec<Option<usize>>)> {
     let bad =
         |model: &str, what: &str| Error::at_element(path, format!("object '{model}'"), format!("inconsistent {what} from the OBJ parser"));
     let faces: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
@@ -291,6 +406,7 @@ fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tob
     };
     // Output material id per tobj material id (None = no usemtl), in order of first use.
     let mut material_ids: HashMap<Option<usize>, u32> = HashMap::new();
+    let mut sources = Vec::new();
     let mut undefined = Vec::<&str>::new();
 
     for model in models {
@@ -325,7 +441,7 @@ fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tob
             for &k in &m.texcoord_indices {
                 let k = 2 * k as usize;
                 let uv = m.texcoords.get(k..k + 2).ok_or_else(|| bad(name, "texture coordinate index"))?;
-                mesh.uvs.push(Vec2::from_slice(uv));
+                mesh.uvs.push(Vec2::new(uv[0], 1.0 - uv[1]));
             }
         }
         if with_colors {
@@ -348,6 +464,7 @@ fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tob
                 }
             };
             mesh.materials.push(material);
+            sources.push(m.material_id.filter(|&i| i < materials.len()));
             next
         });
         mesh.face_materials.extend(std::iter::repeat_n(id, m.indices.len() / 3));
@@ -355,13 +472,18 @@ fn build_mesh(path: &Path, scan: &Scan, models: &[tobj::Model], materials: &[tob
     if !undefined.is_empty() {
         warnings.push(format!("materials without a definition in any loaded .mtl: {}", undefined.join(", ")));
     }
-    Ok(mesh)
+    Ok((mesh, sources))
 }
 
 fn material_from(t: &tobj::Material) -> Material {
     let default = Material::default();
     let [r, g, b] = t.diffuse.unwrap_or([default.base_color[0], default.base_color[1], default.base_color[2]]);
-    Material { name: t.name.clone(), base_color: [r, g, b, t.dissolve.unwrap_or(1.0)], texture: t.diffuse_texture.clone() }
+    Material {
+        name: t.name.clone(),
+        base_color: [r, g, b, t.dissolve.unwrap_or(1.0)],
+        texture: t.diffuse_texture.clone(),
+        ..Material::default()
+    }
 }
 
 fn unit_to_u8(c: f32) -> u8 {
@@ -391,7 +513,7 @@ mod tests {
 
         fn read(&self, name: &str) -> (Result<Mesh>, Vec<String>) {
             let mut warnings = Vec::new();
-            let mesh = read_mesh(&self.0.join(name), &mut warnings);
+            let mesh = read_mesh(&self.0.join(name), &ImportOptions::default(), &mut warnings);
             (mesh, warnings)
         }
     }
@@ -470,7 +592,8 @@ mod tests {
         assert_eq!(mesh.face_count(), 2);
         let z = Vec3::Z;
         assert_eq!(mesh.normals, vec![z, z, -z, -z, z, z]);
-        let uv = |u, v| Vec2::new(u, v);
+        // v flipped: OBJ's runs up the image, strata's (glTF's) down.
+        let uv = |u, v: f32| Vec2::new(u, 1.0 - v);
         assert_eq!(mesh.uvs, vec![uv(0., 0.), uv(1., 0.), uv(0., 1.), uv(0., 0.), uv(0., 1.), uv(1., 0.)]);
         let (r, g, b) = ([255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]);
         assert_eq!(mesh.colors, vec![r, g, b, b, g, r]);
@@ -492,13 +615,46 @@ mod tests {
         let (mesh, warnings) = TempDir::with(&[("m.obj", &obj), ("m.mtl", mtl)]).read("m.obj");
         let mesh = mesh.unwrap();
         mesh.validate().unwrap();
-        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(warnings[0].contains("texture left out") && warnings[0].contains("red skin.png"), "{warnings:?}");
         let names: Vec<&str> = mesh.face_materials.iter().map(|&m| mesh.materials[m as usize].name.as_str()).collect();
         assert_eq!(names, ["default", "red", "blue", "red"]);
         let red = &mesh.materials[mesh.face_materials[1] as usize];
         assert_eq!(red.base_color, [1.0, 0.0, 0.0, 1.0]);
         assert_eq!(red.texture.as_deref(), Some("tex/red skin.png"));
+        assert!(red.maps.iter().all(Option::is_none), "the missing image maps nothing");
         assert_eq!(mesh.materials[mesh.face_materials[2] as usize].base_color, [0.0, 0.0, 1.0, 0.5]);
+    }
+
+    #[test]
+    fn map_statements_read_images_beside_the_library() {
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(4, 2), 90).unwrap();
+        let mtl = "newmtl a\nmap_Kd -s 1 1 1 -clamp on tex\\a b.png\nnorm n.png\nnewmtl b\nmap_Kd tex/a b.png\nmap_Ke gone.png\n";
+        let obj = format!("mtllib lib/m.mtl\n{SQUARE}usemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\n");
+        let dir = TempDir::with(&[("m.obj", &obj)]);
+        std::fs::create_dir_all(dir.0.join("lib/tex")).unwrap();
+        std::fs::write(dir.0.join("lib/m.mtl"), mtl).unwrap();
+        std::fs::write(dir.0.join("lib/tex/a b.png"), &png).unwrap();
+        std::fs::write(dir.0.join("lib/n.png"), b"not an image").unwrap();
+        let (mesh, warnings) = dir.read("m.obj");
+        let mesh = mesh.unwrap();
+        assert_eq!(mesh.images.len(), 1, "one image, read once for both materials");
+        assert_eq!(mesh.images[0].name, "tex/a b.png");
+        assert_eq!(&mesh.images[0].bytes[..], &png[..]);
+        let (a, b) = (&mesh.materials[0], &mesh.materials[1]);
+        assert_eq!(a.map(MapKind::BaseColor), Some(TextureSlot { image: 0, wrap: [Wrap::Clamp; 2] }));
+        assert_eq!(b.map(MapKind::BaseColor), Some(TextureSlot { image: 0, wrap: [Wrap::Repeat; 2] }));
+        assert_eq!((a.map(MapKind::Normal), b.map(MapKind::Emissive)), (None, None));
+        assert_eq!(warnings.len(), 2, "{warnings:?}");
+        assert!(warnings.iter().any(|w| w.contains("n.png") && w.contains("neither a PNG nor a JPEG")), "{warnings:?}");
+        assert!(warnings.iter().any(|w| w.contains("gone.png")), "{warnings:?}");
+    }
+
+    #[test]
+    fn map_options_are_skipped() {
+        assert_eq!(texture_file("a.png"), ("a.png".into(), false));
+        assert_eq!(texture_file("-bm 0.3 -o 0 0 -clamp on my file.jpg"), ("my file.jpg".into(), true));
+        assert_eq!(texture_file("-imfchan r maps\\h.png"), ("maps/h.png".into(), false));
     }
 
     #[test]
@@ -571,7 +727,7 @@ mod tests {
             let e = read_str(text).0.unwrap_err().to_string();
             assert!(e.contains(what), "{e}");
         }
-        let e = read_mesh(Path::new("/nonexistent/strata.obj"), &mut Vec::new()).unwrap_err();
+        let e = read_mesh(Path::new("/nonexistent/strata.obj"), &ImportOptions::default(), &mut Vec::new()).unwrap_err();
         assert!(matches!(e, Error::Io { .. }));
     }
 

@@ -2,7 +2,7 @@
 //!
 //! Hand-written rather than a crate so errors can name the byte offset, line or element that is
 //! wrong, and so large binary files read at close to memory speed. The vertex element gives
-//! positions and optional normals, colors and texture coordinates; `face` polygons are
+//! positions and optional normals, colors and texture coordinates (v flipped to glTF's convention); `face` polygons are
 //! fan-triangulated and `tristrips` expanded with alternating winding. Every other element is
 //! skipped by its declared types. Vertex attributes are copied onto each triangle corner.
 //!
@@ -787,7 +787,7 @@ impl<'p> Reader<'p> {
                 }));
             }
             if uvs {
-                self.uvs.push(Vec2::new(v[U] as f32, v[U + 1] as f32));
+                self.uvs.push(Vec2::new(v[U] as f32, 1.0 - v[U + 1] as f32));
             }
         }
         Ok(())
@@ -853,7 +853,7 @@ impl<'p> Reader<'p> {
             self.triangles.push([indices[0], indices[k], indices[k + 1]].map(|v| v as u32));
             if with_uvs {
                 for c in [0, k, k + 1] {
-                    self.corner_uvs.push(Vec2::new(texcoords[2 * c] as f32, texcoords[2 * c + 1] as f32));
+                    self.corner_uvs.push(Vec2::new(texcoords[2 * c] as f32, 1.0 - texcoords[2 * c + 1] as f32));
                 }
             }
         }
@@ -1109,7 +1109,7 @@ mod tests {
             assert_eq!(m.normals, vec![Vec3::Z; 6]);
             let color = |c: u8| [c, 2 * c, 255, 255];
             assert_eq!(m.colors, [10, 20, 30, 10, 30, 40].map(color).to_vec());
-            let uv = |x: f32, y: f32| Vec2::new(x, y);
+            let uv = |x: f32, y: f32| Vec2::new(x, 1.0 - y);
             assert_eq!(m.uvs, vec![uv(0., 0.), uv(1., 0.), uv(1., 1.), uv(0., 0.), uv(1., 1.), uv(0., 1.)]);
             assert_eq!(m.face_materials, vec![0, 0]);
         }
@@ -1158,7 +1158,7 @@ mod tests {
             let vert = |x: f32| vec![V::F(x), V::F(1.0 - x), V::F(x * x), V::F(x), V::F(2.0 * x)];
             let records = [vert(0.0), vert(0.5), vert(1.0), vec![V::Uc(3), V::I(2), V::I(1), V::I(0)]];
             let m = ok(&file(Encoding::Little, &header, &records));
-            assert_eq!(m.uvs, vec![Vec2::new(1., 2.), Vec2::new(0.5, 1.), Vec2::ZERO], "{u},{v}");
+            assert_eq!(m.uvs, vec![Vec2::new(1., -1.), Vec2::new(0.5, 0.), Vec2::new(0., 1.)], "{u},{v} (v flipped)");
         }
     }
 
@@ -1241,7 +1241,7 @@ mod tests {
         for encoding in ALL {
             let m = ok(&file(encoding, &header, &records));
             assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
-            let uv = |x: f32, y: f32| Vec2::new(x, y);
+            let uv = |x: f32, y: f32| Vec2::new(x, 1.0 - y);
             assert_eq!(m.uvs, vec![uv(0., 0.), uv(1., 0.), uv(1., 1.), uv(0., 0.), uv(1., 1.), uv(0., 1.)], "{encoding:?}");
         }
     }

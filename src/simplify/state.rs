@@ -487,6 +487,7 @@ impl State {
                 alive.iter().map(|&f| self.face_materials[f]).collect()
             },
             materials: mesh.materials.clone(),
+            images: mesh.images.clone(),
             face_normals: Vec::new(),
             face_areas: Vec::new(),
         };

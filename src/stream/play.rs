@@ -61,7 +61,7 @@ pub fn play<S: ByteSource>(
             .iter()
             .filter_map(|&i| {
                 let g = streamer.geometry(i)?;
-                Some(Part { positions: &g.positions, normals: &g.normals, indices: &g.indices, color: palette(i) })
+                Some(Part::new(&g.positions, &g.normals, &g.indices, palette(i)))
             })
             .collect();
         strips.draw(camera, &parts, |row, line| {

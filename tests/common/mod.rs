@@ -19,8 +19,8 @@ pub fn icosphere(depth: u32) -> Mesh {
     mesh.face_materials =
         mesh.triangles.iter().map(|t| (t.iter().map(|&v| mesh.positions[v as usize].z).sum::<f32>() > 0.0) as u32).collect();
     mesh.materials = vec![
-        Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()) },
-        Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None },
+        Material { name: "north".into(), base_color: [0.9, 0.2, 0.1, 1.0], texture: Some("north.png".into()), ..Material::default() },
+        Material { name: "south".into(), base_color: [0.1, 0.2, 0.9, 1.0], texture: None, ..Material::default() },
     ];
     mesh
 }
