@@ -93,7 +93,7 @@ fn main() {
             let camera = session::orbit(center, radius, i, FRAMES, W, H);
             let report = streamer.update(&camera, None).expect("frame");
             let levels = report.stats.levels.iter().filter(|&&n| n > 0).count();
-            let front = draw(&camera, &streamer.front_mesh());
+            let front = draw(&camera, &streamer.front_mesh().expect("front"));
             let reference = draw(&camera, &full);
             let holes = enclosed(&front);
             let cracks = holes.iter().zip(reference.depth.iter()).filter(|(&h, d)| h && d.is_finite()).count() as u64;

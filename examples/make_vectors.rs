@@ -62,6 +62,31 @@ fn sphere() -> Vec<u8> {
     convert(mesh, params, 0.0)
 }
 
+/// A textured globe of 96 faces with a 128 × 64 base color image of two levels: format 2.2 with
+/// `TEXR` and `TEXL` chunks.
+fn textured() -> Vec<u8> {
+    let mut mesh = strata::fixtures::textured_globe(8, 128);
+    let mut warnings = Vec::new();
+    let images = strata::texture::pyramid::prepare(&mut mesh, &mut warnings, &mut || {});
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let params = HierarchyParams { cluster_faces: 8, leaf_faces: 24, growth: 2, top_groups: 2, ..HierarchyParams::default() };
+    let adjacency = Adjacency::build(&mesh);
+    let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
+    let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
+    let mut out = Cursor::new(Vec::new());
+    let opts = WriteOptions {
+        metres_per_unit: 1.0,
+        params,
+        level_ratio: 0.5,
+        tool: "strata vectors".into(),
+        georef: None,
+        encoding: strata::write::Encoding::V2,
+        images,
+    };
+    write_to(&mut out, &h, &lv, &opts).expect("the textured vector writes");
+    out.into_inner()
+}
+
 /// A 9 × 7 elevation grid in degrees with one void, as the DEM readers make it: a `GEOR` chunk
 /// (local tangent plane) and the file version 2.1.
 fn terrain() -> Vec<u8> {
@@ -203,7 +228,7 @@ fn main() -> anyhow::Result<()> {
     std::fs::create_dir_all(&dir)?;
     let sphere = sphere();
     let (nan, nan_node) = nan_error(&sphere);
-    let valid = [("plane", plane()), ("sphere", sphere.clone()), ("terrain", terrain())];
+    let valid = [("plane", plane()), ("sphere", sphere.clone()), ("terrain", terrain()), ("textured", textured())];
     let refused = [
         ("refused-nan-error", nan, vec![format!("node {nan_node}"), "error".to_string()]),
         ("refused-index-past-vertices", index_past_vertices(&sphere), vec!["node 0".to_string(), "index".to_string()]),

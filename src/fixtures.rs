@@ -125,6 +125,68 @@ pub fn cad_part() -> Mesh {
     finish(p.extrude(2.0, 3f64.sqrt() / 2.0))
 }
 
+/// A textured globe: a latitude-longitude sphere of `segments` × `segments / 2` quads (poles as
+/// fans) with an equirectangular map, UV seam at longitude 180°, and its base color image, a
+/// `width` × `width / 2` PNG: a checker of 16 × 8 cells whose hue runs with longitude and
+/// brightness with latitude, under one-texel grid lines every 8 texels, so that each image level
+/// looks different and a wrong UV or a wrong level shows.
+pub fn textured_globe(segments: u32, width: u32) -> Mesh {
+    use crate::format::{MapKind, TextureSlot, Wrap};
+    let (nu, nv) = (segments.max(4), (segments / 2).max(2));
+    let mut m = Mesh::default();
+    let point = |i: u32, j: u32| {
+        let (lon, lat) = (std::f64::consts::TAU * i as f64 / nu as f64, std::f64::consts::PI * (0.5 - j as f64 / nv as f64));
+        DVec3::new(lat.cos() * lon.cos(), lat.sin(), -lat.cos() * lon.sin())
+    };
+    // Vertices by (i, j) with i = nu the seam's copy of i = 0: positions shared by the weld below.
+    for j in 0..=nv {
+        for i in 0..=nu {
+            m.positions.push(point(i % nu, j).as_vec3());
+        }
+    }
+    let at = |i: u32, j: u32| j * (nu + 1) + i;
+    let uv = |i: u32, j: u32| Vec2::new(i as f32 / nu as f32, j as f32 / nv as f32);
+    for j in 0..nv {
+        for i in 0..nu {
+            let quad = [(i, j), (i, j + 1), (i + 1, j + 1), (i + 1, j)];
+            let tris: &[[usize; 3]] = if j == 0 {
+                &[[0, 1, 2]]
+            } else if j + 1 == nv {
+                &[[0, 2, 3]]
+            } else {
+                &[[0, 1, 2], [0, 2, 3]]
+            };
+            for t in tris {
+                let c = t.map(|k| quad[k]);
+                m.triangles.push(c.map(|(a, b)| at(a, b)));
+                for (a, b) in c {
+                    m.uvs.push(uv(a, b));
+                    m.normals.push(point(a % nu, b).as_vec3());
+                }
+            }
+        }
+    }
+    m.face_materials = vec![0; m.triangles.len()];
+    m.materials = vec![crate::mesh::Material { name: "globe".into(), base_color: [1.0; 4], ..crate::mesh::Material::default() }];
+    m.materials[0].maps[MapKind::BaseColor as usize] = Some(TextureSlot { image: 0, wrap: [Wrap::Repeat, Wrap::Clamp] });
+    let (w, h) = (width.max(16), (width / 2).max(8));
+    let mut im = crate::texture::Rgba8::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let (cx, cy) = (16 * x / w, 8 * y / h);
+            let hue = x as f32 / w as f32 * 6.0;
+            let rgb = [(hue - 3.0).abs() - 1.0, 2.0 - (hue - 2.0).abs(), 2.0 - (hue - 4.0).abs()].map(|c| c.clamp(0.0, 1.0));
+            let light = if (cx + cy) % 2 == 0 { 0.95 } else { 0.45 } * (0.4 + 0.6 * (1.0 - (2.0 * y as f32 / h as f32 - 1.0).abs()));
+            let line = x % 8 == 0 || y % 8 == 0;
+            let px = rgb.map(|c| if line { 20 } else { (255.0 * (0.15 + 0.85 * c) * light) as u8 });
+            im.pixels[4 * (y * w + x) as usize..][..4].copy_from_slice(&[px[0], px[1], px[2], 255]);
+        }
+    }
+    let png = crate::texture::encode(crate::texture::ImageCodec::Png, &im, 90).expect("a fixture image encodes");
+    m.images = vec![crate::texture::SourceImage::new("globe.png".into(), png).expect("a PNG")];
+    finish(m)
+}
+
 /// The meshes behind the files in `fixtures/`, written by `examples/make_fixtures.rs`.
 pub struct Fixture {
     /// File name under `fixtures/`; its extension picks the format.
@@ -150,6 +212,11 @@ pub fn committed() -> Vec<Fixture> {
         f("nonmanifold.obj", "an edge shared by three faces and a bowtie vertex", nonmanifold()),
         f("two_materials.glb", "two materials (two primitives), UVs and normals in glTF", two_material_box()),
         f("colored_sphere.ply", "per-vertex RGBA colors (uchar) and normals in binary PLY", colored_sphere(4)),
+        f(
+            "textured_globe.glb",
+            "a base color image embedded in GLB (512 × 256 PNG), equirectangular UVs with a seam, clamped along v",
+            textured_globe(96, 512),
+        ),
     ]
 }
 

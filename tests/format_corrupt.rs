@@ -49,10 +49,11 @@ fn small_file() -> Vec<u8> {
     bytes
 }
 
-/// The small file, and the terrain golden vector, whose `GEOR` chunk (format 2.1) gets the same damage.
+/// The small file, and the terrain and textured golden vectors, whose `GEOR` chunk (format 2.1)
+/// and `TEXR` and `TEXL` chunks (2.2) get the same damage.
 fn damage_targets() -> Vec<(&'static str, Vec<u8>)> {
-    let terrain = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors/terrain.strata")).expect("terrain vector");
-    vec![("small", small_file()), ("terrain", terrain)]
+    let vector = |name: &str| std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors").join(name)).expect(name);
+    vec![("small", small_file()), ("terrain", vector("terrain.strata")), ("textured", vector("textured.strata"))]
 }
 
 /// Exercise every reading path; results are ignored, panics are not.
@@ -65,6 +66,10 @@ fn read_everything(bytes: &[u8]) {
         for l in 0..rd.levels().len() as u32 {
             let _ = strata::assemble::to_mesh(&rd, l);
         }
+        for l in &rd.textures().levels {
+            let _ = rd.read_image_level(l.image, l.level);
+        }
+        let _ = strata::texture::draw::read_base_color_chains(&rd);
         let _ = rd.chunks();
         let select = inspect::Selection { depth: Some(9), level: Some(0), node: Some(0) };
         let _ = inspect::inspect(&rd, select);

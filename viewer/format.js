@@ -10,13 +10,15 @@
 //
 //   openingRange(prefix, fileLength)  how many bytes the skeleton needs (a few short reads);
 //   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials;
-//   decodeNode(skeleton, i, bytes)    one node's GEOM chunk, checked and decoded.
+//   decodeNode(skeleton, i, bytes)    one node's GEOM chunk, checked and decoded;
+//   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
+//                                     file inside, for the browser to decode.
 //
 // Hostile input never hangs the reader nor makes it throw anything but a FormatError: every read is
 // bounds-checked first, every size taken from the file is checked against counts and lengths before
 // anything is allocated with it, and u64 fields beyond 2^53 are refused.
 
-export const MAJOR = 2, MINOR = 1;
+export const MAJOR = 2, MINOR = 2;
 
 /** A file that breaks the format; `offset` is the byte offset the message names, `node` the node. */
 export class FormatError extends Error {
@@ -729,8 +731,14 @@ export function decodeSkeleton(bytes, fileLength) {
   }
   if (m < mend && minor <= MINOR) throw merr(m, `${mend - m} bytes after ${h.materials} materials`);
 
+  // TEXR (2.2), optional: images, their levels after the geometry, material maps, node densities.
+  const texrs = subs.filter((x) => x.id === 'TEXR');
+  if (texrs.length > 1) throw chunkFail(texrs[1].at, 'SKEL', skelAt, 'has a second TEXR chunk');
+  const textures = texrs.length ? decodeTexr(b, texrs[0], N, materials, geo, fileLength) : { images: [], levels: [], uvDensity: new Float32Array(N) };
+
   Object.assign(sk, {
     materials,
+    textures,
     level,
     parent,
     firstChild,
@@ -754,6 +762,169 @@ export function decodeSkeleton(bytes, fileLength) {
   // Where the node table lies, for errors naming a node's record.
   Object.defineProperty(sk, '_nodeTable', { value: { at: node.at, ps: node.ps }, enumerable: false });
   return sk;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Images (§7.5, format 2.2).
+
+/** Map slots of a material, in TEXR's order. */
+export const MAP_KINDS = ['baseColor', 'normal', 'metallicRoughness', 'occlusion', 'emissive'];
+const LEVEL_ENTRY_BYTES = 24;
+const MAX_IMAGE_LEVELS = 32;
+const MAX_IMAGE_SIDE = 65536;
+const MAX_IMAGE_NAME = 4096;
+const NO_IMAGE = 0xffffffff;
+/** Media types of the image codecs (1 PNG, 2 JPEG). */
+export const IMAGE_MIME = { 1: 'image/png', 2: 'image/jpeg' };
+
+/** UV units per model unit of a node's density code (0 for none). */
+export function densityDecode(code) {
+  return code === 0 ? 0 : fr(2 ** ((code - 32768) / 256));
+}
+
+/**
+ * The TEXR sub-chunk `t`: image records, level entries with their TEXL offsets (back to back from
+ * `levelsStart`, the end of the geometry), each material's maps (set on `materials[k].maps`) and
+ * each node's UV density. Every count is checked against the payload before use.
+ */
+function decodeTexr(b, t, N, materials, levelsStart, fileLength) {
+  const err = (at, msg) => chunkFail(at, 'TEXR', t.at, msg);
+  const end = t.pe;
+  let p = t.ps;
+  const need = (n, what) => {
+    if (end - p < n) throw err(p, `${what}: needs ${n} more bytes, ${end - p} left`);
+  };
+  need(8, 'counts');
+  const count = u32(b, p), entries = u32(b, p + 4);
+  p += 8;
+  if (count === 0) throw err(t.ps, 'holds no image; a file without images has no TEXR chunk');
+  const images = [];
+  let total = 0;
+  for (let i = 0; i < count; i++) {
+    const at = p;
+    need(4, `image ${i}`);
+    const len = u32(b, p);
+    if (len > MAX_IMAGE_NAME) throw err(at, `image ${i}: a name of ${len} bytes (at most ${MAX_IMAGE_NAME})`);
+    const name = len <= end - p - 4 ? utf8(b, p + 4, p + 4 + len) : null;
+    if (name === null) throw err(at, `image ${i}: name of ${len} bytes runs past the chunk or is not UTF-8`);
+    p += 4 + len;
+    need(4, `image ${i}`);
+    const codec = b[p], k = b[p + 1];
+    if (codec !== 1 && codec !== 2) throw err(p, `image ${i}: unknown codec ${codec}`);
+    if (k === 0 || k > MAX_IMAGE_LEVELS || b[p + 2] !== 0 || b[p + 3] !== 0) {
+      throw err(p, `image ${i}: ${k} levels (1..=${MAX_IMAGE_LEVELS}) or non-zero reserved bytes`);
+    }
+    p += 4;
+    total += k;
+    images.push({ name, codec, levels: new Array(k).fill(-1) });
+  }
+  if (entries !== total) throw err(t.ps + 4, `${entries} level entries for images with ${total} levels`);
+  need(entries * LEVEL_ENTRY_BYTES, `${entries} level entries`);
+  const levels = [];
+  let offset = levelsStart;
+  for (let e = 0; e < entries; e++) {
+    const at = p;
+    const [image, level, width, height, size, crc] = [0, 4, 8, 12, 16, 20].map((o) => u32(b, p + o));
+    p += LEVEL_ENTRY_BYTES;
+    const bad = (msg) => err(at, `level entry ${e}: ${msg}`);
+    if (image >= count) throw bad(`image ${image} of ${count}`);
+    const rec = images[image];
+    if (level >= rec.levels.length) throw bad(`level ${level} of image ${image}'s ${rec.levels.length}`);
+    if (rec.levels[level] !== -1) throw bad(`level ${level} of image ${image} a second time`);
+    rec.levels[level] = e;
+    if (width === 0 || height === 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE) {
+      throw bad(`${width} × ${height} pixels (1..=${MAX_IMAGE_SIDE} a side)`);
+    }
+    if (size < FRAME + TRAILER + 1) throw bad(`a chunk of ${size} bytes`);
+    const stop = offset + size;
+    if (stop > fileLength) throw bad(`its chunk at offset ${offset} (${size} bytes) runs past the end of the file (${fileLength} bytes)`);
+    levels.push({ image, level, width, height, offset, size, crc });
+    offset = stop + padding(stop);
+  }
+  images.forEach((rec, i) => {
+    for (let l = 1; l < rec.levels.length; l++) {
+      const a = levels[rec.levels[l - 1]], c = levels[rec.levels[l]];
+      if (c.width !== Math.ceil(a.width / 2) || c.height !== Math.ceil(a.height / 2) || (a.width === 1 && a.height === 1)) {
+        throw err(
+          t.ps,
+          `image ${i}: level ${a.level} is ${a.width} × ${a.height}, level ${c.level} ${c.width} × ${c.height}; each level must halve the one before, rounding up`,
+        );
+      }
+    }
+  });
+  need(materials.length * 8 * MAP_KINDS.length, 'material maps');
+  materials.forEach((mat, k) => {
+    mat.maps = {};
+    MAP_KINDS.forEach((kind, slot) => {
+      const at = p;
+      const image = u32(b, p), ws = b[p + 4], wt = b[p + 5];
+      p += 8;
+      if (b[at + 6] !== 0 || b[at + 7] !== 0) throw err(at, `material ${k} slot ${slot}: non-zero reserved bytes`);
+      if (ws > 2 || wt > 2) throw err(at, `material ${k} slot ${slot}: unknown wrap modes ${ws} ${wt}`);
+      if (image === NO_IMAGE) mat.maps[kind] = null;
+      else if (image < count) mat.maps[kind] = { image, wrap: [ws, wt] };
+      else throw err(at, `material ${k} slot ${slot}: image ${image} of ${count}`);
+    });
+  });
+  need(2 * N, 'node densities');
+  const uvDensity = new Float32Array(N);
+  for (let i = 0; i < N; i++) uvDensity[i] = densityDecode(u16(b, p + 2 * i));
+  p += 2 * N;
+  if (p < end) throw err(p, `${end - p} bytes after the node densities`);
+  return { images, levels, uvDensity };
+}
+
+/** Width and height a PNG or JPEG file's header states (codec 1 or 2), or a message why not. */
+export function imageSize(codec, b) {
+  if (codec === 1) {
+    const sig = [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a];
+    if (b.length < 24 || sig.some((x, k) => b[k] !== x) || !isId(b, 12, 'IHDR')) return 'not a PNG file (no signature and IHDR)';
+    const be = (o) => ((b[o] << 24) | (b[o + 1] << 16) | (b[o + 2] << 8) | b[o + 3]) >>> 0;
+    return [be(16), be(20)];
+  }
+  if (b.length < 4 || b[0] !== 0xff || b[1] !== 0xd8) return 'not a JPEG file (no start-of-image marker)';
+  let at = 2;
+  while (at + 4 <= b.length) {
+    if (b[at] !== 0xff) return `no JPEG marker at byte ${at}`;
+    const marker = b[at + 1];
+    if (marker === 0xff) {
+      at += 1;
+      continue;
+    }
+    const len = (b[at + 2] << 8) | b[at + 3];
+    if (marker >= 0xc0 && marker <= 0xcf && marker !== 0xc4 && marker !== 0xc8 && marker !== 0xcc) {
+      if (at + 9 > b.length) break;
+      return [(b[at + 7] << 8) | b[at + 8], (b[at + 5] << 8) | b[at + 6]];
+    }
+    if (marker === 0xda || len < 2) break;
+    at += 2 + len;
+  }
+  return 'no JPEG start-of-frame marker before the image data';
+}
+
+/**
+ * Check the TEXL chunk `bytes` of level entry `e` of `skeleton` (its `size` bytes, ID through CRC):
+ * ID, size, CRC against trailer and entry, and the image header's size. Returns the image file's
+ * bytes (a view into `bytes`).
+ */
+export function decodeImageLevel(skeleton, e, bytes) {
+  const lv = skeleton.textures.levels[e];
+  if (!lv) throw fail(undefined, `no image level entry ${e}`);
+  const rec = skeleton.textures.images[lv.image];
+  const at = lv.offset;
+  const bad = (o, msg) => chunkFail(o, 'TEXL', at, `image ${lv.image} level ${lv.level}: ${msg}`);
+  if (bytes.length !== lv.size) throw bad(at, `${bytes.length} bytes, the entry says ${lv.size}`);
+  if (!isId(bytes, 0, 'TEXL')) throw bad(at, `${idStr(bytes, 0)} where a TEXL chunk should be`);
+  const size = u64(bytes, 8);
+  if (size + FRAME + TRAILER !== lv.size) throw bad(at + 8, `payload size ${size} does not match the entry's ${lv.size} bytes`);
+  const end = bytes.length - TRAILER;
+  const stored = u32(bytes, end), actual = crc32(bytes, FRAME, end);
+  if (stored !== actual || stored !== lv.crc) throw bad(at + end, `CRC ${hex(actual)}, stored ${hex(stored)}, table ${hex(lv.crc)}`);
+  const file = bytes.subarray(FRAME, end);
+  const dims = imageSize(rec.codec, file);
+  if (typeof dims === 'string') throw bad(at + FRAME, dims);
+  if (dims[0] !== lv.width || dims[1] !== lv.height) throw bad(at + FRAME, `the image is ${dims[0]} × ${dims[1]}, the entry says ${lv.width} × ${lv.height}`);
+  return file;
 }
 
 // ---------------------------------------------------------------------------------------------

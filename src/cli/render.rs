@@ -73,7 +73,7 @@ pub fn run(a: Args) -> Result<()> {
         for node in rd.level_nodes(a.level) {
             let g = rd.read_node(node)?;
             let parts = match color {
-                RenderColor::Materials => node_parts(&g, rd.materials(), &chains),
+                RenderColor::Materials => node_parts(&g, rd.materials(), &|i| chains.get(i as usize)?.as_ref()),
                 c => {
                     let color = match c {
                         RenderColor::Groups => palette(node),

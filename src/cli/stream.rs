@@ -110,6 +110,7 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         Vec::new()
     };
+    let textured = !reader.textures().is_empty();
     let mut streamer = Streamer::new(reader, budgets)?;
     let opts = play::PlayOptions { width, height, pixels: a.frames_dir.is_some(), compare_full: a.compare_full };
     play::play(&mut streamer, &cameras, opts, &full, opened, |f| {
@@ -128,6 +129,11 @@ pub fn run(a: Args) -> Result<()> {
                 v["retained"] = serde_json::json!(r.shaded);
                 v["coverage_retained"] = serde_json::json!(r.coverage);
             }
+            if textured {
+                v["texture_bytes_read"] = serde_json::json!(s.texture_bytes_read);
+                v["texture_resident_bytes"] = serde_json::json!(s.texture_resident_bytes);
+                v["texture_levels"] = serde_json::json!(s.texture_levels);
+            }
             if a.print_front {
                 v["camera"] = cameras[rep.frame as usize].to_json();
                 v["front"] = serde_json::json!(rep.front);
@@ -141,6 +147,15 @@ pub fn run(a: Args) -> Result<()> {
                 rep.frame, s.nodes, s.faces, levels.join(" "), rep.added.len(), rep.removed.len(), s.bytes_read,
                 s.resident_bytes, s.pixel_error, s.refine_ms, f.draw_ms
             );
+            if textured {
+                let levels: Vec<String> = s.texture_levels.iter().map(|[i, w, d]| format!("{i}:{d}/{w}")).collect();
+                println!(
+                    "           images read {} B  resident {} B  levels drawn/wanted [{}]",
+                    s.texture_bytes_read,
+                    s.texture_resident_bytes,
+                    levels.join(" ")
+                );
+            }
             if rep.frame == 0 {
                 println!("           first frame ready {:.1} ms after opening the file", f.since_open_ms);
             }
@@ -151,7 +166,7 @@ pub fn run(a: Args) -> Result<()> {
         Ok(())
     })?;
     if let Some(out) = &a.export_cut {
-        let mesh = streamer.front_mesh();
+        let mesh = streamer.front_mesh()?;
         strata::export::write(out, &mesh)?;
         if !a.json {
             println!("wrote the last front ({} faces) to {}", mesh.face_count(), out.display());

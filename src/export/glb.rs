@@ -3,12 +3,14 @@
 //! Each primitive has its own vertices, one per distinct (position, normal, UV, color) among its
 //! corners, and u32 indices. Attributes: POSITION (with the min/max the spec requires) and, when the
 //! mesh has them, NORMAL, TEXCOORD_0 and COLOR_0 (normalized unsigned bytes, RGBA). Materials keep
-//! name and base color; a material's texture becomes an image referenced by URI (the path as stored,
-//! made a valid URI reference), written only when the mesh has UVs to map it.
+//! name and base color, and their maps (base color, normal, metallic-roughness, occlusion,
+//! emissive) when the mesh has UVs: the images they sample are embedded in the binary chunk with
+//! their media type, so the file stands alone; each map's wrap modes become a sampler.
 
 use super::{check, invalid_mesh, split_vertices, Split};
 use crate::atomic::write_file;
 use crate::error::Result;
+use crate::format::{MapKind, Wrap, MAP_KINDS};
 use crate::mesh::Mesh;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -38,20 +40,30 @@ pub fn write_glb<W: Write>(mut out: W, mesh: &Mesh) -> io::Result<()> {
         .map(|(m, faces)| primitive(&mut bin, mesh, m as u32, &split_vertices(mesh, faces.iter().copied())))
         .collect();
 
-    let (textures, images, samplers, texture_of) = textures(mesh);
+    let t = textures(&mut bin, mesh);
     let materials = mesh
         .materials
         .iter()
-        .zip(texture_of)
-        .map(|(m, texture)| MaterialJson {
-            name: m.name.clone(),
-            pbr_metallic_roughness: Pbr {
-                base_color_factor: m.base_color.map(|c| c.clamp(0.0, 1.0)),
-                base_color_texture: texture.map(|index| TextureRef { index }),
-                metallic_factor: 0.0,
-                roughness_factor: 1.0,
-            },
-            alpha_mode: (m.base_color[3] < 1.0).then_some("BLEND"),
+        .zip(&t.maps)
+        .map(|(m, maps)| {
+            let r = |k: MapKind| maps[k as usize].map(|index| TextureRef { index });
+            let metal_rough = r(MapKind::MetallicRoughness);
+            MaterialJson {
+                name: m.name.clone(),
+                pbr_metallic_roughness: Pbr {
+                    base_color_factor: m.base_color.map(|c| c.clamp(0.0, 1.0)),
+                    base_color_texture: r(MapKind::BaseColor),
+                    // With a metallic-roughness map its texels decide; without, a dull dielectric.
+                    metallic_factor: if metal_rough.is_some() { 1.0 } else { 0.0 },
+                    roughness_factor: 1.0,
+                    metallic_roughness_texture: metal_rough,
+                },
+                normal_texture: r(MapKind::Normal),
+                occlusion_texture: r(MapKind::Occlusion),
+                emissive_factor: r(MapKind::Emissive).map(|_| [1.0; 3]),
+                emissive_texture: r(MapKind::Emissive),
+                alpha_mode: (m.base_color[3] < 1.0).then_some("BLEND"),
+            }
         })
         .collect();
     while bin.data.len() % 4 != 0 {
@@ -64,9 +76,9 @@ pub fn write_glb<W: Write>(mut out: W, mesh: &Mesh) -> io::Result<()> {
         nodes: vec![Node { mesh: 0 }],
         meshes: vec![MeshJson { primitives }],
         materials,
-        textures,
-        images,
-        samplers,
+        textures: t.textures,
+        images: t.images,
+        samplers: t.samplers,
         accessors: bin.accessors,
         buffer_views: bin.views,
         buffers: vec![Buffer { byte_length: bin.data.len() }],
@@ -129,42 +141,47 @@ fn primitive(bin: &mut Bin, mesh: &Mesh, material: u32, split: &Split) -> Primit
     Primitive { attributes, indices, material, mode: 4 }
 }
 
-/// Textures for the materials that have one, when the mesh has UVs: the texture, image and sampler
-/// arrays, and each material's texture index. Identical paths share one image.
-fn textures(mesh: &Mesh) -> (Vec<Texture>, Vec<Image>, Vec<Sampler>, Vec<Option<u32>>) {
-    let mut images: Vec<Image> = Vec::new();
-    let texture_of: Vec<Option<u32>> = mesh
-        .materials
-        .iter()
-        .map(|m| {
-            let uri = uri_reference(m.texture.as_deref().filter(|_| !mesh.uvs.is_empty())?);
-            let i = images.iter().position(|im| im.uri == uri).unwrap_or_else(|| {
-                images.push(Image { uri });
-                images.len() - 1
-            });
-            Some(i as u32)
-        })
-        .collect();
-    let textures = (0..images.len() as u32).map(|source| Texture { sampler: 0, source }).collect();
-    let samplers =
-        if images.is_empty() { Vec::new() } else { vec![Sampler { mag_filter: 9729, min_filter: 9987, wrap_s: 10497, wrap_t: 10497 }] };
-    (textures, images, samplers, texture_of)
+/// The texture, image and sampler arrays of the materials' maps, when the mesh has UVs, and each
+/// material's texture index per map kind. Each image used is embedded once (a buffer view with its
+/// media type); each distinct (image, wrap modes) is one texture.
+struct Textures {
+    textures: Vec<Texture>,
+    images: Vec<Image>,
+    samplers: Vec<Sampler>,
+    maps: Vec<[Option<u32>; MAP_KINDS]>,
 }
 
-/// A file path as a URI reference: backslashes become slashes and bytes a URI may not hold are
-/// percent-encoded; `%` is kept, so a path that already is a URI stays as it is.
-fn uri_reference(path: &str) -> String {
-    let mut uri = String::with_capacity(path.len());
-    for b in path.bytes() {
-        match b {
-            b'\\' => uri.push('/'),
-            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' => uri.push(b as char),
-            b'-' | b'.' | b'_' | b'~' | b':' | b'/' | b'?' | b'#' | b'[' | b']' | b'@' | b'!' | b'$' | b'&' | b'\'' | b'(' | b')'
-            | b'*' | b'+' | b',' | b';' | b'=' | b'%' => uri.push(b as char),
-            _ => uri.push_str(&format!("%{b:02X}")),
-        }
+fn textures(bin: &mut Bin, mesh: &Mesh) -> Textures {
+    let mut t = Textures { textures: Vec::new(), images: Vec::new(), samplers: Vec::new(), maps: Vec::new() };
+    let mut image_of: BTreeMap<u32, u32> = BTreeMap::new();
+    let mut sampler_of: BTreeMap<[Wrap; 2], u32> = BTreeMap::new();
+    let mut texture_of: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+    let gl = |w: Wrap| match w {
+        Wrap::Repeat => 10497,
+        Wrap::Clamp => 33071,
+        Wrap::Mirror => 33648,
+    };
+    for m in &mesh.materials {
+        let slots = m.maps.map(|slot| {
+            let slot = slot.filter(|_| !mesh.uvs.is_empty())?;
+            let source = mesh.images.get(slot.image as usize)?;
+            let image = *image_of.entry(slot.image).or_insert_with(|| {
+                let view = bin.view(&source.bytes);
+                t.images.push(Image { name: source.name.clone(), buffer_view: view, mime_type: source.codec.mime() });
+                t.images.len() as u32 - 1
+            });
+            let sampler = *sampler_of.entry(slot.wrap).or_insert_with(|| {
+                t.samplers.push(Sampler { mag_filter: 9729, min_filter: 9987, wrap_s: gl(slot.wrap[0]), wrap_t: gl(slot.wrap[1]) });
+                t.samplers.len() as u32 - 1
+            });
+            Some(*texture_of.entry((image, sampler)).or_insert_with(|| {
+                t.textures.push(Texture { sampler, source: image });
+                t.textures.len() as u32 - 1
+            }))
+        });
+        t.maps.push(slots);
     }
-    uri
+    t
 }
 
 /// The binary chunk under construction, with one buffer view and one accessor per array.
@@ -176,6 +193,16 @@ struct Bin {
 }
 
 impl Bin {
+    /// Append `bytes` as a buffer view without target (an image's); returns the view's index.
+    fn view(&mut self, bytes: &[u8]) -> u32 {
+        while self.data.len() % 4 != 0 {
+            self.data.push(0);
+        }
+        self.views.push(BufferView { buffer: 0, byte_offset: self.data.len(), byte_length: bytes.len(), target: None });
+        self.data.extend_from_slice(bytes);
+        (self.views.len() - 1) as u32
+    }
+
     /// Append `bytes` as a new buffer view and accessor; returns the accessor index.
     fn push(
         &mut self,
@@ -189,7 +216,7 @@ impl Bin {
         while self.data.len() % 4 != 0 {
             self.data.push(0);
         }
-        self.views.push(BufferView { buffer: 0, byte_offset: self.data.len(), byte_length: bytes.len(), target });
+        self.views.push(BufferView { buffer: 0, byte_offset: self.data.len(), byte_length: bytes.len(), target: Some(target) });
         self.data.extend_from_slice(bytes);
         self.accessors.push(Accessor {
             buffer_view: (self.views.len() - 1) as u32,
@@ -259,6 +286,14 @@ struct MaterialJson {
     name: String,
     pbr_metallic_roughness: Pbr,
     #[serde(skip_serializing_if = "Option::is_none")]
+    normal_texture: Option<TextureRef>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    occlusion_texture: Option<TextureRef>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    emissive_texture: Option<TextureRef>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    emissive_factor: Option<[f32; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     alpha_mode: Option<&'static str>,
 }
 
@@ -270,6 +305,8 @@ struct Pbr {
     base_color_texture: Option<TextureRef>,
     metallic_factor: f32,
     roughness_factor: f32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    metallic_roughness_texture: Option<TextureRef>,
 }
 
 #[derive(Serialize)]
@@ -284,8 +321,11 @@ struct Texture {
 }
 
 #[derive(Serialize)]
+#[serde(rename_all = "camelCase")]
 struct Image {
-    uri: String,
+    name: String,
+    buffer_view: u32,
+    mime_type: &'static str,
 }
 
 #[derive(Serialize)]
@@ -319,7 +359,8 @@ struct BufferView {
     buffer: u32,
     byte_offset: usize,
     byte_length: usize,
-    target: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    target: Option<u32>,
 }
 
 #[derive(Serialize)]
@@ -436,18 +477,39 @@ mod tests {
         }
     }
 
-    #[test]
-    fn textures_become_images() {
+    /// A box whose two materials share one embedded image as base color, the second also with it
+    /// as emissive map clamped along v.
+    fn textured_box() -> (Mesh, Vec<u8>) {
         let mut m = fixtures::two_material_box();
-        m.materials[0].texture = Some("maps\\side wall.png".into());
-        m.materials[1].texture = Some("maps\\side wall.png".into());
-        let (json, _) = parse(&glb(&m));
-        assert_eq!(json["images"], serde_json::json!([{ "uri": "maps/side%20wall.png" }]));
-        assert_eq!(json["textures"], serde_json::json!([{ "sampler": 0, "source": 0 }]));
-        assert_eq!(json["samplers"].as_array().unwrap().len(), 1);
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(4, 4), 90).unwrap();
+        m.images = vec![crate::texture::SourceImage::new("maps/side wall.png".into(), png.clone()).unwrap()];
+        let slot = crate::format::TextureSlot { image: 0, wrap: [Wrap::Repeat; 2] };
+        m.materials[0].maps[MapKind::BaseColor as usize] = Some(slot);
+        m.materials[1].maps[MapKind::BaseColor as usize] = Some(slot);
+        m.materials[1].maps[MapKind::Emissive as usize] = Some(crate::format::TextureSlot { wrap: [Wrap::Repeat, Wrap::Clamp], ..slot });
+        m.materials[1].texture = Some("a path that is not written.png".into());
+        (m, png)
+    }
+
+    #[test]
+    fn maps_embed_their_images() {
+        let (mut m, png) = textured_box();
+        let bytes = glb(&m);
+        let (json, bin) = parse(&bytes);
+        let view = json["images"][0]["bufferView"].clone();
+        assert_eq!(json["images"], serde_json::json!([{ "name": "maps/side wall.png", "bufferView": view, "mimeType": "image/png" }]));
+        let view = &json["bufferViews"][json["images"][0]["bufferView"].as_u64().unwrap() as usize];
+        assert!(view.get("target").is_none(), "an image's view has no target");
+        let at = view["byteOffset"].as_u64().unwrap() as usize;
+        assert_eq!(&bin[at..at + view["byteLength"].as_u64().unwrap() as usize], &png[..]);
+        assert_eq!(json["textures"], serde_json::json!([{ "sampler": 0, "source": 0 }, { "sampler": 1, "source": 0 }]));
+        assert_eq!(json["samplers"][1]["wrapT"], 33071);
         for mat in json["materials"].as_array().unwrap() {
             assert_eq!(mat["pbrMetallicRoughness"]["baseColorTexture"]["index"], 0);
         }
+        assert_eq!(json["materials"][1]["emissiveTexture"]["index"], 1);
+        assert_eq!(json["materials"][1]["emissiveFactor"], serde_json::json!([1.0, 1.0, 1.0]));
+        assert!(!String::from_utf8_lossy(&glb(&m)).contains("not written"), "no reference to files beside it");
         m.uvs.clear();
         let (json, _) = parse(&glb(&m));
         assert!(json.get("images").is_none() && json.get("textures").is_none());
@@ -455,8 +517,7 @@ mod tests {
 
     #[test]
     fn gltf_crate_reads_it_back() {
-        let mut m = fixtures::two_material_box();
-        m.materials[1].texture = Some("top.png".into());
+        let (mut m, png) = textured_box();
         m.colors = vec![[10, 20, 30, 255]; 3 * m.face_count()];
         let bytes = glb(&m);
         let doc = gltf::Gltf::from_slice(&bytes).unwrap();
@@ -475,14 +536,9 @@ mod tests {
         assert_eq!(corners, 3 * m.face_count());
         let top = doc.materials().nth(1).unwrap();
         let texture = top.pbr_metallic_roughness().base_color_texture().unwrap().texture();
-        assert!(matches!(texture.source().source(), gltf::image::Source::Uri { uri: "top.png", .. }));
-    }
-
-    #[test]
-    fn uri_reference_escapes_only_what_it_must() {
-        assert_eq!(uri_reference("a b/ç.png"), "a%20b/%C3%A7.png");
-        assert_eq!(uri_reference("already%20encoded.png"), "already%20encoded.png");
-        assert_eq!(uri_reference("C:\\tex\\x.jpg"), "C:/tex/x.jpg");
+        let gltf::image::Source::View { view, mime_type } = texture.source().source() else { panic!("an embedded image") };
+        assert_eq!(mime_type, "image/png");
+        assert_eq!(&blob[view.offset()..view.offset() + view.length()], &png[..]);
     }
 
     #[test]

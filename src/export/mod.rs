@@ -2,7 +2,9 @@
 //! Every writer goes through [`crate::atomic::AtomicFile`], so no partial file is left behind, and
 //! each also writes to any `impl Write`. Output is deterministic: the same mesh gives the same bytes.
 //!
-//! UVs are written as stored in the [`Mesh`], in every format (no v flip).
+//! A [`Mesh`] holds UVs in glTF's convention (v down the image): GLB writes them as they are, OBJ
+//! and PLY with v flipped, as those formats count it. GLB embeds the images materials' maps use;
+//! OBJ writes them beside it.
 
 pub mod glb;
 pub mod obj;

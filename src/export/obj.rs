@@ -1,4 +1,7 @@
-//! Write Wavefront OBJ, plus a sibling .mtl when the mesh has materials beyond a single default.
+//! Write Wavefront OBJ, plus a sibling .mtl when the mesh has materials beyond a single default,
+//! and the images its materials' base color, normal and emissive maps sample (`map_Kd`, `norm`,
+//! `map_Ke`) as files beside it, named after the OBJ so that they never replace another file's
+//! images. OBJ's UVs count v up from the bottom of the image: v is flipped on the way out.
 //!
 //! Numbers are printed in the shortest form that parses back to the same f32, so positions survive
 //! exactly. Identical normals and UVs are written once. Per-corner colors use the common
@@ -8,6 +11,7 @@
 use super::check;
 use crate::atomic::{write_file, AtomicFile};
 use crate::error::{Error, Result};
+use crate::format::MapKind;
 use crate::mesh::{Material, Mesh};
 use std::collections::{HashMap, HashSet};
 use std::fmt;
@@ -15,16 +19,64 @@ use std::hash::Hash;
 use std::io::{self, Write};
 use std::path::Path;
 
-/// Write `mesh` to `path` and, when [`needs_mtl`], its materials to `path` with extension `.mtl`.
+/// Write `mesh` to `path` and, when [`needs_mtl`], its materials to `path` with extension `.mtl`
+/// and the images their maps use beside it ([`image_files`]).
 pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     let mtl_path = needs_mtl(mesh).then(|| path.with_extension("mtl"));
     let mtllib = mtl_path.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned());
+    let stem = path.file_stem().map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
+    let files = if mtl_path.is_some() { image_files(mesh, &stem) } else { Vec::new() };
     let mut file = AtomicFile::create(path)?;
     write_obj(file.writer(), mesh, mtllib.as_deref()).map_err(|e| Error::io(path, e))?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    for (image, name) in mesh.images.iter().zip(&files) {
+        if let Some(name) = name {
+            write_file(&dir.join(name), |w| w.write_all(&image.bytes))?;
+        }
+    }
     if let Some(mtl_path) = &mtl_path {
-        write_file(mtl_path, |w| write_mtl(w, mesh))?;
+        write_file(mtl_path, |w| write_mtl(w, mesh, &files))?;
     }
     file.commit()
+}
+
+/// Maps an OBJ material library can name, with their statements.
+const OBJ_MAPS: [(MapKind, &str); 3] = [(MapKind::BaseColor, "map_Kd"), (MapKind::Normal, "norm"), (MapKind::Emissive, "map_Ke")];
+
+/// File names, beside an OBJ named `stem`, for the images the materials' [`OBJ_MAPS`] use (when
+/// the mesh has UVs): `<stem>_<image name's file name>`, made safe for a file system and unique,
+/// with the codec's extension; `None` for images not written.
+pub fn image_files(mesh: &Mesh, stem: &str) -> Vec<Option<String>> {
+    let mut used = vec![false; mesh.images.len()];
+    if !mesh.uvs.is_empty() {
+        for m in &mesh.materials {
+            for (kind, _) in OBJ_MAPS {
+                if let Some(u) = m.map(kind).and_then(|s| used.get_mut(s.image as usize)) {
+                    *u = true;
+                }
+            }
+        }
+    }
+    let mut taken = HashSet::new();
+    mesh.images
+        .iter()
+        .zip(used)
+        .enumerate()
+        .map(|(i, (image, used))| {
+            if !used {
+                return None;
+            }
+            let base = image.name.rsplit(['/', '\\']).next().unwrap_or("");
+            let base = base.rsplit_once('.').map_or(base, |(b, _)| b);
+            let safe: String = base.chars().map(|c| if c.is_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+            let safe = if safe.is_empty() { format!("image{i}") } else { safe };
+            let mut name = format!("{stem}_{safe}.{}", image.codec.extension());
+            while !taken.insert(name.clone()) {
+                name = format!("{stem}_{safe}_{i}.{}", image.codec.extension());
+            }
+            Some(name)
+        })
+        .collect()
 }
 
 /// Whether the mesh carries materials worth a .mtl file: anything but none or one default material.
@@ -91,14 +143,28 @@ pub fn write_obj<W: Write>(mut out: W, mesh: &Mesh, mtllib: Option<&str>) -> io:
     out.flush()
 }
 
-/// Write the .mtl text for the materials of `mesh`: diffuse color, opacity and diffuse texture.
-pub fn write_mtl<W: Write>(mut out: W, mesh: &Mesh) -> io::Result<()> {
+/// Write the .mtl text for the materials of `mesh`: diffuse color, opacity, and its maps: those
+/// whose image is written as `image_files[image]`, else the base color texture's path as the source
+/// named it.
+pub fn write_mtl<W: Write>(mut out: W, mesh: &Mesh, image_files: &[Option<String>]) -> io::Result<()> {
     writeln!(out, "# written by strata: {} materials", mesh.materials.len())?;
     for (m, name) in mesh.materials.iter().zip(material_names(&mesh.materials)) {
         let [r, g, b, a] = m.base_color.map(Num);
         writeln!(out, "\nnewmtl {name}\nKd {r} {g} {b}\nd {a}")?;
-        if let Some(texture) = &m.texture {
-            writeln!(out, "map_Kd {texture}")?;
+        let file = |kind: MapKind| m.map(kind).and_then(|s| image_files.get(s.image as usize)?.clone());
+        for (kind, statement) in OBJ_MAPS {
+            match (file(kind), kind) {
+                (Some(f), _) => {
+                    let clamp = m.map(kind).is_some_and(|s| s.wrap.contains(&crate::format::Wrap::Clamp));
+                    writeln!(out, "{statement} {}{f}", if clamp { "-clamp on " } else { "" })?;
+                }
+                (None, MapKind::BaseColor) => {
+                    if let Some(texture) = &m.texture {
+                        writeln!(out, "map_Kd {texture}")?;
+                    }
+                }
+                _ => {}
+            }
         }
     }
     out.flush()
@@ -233,13 +299,41 @@ mod tests {
         assert_eq!(lines(&text, "usemtl").len(), runs);
         assert!(runs >= 2);
         let mut mtl = Vec::new();
-        write_mtl(&mut mtl, &m).unwrap();
+        write_mtl(&mut mtl, &m, &[]).unwrap();
         let mtl = String::from_utf8(mtl).unwrap();
         assert_eq!(lines(&mtl, "newmtl"), ["newmtl sides", "newmtl top"]);
         assert_eq!(lines(&mtl, "Kd").len(), 2);
         assert_eq!(lines(&mtl, "map_Kd"), ["map_Kd tex/top.png"]);
         let c = m.materials[1].base_color;
         assert!(mtl.contains(&format!("Kd {} {} {}\nd {}", c[0], c[1], c[2], c[3])));
+    }
+
+    #[test]
+    fn maps_write_their_images_beside_the_obj() {
+        let mut m = fixtures::two_material_box();
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
+        m.images = vec![
+            crate::texture::SourceImage::new("maps\\wall paper.png".into(), png.clone()).unwrap(),
+            crate::texture::SourceImage::new("unused.png".into(), png.clone()).unwrap(),
+        ];
+        let slot = crate::format::TextureSlot { image: 0, wrap: [crate::format::Wrap::Clamp; 2] };
+        m.materials[0].maps[MapKind::BaseColor as usize] = Some(slot);
+        m.materials[1].maps[MapKind::Normal as usize] = Some(slot);
+        let dir = std::env::temp_dir().join(format!("strata-obj-export-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("box.obj");
+        write(&path, &m).unwrap();
+        let mtl = std::fs::read_to_string(dir.join("box.mtl")).unwrap();
+        assert_eq!(lines(&mtl, "map_Kd"), ["map_Kd -clamp on box_wall_paper.png"]);
+        assert_eq!(lines(&mtl, "norm"), ["norm -clamp on box_wall_paper.png"]);
+        assert_eq!(std::fs::read(dir.join("box_wall_paper.png")).unwrap(), png);
+        assert!(!dir.join("box_unused.png").exists(), "an image no map uses is not written");
+        // Read back: the same image, the same maps, the same UVs.
+        let back = crate::import::import(&path, None).unwrap().mesh;
+        assert_eq!(&back.images[0].bytes[..], &png[..]);
+        assert_eq!(back.materials.iter().filter_map(|x| x.map(MapKind::BaseColor)).count(), 1);
+        assert_eq!(back.uvs.len(), m.uvs.len());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

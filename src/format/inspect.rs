@@ -273,7 +273,7 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
             },
         }));
     }
-    Ok(json!({
+    let mut out = json!({
         "version": format!("{}.{}", h.major, h.minor),
         "header": {
             "file_size": h.file_size,
@@ -304,5 +304,26 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
             "name": m.name, "base_color": m.base_color.map(|x| x as f64), "texture": m.texture,
         })).collect::<Vec<_>>(),
         "nodes": nodes,
-    }))
+    });
+    let t = rd.textures();
+    if !t.is_empty() {
+        // Files with images (2.2) also list them; the level files' bytes by length and CRC-32.
+        let slot = |s: Option<super::TextureSlot>| s.map(|s| json!({ "image": s.image, "wrap": [s.wrap[0] as u8, s.wrap[1] as u8] }));
+        let mut levels = Vec::with_capacity(t.levels.len());
+        for l in &t.levels {
+            let bytes = rd.read_image_level(l.image, l.level)?;
+            levels.push(json!({
+                "image": l.image, "level": l.level, "width": l.width, "height": l.height,
+                "offset": l.offset, "size": l.size, "crc": l.crc,
+                "file_bytes": bytes.len(), "file_crc": super::chunk::crc32(&bytes),
+            }));
+        }
+        out["textures"] = json!({
+            "images": t.images.iter().map(|i| json!({ "name": i.name, "codec": i.codec as u8, "levels": i.levels })).collect::<Vec<_>>(),
+            "levels": levels,
+            "maps": rd.materials().iter().map(|m| m.maps.map(slot)).collect::<Vec<_>>(),
+            "uv_density": t.uv_density.iter().map(|&d| f(d)).collect::<Vec<_>>(),
+        });
+    }
+    Ok(out)
 }

@@ -71,7 +71,7 @@ impl MapKind {
 }
 
 /// How UVs outside [0, 1] sample an image, per axis (glTF's sampler wrap modes).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
 pub enum Wrap {
     #[default]
     Repeat = 0,

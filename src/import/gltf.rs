@@ -156,8 +156,9 @@ fn load_images(
             let index = *loaded.get_mut(image as usize).expect("validated image index").get_or_insert_with(|| {
                 let element = format!("image {image}");
                 let im = &json.images[image as usize];
-                let name = match im.uri.as_deref() {
-                    Some(uri) if !uri.starts_with("data:") => uri.to_string(),
+                let name = match (im.uri.as_deref(), im.name.as_deref()) {
+                    (Some(uri), _) if !uri.starts_with("data:") => uri.to_string(),
+                    (_, Some(name)) if !name.is_empty() => name.to_string(),
                     _ => format!("embedded image {image}"),
                 };
                 let bytes = match (&im.uri, im.buffer_view) {
@@ -643,6 +644,7 @@ fn load_uri(path: &Path, element: &str, uri: &str, allow_outside: bool, max_len:
         ));
     }
     let file = folder.join(name);
+    crate::atomic::protect(&file);
     let cannot = |e: &dyn std::fmt::Display| Error::at_element(path, element, format!("cannot read {}: {e}", file.display()));
     super::read_regular_file(&file, max_len).map_err(|e| cannot(&e))
 }

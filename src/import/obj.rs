@@ -163,6 +163,7 @@ impl Images {
         if let Some(&known) = self.by_path.get(&path) {
             return known;
         }
+        crate::atomic::protect(&path);
         let result = if !allow_outside && !super::stays_inside(Path::new(file)) {
             Err(format!("{file} lies outside the model's folder (--allow-outside-files reads it)"))
         } else {

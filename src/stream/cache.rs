@@ -97,8 +97,14 @@ impl Cache {
         Ok(())
     }
 
-    /// Evict idle entries, least recently used first, until at most `limit` bytes are resident.
-    fn evict_to(&mut self, limit: u64) {
+    /// Bytes of the displayed nodes' geometry.
+    pub fn displayed_bytes(&self) -> u64 {
+        self.displayed
+    }
+
+    /// Evict idle entries, least recently used first, until at most `limit` bytes are resident
+    /// (never displayed ones).
+    pub fn evict_to(&mut self, limit: u64) {
         while self.resident > limit {
             let Some((_, node)) = self.idle.pop_first() else { return };
             if let Some(e) = self.entries.remove(&node) {

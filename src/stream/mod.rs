@@ -4,6 +4,7 @@
 //! - [`refine`]: front selection, breadth-first with the neighbour rule, largest projected error or
 //!   the paper's priority first;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
+//! - [`images`]: which image levels the front needs, and those held (selection.md §4);
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
 //! - [`retention`]: shape retention of a front's image against the full-detail one;
 //! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines;
@@ -11,6 +12,7 @@
 
 pub mod budget;
 pub mod cache;
+pub mod images;
 pub mod play;
 pub mod refine;
 pub mod retention;
@@ -24,6 +26,7 @@ use crate::format::{ByteSource, NodeGeometry, NodeRecord, Reader};
 use crate::mesh::{Material, Mesh};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
+use images::ImageCache;
 pub use refine::Priority;
 use refine::{Limits, Mark, Refiner};
 use serde::Serialize;
@@ -68,8 +71,14 @@ pub struct Stats {
     pub resident_bytes: u64,
     /// The pixel-error threshold this frame was refined with.
     pub pixel_error: f32,
-    /// Time to select the front and load its geometry.
+    /// Time to select the front and load its geometry and image levels.
     pub refine_ms: f64,
+    /// Bytes of image level files read so far, and image levels held as RGBA8 (counted in the
+    /// memory budget with the geometry).
+    pub texture_bytes_read: u64,
+    pub texture_resident_bytes: u64,
+    /// Per image the front draws: [image, wanted level, drawn level] (0 = full resolution).
+    pub texture_levels: Vec<[u32; 3]>,
 }
 
 /// One frame's front and what changed since the previous frame.
@@ -99,6 +108,9 @@ pub struct Streamer<S> {
     culled: Vec<u32>,
     faces: u64,
     frame: u64,
+    images: ImageCache,
+    /// Decoded bytes of every image's coarsest level, kept out of the geometry's share of the budget.
+    pinned: u64,
 }
 
 impl<S: ByteSource> Streamer<S> {
@@ -109,17 +121,25 @@ impl<S: ByteSource> Streamer<S> {
         let top_nodes = &reader.nodes()[reader.level_nodes(top).start as usize..reader.level_nodes(top).end as usize];
         let faces: u64 = top_nodes.iter().map(|n| n.faces as u64).sum();
         let bytes: u64 = top_nodes.iter().map(|n| record_bytes(n, attrs)).sum();
+        let pinned = ImageCache::pinned_bytes(reader.textures(), reader.materials());
+        let bytes = bytes + pinned;
         if budgets.faces.is_some_and(|b| b < faces) {
             return Err(Error::invalid(reader.path(), None, format!("the face budget is below the top level's {faces} faces")));
         }
         if budgets.bytes.is_some_and(|b| b < bytes) {
-            return Err(Error::invalid(reader.path(), None, format!("the memory budget is below the top level's {bytes} bytes")));
+            return Err(Error::invalid(
+                reader.path(),
+                None,
+                format!("the memory budget is below the top level's {bytes} bytes (images' coarsest levels included)"),
+            ));
         }
         if budgets.pixel_error.is_nan() || budgets.pixel_error < 0.0 {
             return Err(Error::invalid(reader.path(), None, "the pixel-error threshold must be zero or more"));
         }
         Ok(Streamer {
-            cache: Cache::new(budgets.bytes),
+            cache: Cache::new(budgets.bytes.map(|b| b - pinned)),
+            images: ImageCache::default(),
+            pinned,
             controller: budgets.target_ms.map(|t| FrameTime::new(t, budgets.pixel_error)),
             reader,
             budgets,
@@ -145,6 +165,11 @@ impl<S: ByteSource> Streamer<S> {
         self.cache.get(node)
     }
 
+    /// What a renderer samples for image `image` this frame: its drawn level.
+    pub fn image(&self, image: u32) -> Option<&crate::texture::sample::MipChain> {
+        self.images.chain(image)
+    }
+
     /// Compute the front for `camera`, load what it adds and report it. `frame_ms` is the time
     /// the previous frame took, fed to the frame-time controller when there is one.
     pub fn update(&mut self, camera: &Camera, frame_ms: Option<f32>) -> Result<FrameReport> {
@@ -156,7 +181,7 @@ impl<S: ByteSource> Streamer<S> {
         let mut limits = Limits {
             pixel_error: threshold,
             max_faces: self.budgets.faces,
-            max_bytes: self.budgets.bytes,
+            max_bytes: self.budgets.bytes.map(|b| b - self.pinned),
             priority: self.budgets.priority,
         };
         let attrs = self.reader.header().attributes;
@@ -180,6 +205,17 @@ impl<S: ByteSource> Streamer<S> {
             }
         }
         self.cache.update(&added, &removed, &self.reader)?;
+        if !self.reader.textures().is_empty() {
+            let (cache, materials) = (&self.cache, self.reader.materials());
+            let wanted = images::wanted(self.reader.skeleton(), camera, &cut.shown, &|i| {
+                cache.get(i).map(|g| images::base_color_images(g, materials))
+            });
+            let room = self.budgets.bytes.map(|b| b.saturating_sub(self.cache.displayed_bytes()));
+            self.images.update(&self.reader, &wanted, room)?;
+            if let Some(b) = self.budgets.bytes {
+                self.cache.evict_to(b.saturating_sub(self.images.resident_bytes()));
+            }
+        }
 
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {
@@ -194,6 +230,9 @@ impl<S: ByteSource> Streamer<S> {
             resident_bytes: self.cache.resident_bytes(),
             pixel_error: limits.pixel_error,
             refine_ms: start.elapsed().as_secs_f64() * 1e3,
+            texture_bytes_read: self.images.bytes_read(),
+            texture_resident_bytes: self.images.resident_bytes(),
+            texture_levels: self.images.drawn().iter().map(|(&i, &(w, d))| [i, w, d]).collect(),
         };
         self.front.clone_from(&cut.shown);
         self.culled.clone_from(&cut.culled);
@@ -203,25 +242,26 @@ impl<S: ByteSource> Streamer<S> {
         Ok(report)
     }
 
-    /// The displayed front as one mesh, each node's vertices kept apart, material 0 throughout.
-    pub fn front_mesh(&self) -> Mesh {
+    /// The displayed front as one mesh, each node's vertices kept apart, with the file's materials
+    /// and corner attributes; a textured file's images come along at full resolution (read here),
+    /// so that an export stands alone.
+    pub fn front_mesh(&self) -> Result<Mesh> {
         let mut m = Mesh::default();
         let geometries: Vec<&NodeGeometry> = self.front.iter().filter_map(|&i| self.geometry(i)).collect();
-        let normals = geometries.iter().all(|g| !g.normals.is_empty());
+        let attrs = self.reader.header().attributes;
         for g in geometries {
             let base = m.positions.len() as u32;
             m.positions.extend(&g.positions);
-            for t in g.indices.chunks_exact(3) {
-                m.triangles.push([base + t[0], base + t[1], base + t[2]]);
-                if normals {
-                    m.normals.extend(t.iter().map(|&k| g.normals[k as usize]));
-                }
-            }
+            let vertex: Vec<u32> = (base..base + g.positions.len() as u32).collect();
+            crate::assemble::append_faces(&mut m, g, &vertex, attrs);
         }
-        m.face_materials = vec![0; m.triangles.len()];
-        m.materials = vec![Material::default()];
+        m.materials = self.reader.materials().to_vec();
+        if m.materials.is_empty() {
+            m.materials.push(Material::default());
+        }
+        m.images = crate::assemble::images(&self.reader)?;
         m.compute_face_geometry();
-        m
+        Ok(m)
     }
 
     /// The mark node `i` got in the last frame.

@@ -8,6 +8,7 @@ use crate::camera::Camera;
 use crate::error::Result;
 use crate::format::{ByteSource, NodeGeometry};
 use crate::render::{palette, Image, Part, Strips};
+use crate::texture::draw::node_parts;
 use std::time::Instant;
 
 /// What to produce per frame besides the report.
@@ -15,7 +16,8 @@ use std::time::Instant;
 pub struct PlayOptions {
     pub width: u32,
     pub height: u32,
-    /// Keep each whole frame's pixels (RGBA, rows top down), nodes colored by id.
+    /// Keep each whole frame's pixels (RGBA, rows top down): nodes colored by id, or for a textured
+    /// model its materials with the image levels held.
     pub pixels: bool,
     /// Also draw the front and the full-detail model in one plain color and measure the retention.
     pub compare_full: bool,
@@ -53,15 +55,23 @@ pub fn play<S: ByteSource>(
     let mut rgba = if opts.pixels { vec![0u8; row_bytes * height as usize] } else { Vec::new() };
     let mut plain = opts.compare_full.then(|| (Image::new(width, height), Image::new(width, height)));
     let mut last_ms = None;
+    // A textured model is drawn in its materials with the image levels the streamer holds; others
+    // with a color per node.
+    let textured = !streamer.reader().textures().is_empty();
     for camera in cameras {
         let report = streamer.update(camera, last_ms)?;
         let start = Instant::now();
+        let s = &*streamer;
         let parts: Vec<Part> = report
             .front
             .iter()
-            .filter_map(|&i| {
-                let g = streamer.geometry(i)?;
-                Some(Part::new(&g.positions, &g.normals, &g.indices, palette(i)))
+            .filter_map(|&i| s.geometry(i).map(|g| (i, g)))
+            .flat_map(|(i, g)| {
+                if textured {
+                    node_parts(g, s.reader().materials(), &|image| s.image(image))
+                } else {
+                    vec![Part::new(&g.positions, &g.normals, &g.indices, palette(i))]
+                }
             })
             .collect();
         strips.draw(camera, &parts, |row, line| {

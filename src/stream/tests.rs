@@ -77,7 +77,7 @@ fn check(s: &Streamer<File>, rep: &FrameReport, camera: &Camera, budgets: &Budge
     }
     let faces: u64 = rep.front.iter().map(|&i| nodes[i as usize].faces as u64).sum();
     assert_eq!(faces, rep.stats.faces);
-    assert_eq!(s.front_mesh().face_count() as u64, faces);
+    assert_eq!(s.front_mesh().unwrap().face_count() as u64, faces);
     assert!(budgets.faces.is_none_or(|b| faces <= b), "frame {}: {faces} faces", rep.frame);
     assert!(budgets.bytes.is_none_or(|b| rep.stats.resident_bytes <= b), "frame {}", rep.frame);
 }
@@ -300,4 +300,76 @@ fn a_model_coming_into_view_is_drawn_coarse_first_then_refined_as_predicted() {
     let next = &predictive[3];
     assert!(next.stats.pixel_error >= budget::STEP, "the predicted step coarsens before drawing: {}", next.stats.pixel_error);
     assert!(next.stats.faces > entering.stats.faces && next.stats.faces < reactive[3].stats.faces, "{} faces", next.stats.faces);
+}
+
+/// The textured globe fixture converted with small groups; built once.
+fn textured() -> &'static PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("strata-stream-tex-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("globe.strata");
+        let input = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/textured_globe.glb"));
+        let hierarchy = HierarchyParams { cluster_faces: 8, leaf_faces: 64, top_groups: 2, ..HierarchyParams::default() };
+        convert(&input, &Default::default(), &out, &ConvertOptions { hierarchy, ..ConvertOptions::default() }, &mut Silent).unwrap();
+        out
+    })
+}
+
+#[test]
+fn needed_levels_follow_texels_per_pixel() {
+    let r = Reader::open_path(textured()).unwrap();
+    let t = r.textures();
+    // 512 × 256, 256 × 128, 128 × 64, 64 × 32: geometric-mean sides 362, 181, 90.5, 45.3.
+    assert_eq!(t.level_count(0), 4);
+    let need = |texels_per_uv: f32| images::needed_level(t, 0, texels_per_uv, 1.0);
+    assert_eq!(need(1000.0), 0, "nothing finer than the full image");
+    assert_eq!(need(362.0), 0);
+    assert_eq!(need(363.0), 0);
+    assert_eq!(need(181.0), 1);
+    assert_eq!(need(100.0), 1);
+    assert_eq!(need(90.0), 2);
+    assert_eq!(need(45.0), 3);
+    assert_eq!(need(1.0), 3);
+    // Density scales the need: twice the UV units per model unit, half the pixels per UV unit.
+    assert_eq!(images::needed_level(t, 0, 200.0, 2.0), need(100.0));
+}
+
+#[test]
+fn images_stream_coarse_first_within_the_budget() {
+    let r = Reader::open_path(textured()).unwrap();
+    let t = r.textures().clone();
+    let coarsest = t.level(0, 3).unwrap();
+    let (center, radius) = sphere(&r);
+    let top = r.level_nodes(r.levels().len() as u32 - 1);
+    let top_bytes: u64 = top.map(|i| cache::record_bytes(&r.nodes()[i as usize], r.header().attributes)).sum();
+    // Room for the top level, the coarsest level and a little more, but not the full image.
+    let budget = top_bytes + coarsest.decoded_bytes() + 300_000;
+    let budgets = Budgets { bytes: Some(budget), ..Budgets::default() };
+    let mut s = Streamer::new(r, budgets).unwrap();
+    let mut finest = u32::MAX;
+    for i in 0..24 {
+        let camera = orbit(center, radius, i, 24, 800, 600);
+        let rep = s.update(&camera, None).unwrap();
+        let st = &rep.stats;
+        if i == 0 {
+            assert_eq!(st.texture_bytes_read, coarsest.size as u64 - 20, "the first frame reads the coarsest level alone");
+            assert_eq!(st.texture_levels, vec![[0, st.texture_levels[0][1], 3]]);
+        }
+        assert!(
+            st.resident_bytes + st.texture_resident_bytes <= budget,
+            "frame {i}: {} + {} > {budget}",
+            st.resident_bytes,
+            st.texture_resident_bytes
+        );
+        for &[image, wanted, drawn] in &st.texture_levels {
+            assert_eq!(image, 0);
+            assert!(drawn >= wanted, "never finer than wanted");
+            let chain = s.image(0).unwrap();
+            assert_eq!(chain.first_level, drawn);
+            finest = finest.min(drawn);
+        }
+    }
+    assert!(finest < 3, "the orbit's close-ups draw a finer level than the coarsest");
+    assert!(finest > 0, "the budget keeps the full image out");
 }

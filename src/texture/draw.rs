@@ -20,9 +20,9 @@ pub fn srgb_color(linear: [f32; 4]) -> [u8; 4] {
 }
 
 /// The parts of one node's geometry: one per material range, in the material's color, textured
-/// with `chains[image]` where the material's base color map names a loaded chain (and the node has
-/// UVs).
-pub fn node_parts<'a>(g: &'a NodeGeometry, materials: &[Material], chains: &'a [Option<MipChain>]) -> Vec<Part<'a>> {
+/// with `chain(image)` where the material's base color map names an image that has one (and the
+/// node has UVs).
+pub fn node_parts<'a>(g: &'a NodeGeometry, materials: &[Material], chain: &dyn Fn(u32) -> Option<&'a MipChain>) -> Vec<Part<'a>> {
     g.material_ranges
         .iter()
         .filter_map(|r| {
@@ -30,7 +30,7 @@ pub fn node_parts<'a>(g: &'a NodeGeometry, materials: &[Material], chains: &'a [
             let m = materials.get(r.material as usize);
             let color = m.map_or([200, 200, 200, 255], |m| srgb_color(m.base_color));
             let part = Part::new(&g.positions, &g.normals, indices, color);
-            let chain = m.and_then(|m| m.map(MapKind::BaseColor)).and_then(|s| chains.get(s.image as usize)?.as_ref());
+            let chain = m.and_then(|m| m.map(MapKind::BaseColor)).and_then(|s| chain(s.image));
             Some(match chain {
                 Some(c) => part.textured(&g.uvs, c),
                 None => part,

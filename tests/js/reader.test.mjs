@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode } from '../../viewer/format.js';
+import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode, decodeImageLevel, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -22,12 +22,13 @@ const vectorNames = () => readdirSync(VECTORS).filter((f) => f.endsWith('.strata
 
 const nodeBytes = (sk, i, bytes) => bytes.subarray(sk.offset[i], sk.offset[i] + sk.size[i]);
 
-/** Open a whole file in memory and decode every node (throws at the first problem). */
+/** Open a whole file in memory and decode every node and image level (throws at the first problem). */
 function decodeAll(bytes, opts) {
   const sk = decodeSkeleton(bytes, bytes.length);
   const geoms = [];
   for (let i = 0; i < sk.nodeCount; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
-  return { sk, geoms };
+  const images = sk.textures.levels.map((l, e) => decodeImageLevel(sk, e, bytes.subarray(l.offset, l.offset + l.size)));
+  return { sk, geoms, images };
 }
 
 /** Whether the file is refused (true) or read (false); anything but a FormatError fails the test. */
@@ -43,8 +44,9 @@ function refused(bytes, what) {
   }
 }
 
-/** The JSON `strata::format::inspect::dump` makes of a file (src/format/inspect.rs). */
-function dump(sk, geoms) {
+/** The JSON `strata::format::inspect::dump` makes of a file (src/format/inspect.rs); `images` are
+ * the image files of the level entries, for files with images. */
+function dump(sk, geoms, images = []) {
   const v3 = (a, o) => [a[o], a[o + 1], a[o + 2]];
   const rows = (a, k) => Array.from({ length: a ? a.length / k : 0 }, (_, j) => Array.from(a.subarray(k * j, k * j + k)));
   const h = sk.header;
@@ -108,6 +110,26 @@ function dump(sk, geoms) {
         })),
       },
     })),
+    ...(sk.textures.images.length
+      ? {
+          textures: {
+            images: sk.textures.images.map((i) => ({ name: i.name, codec: i.codec, levels: i.levels })),
+            levels: sk.textures.levels.map((l, e) => ({
+              image: l.image,
+              level: l.level,
+              width: l.width,
+              height: l.height,
+              offset: l.offset,
+              size: l.size,
+              crc: l.crc,
+              file_bytes: images[e].length,
+              file_crc: crc32(images[e]),
+            })),
+            maps: sk.materials.map((m) => MAP_KINDS.map((k) => m.maps[k])),
+            uv_density: Array.from(sk.textures.uvDensity),
+          },
+        }
+      : {}),
   };
 }
 
@@ -288,8 +310,8 @@ test('every valid golden vector decodes to its JSON, bit for bit', () => {
     const expected = JSON.parse(readFileSync(join(VECTORS, `${name}.json`), 'utf8'));
     if (expected.refused) continue;
     const bytes = read(`${name}.strata`);
-    const { sk, geoms } = decodeAll(bytes);
-    const d = difference(expected, dump(sk, geoms));
+    const { sk, geoms, images } = decodeAll(bytes);
+    const d = difference(expected, dump(sk, geoms, images));
     assert.equal(d, null, `${name}: ${d}`);
     // The struct of arrays is typed as promised.
     assert.ok(sk.level instanceof Uint16Array && sk.parent instanceof Uint32Array && sk.offset instanceof Float64Array);
@@ -337,7 +359,8 @@ test('openingRange on every prefix: needs grow, then the true skeleton and top-l
     const topNodes = levl.getUint32(32 * (L - 1) + 4, true);
     const geoms = tree.chunks.filter((c) => c.id === 'GEOM');
     const sk = { skeletonEnd: geoms[0].at };
-    const topEnd = topNodes < geoms.length ? geoms[topNodes].at : bytes.length;
+    const after = tree.chunks.find((c) => c.id !== 'GEOM' && c.at > geoms[geoms.length - 1].at);
+    const topEnd = topNodes < geoms.length ? geoms[topNodes].at : after ? after.at : bytes.length;
     for (const fileLength of [bytes.length, undefined]) {
       let need = 0, resolvedAt = -1, topAt = -1;
       for (let p = 0; p <= bytes.length; p++) {
@@ -437,7 +460,7 @@ test('every byte of sphere.strata flipped: refused with a FormatError, or read o
   t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, and GEOM padding); every other flip refused`);
 });
 
-for (const file of ['sphere.strata', 'terrain.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
+for (const file of ['sphere.strata', 'terrain.strata', 'textured.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
   const bytes = read(file);
   const tree = parseTree(bytes);
   const spots = leaves(tree);
