@@ -37,6 +37,8 @@ convert "$fixtures/nonmanifold.obj" nonmanifold --normals none
 convert "$fixtures/two_materials.glb" two_materials "${tiny[@]}"
 convert "$fuzz/seeds/quad_ascii.ply" quad_colors_uvs
 convert "$fuzz/seeds/tetra_datauri.gltf" tetra_all_attributes "${tiny[@]}"
+# Images (format 2.2): the textured golden vector.
+cp "$root/format-spec/vectors/textured.strata" "$corpus/reader/"
 
 mkdir -p "$corpus/reader_sealed"
 cp "$corpus"/reader/*.strata "$corpus/reader_sealed/"

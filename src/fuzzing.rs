@@ -38,6 +38,12 @@ pub fn read_everything(bytes: &[u8]) -> Reached {
         for l in 0..=levels {
             let _ = crate::assemble::to_mesh(&rd, l);
         }
+        for l in &rd.textures().levels {
+            if let (Ok(b), Some(im)) = (rd.read_image_level(l.image, l.level), rd.textures().images.get(l.image as usize)) {
+                let _ = crate::texture::decode(im.codec, &b);
+            }
+        }
+        let _ = crate::texture::draw::read_base_color_chains(&rd);
         let _ = rd.chunks();
         let selections = [
             inspect::Selection { depth: Some(u32::MAX), level: None, node: None },

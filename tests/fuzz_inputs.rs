@@ -217,7 +217,7 @@ fn chunk_files() -> Vec<Seed> {
         ("fuzz/seeds/quad_ascii.ply", "quad_colors_uvs", &plain),
         ("fuzz/seeds/tetra_datauri.gltf", "tetra_all_attributes", &tiny),
     ];
-    inputs
+    let mut files: Vec<Seed> = inputs
         .iter()
         .map(|(input, name, opts)| {
             let input = root().join(input);
@@ -226,7 +226,10 @@ fn chunk_files() -> Vec<Seed> {
             convert(&input, &Default::default(), &out, opts, &mut Silent).unwrap_or_else(|e| panic!("{}: {e}", input.display()));
             (name, read(&out))
         })
-        .collect()
+        .collect();
+    // Images (format 2.2): the textured golden vector.
+    files.push(("textured.strata".into(), read(&root().join("format-spec/vectors/textured.strata"))));
+    files
 }
 
 /// Numbers that text formats should refuse or survive (and a few ordinary ones, which keep the

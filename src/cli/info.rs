@@ -34,6 +34,7 @@ pub fn run(a: Args) -> Result<()> {
             "metres_per_unit": imp.metres_per_unit,
             "material_names": m.materials.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
             "attributes": attributes,
+            "images": m.images.iter().map(|i| serde_json::json!({ "name": i.name, "codec": i.codec, "bytes": i.bytes.len() })).collect::<Vec<_>>(),
             "bounds": { "min": lo.to_array(), "max": hi.to_array() },
             "components": components,
             "boundary_edges": adj.boundary_edges,
@@ -52,6 +53,14 @@ pub fn run(a: Args) -> Result<()> {
     println!("faces              {} (of {} read)", m.face_count(), imp.source_faces);
     println!("materials          {} ({})", m.materials.len(), m.materials.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", "));
     println!("attributes         {}", if attributes.is_empty() { "none".to_string() } else { attributes.join(", ") });
+    if !m.images.is_empty() {
+        let bytes: usize = m.images.iter().map(|i| i.bytes.len()).sum();
+        println!(
+            "images             {} ({bytes} bytes: {})",
+            m.images.len(),
+            m.images.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", ")
+        );
+    }
     println!("units              {}", imp.metres_per_unit.map_or("not stated by the file".to_string(), |m| format!("{m} m per unit")));
     println!("bounds             [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
     println!("components         {components}");
