@@ -35,7 +35,7 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
         tool: "strata vectors".into(),
         georef,
         encoding: strata::write::Encoding::V2,
-        images: Vec::new(),
+        images: Default::default(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
     out.into_inner()
@@ -81,7 +81,7 @@ fn textured() -> Vec<u8> {
         tool: "strata vectors".into(),
         georef: None,
         encoding: strata::write::Encoding::V2,
-        images,
+        images: images.into(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the textured vector writes");
     out.into_inner()

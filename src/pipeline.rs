@@ -135,7 +135,7 @@ pub fn convert(
         level_ratio: opts.levels.ratio,
         georef,
         encoding: opts.encoding,
-        images,
+        images: images.into(),
         ..WriteOptions::default()
     };
     let summary = write::write(output, &h, &lv, &write_opts)?;

@@ -21,6 +21,7 @@ use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
+use std::sync::Arc;
 
 /// What the writer records besides the hierarchy and the meshes.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,8 +38,9 @@ pub struct WriteOptions {
     pub georef: Option<Georef>,
     /// How node geometry is stored.
     pub encoding: Encoding,
-    /// The images level 0's materials index, each with its levels ([`crate::texture::pyramid`]).
-    pub images: Vec<ImageIn>,
+    /// The images level 0's materials index, each with its levels ([`crate::texture::pyramid`]);
+    /// shared, so that options are cheap to copy however large the images.
+    pub images: Arc<Vec<ImageIn>>,
 }
 
 /// How node geometry is stored: format 2's fixed-width arrays on a 20-bit grid, or format 3's
@@ -91,7 +93,7 @@ impl Default for WriteOptions {
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
             georef: None,
             encoding: Encoding::V2,
-            images: Vec::new(),
+            images: Arc::default(),
         }
     }
 }

@@ -196,7 +196,7 @@ fn options() -> WriteOptions {
         tool: "strata test".into(),
         georef: None,
         encoding: strata::write::Encoding::V2,
-        images: Vec::new(),
+        images: Default::default(),
     }
 }
 
@@ -567,7 +567,7 @@ fn images_follow_the_spec() {
         levels: vec![level(&t.full, 2), level(&t.half, 1)],
     };
     let mut cur = Cursor::new(Vec::new());
-    let opts = WriteOptions { images: vec![image], ..options() };
+    let opts = WriteOptions { images: vec![image].into(), ..options() };
     strata::write::write_to(&mut cur, &hierarchy(), &lv, &opts).expect("write");
     assert_eq!(cur.into_inner(), d.bytes, "the writer follows §7.5");
 

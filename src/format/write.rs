@@ -51,7 +51,7 @@ pub struct WriterOptions {
     pub major: u16,
     /// The images the materials' maps index, each as its levels, finest first; a file with images
     /// is format 2.2 (spec §7.5).
-    pub images: Vec<ImageIn>,
+    pub images: std::sync::Arc<Vec<ImageIn>>,
 }
 
 /// One finished node.

@@ -10,7 +10,7 @@ import { existsSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { extname } from 'node:path';
 import { root, scratch, strataBin, converted, run } from './helpers.mjs';
-import { crc32 } from '../../viewer/format.js';
+import { crc32, decodeSkeleton, IMAGE_MIME } from '../../viewer/format.js';
 import { Camera } from '../../viewer/camera.js';
 
 const CHROMIUM = [process.env.CHROMIUM, '/usr/bin/chromium', '/usr/bin/chromium-browser', '/usr/bin/google-chrome'].find((p) => p && existsSync(p));
@@ -56,6 +56,7 @@ before(async () => {
   copy('ico', converted('icosphere', `${root}/fixtures/icosphere.obj`, ['--leaf-faces', '16', '--cluster-faces', '4', '--top-groups', '2']));
   if (existsSync(CT_HEAD)) copy('cthead', converted('cthead', CT_HEAD, []));
   copy('terrain', `${root}/format-spec/vectors/terrain.strata`);
+  copy('globe', converted('textured_globe', `${root}/fixtures/textured_globe.glb`, []));
   // Far from the origin, as georeferenced scans are: the noisy sphere scaled to a radius of about
   // 100 and snapped to multiples of 1/32, at the origin and moved by (500 000, 250 000, 1 000),
   // where 1/32 is still exact in f32, so both import the same shape bit for bit.
@@ -365,6 +366,51 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     t.diagnostic(`far from the origin: ${differ} of ${covered} covered pixels differ by more than 24 from the same close-up at the origin`);
     assert.ok(covered > (W * H) / 2, 'the close-up is covered by the surface');
     assert.ok(differ / covered < 0.01, `${differ} of ${covered} pixels differ`);
+  });
+
+  await sub('a textured model: its coarsest image level first, then the image drawn as strata render draws it', async (t) => {
+    const { p, errors } = await page(viewer('globe'));
+    await within(p.evaluate(() => window.strata.ready()), 60000, 'first frame');
+    const bytes = new Uint8Array(readFileSync(models.globe));
+    const sk = decodeSkeleton(bytes, bytes.length);
+    const tex = sk.textures;
+    const coarsest = tex.levels[tex.images[0].levels.at(-1)];
+    const h = sk.header;
+    const center = h.min.map((m, k) => (m + h.max[k]) / 2);
+    const radius = Math.hypot(...h.max.map((m, k) => m - h.min[k])) / 2;
+    const cam = Camera.framing(center, radius, [0.3, 0.4, 1.0], (45 * Math.PI) / 180, W, H);
+    const d = Math.hypot(...cam.eye.map((e, k) => e - center[k]));
+    cam.near = Math.max(d - radius, 1e-4 * (d + radius));
+    cam.far = d + radius;
+    await p.evaluate(([c]) => {
+      window.strata.setColor('material');
+      window.strata.setLimits({ pixelError: 0 });
+      window.strata.setCamera(c);
+    }, [cam.toJSON()]);
+    await within(p.evaluate(() => window.strata.idle()), 120000, 'full detail');
+    const st = await p.evaluate(() => window.strata.state());
+    const f = st.firstTextured;
+    t.diagnostic(`globe: first textured frame ${f.ms.toFixed(0)} ms after page load, ${f.textureBytesRead} texture bytes read in ${f.textureRequests} request(s) (the coarsest level is ${coarsest.size} bytes); at rest ${JSON.stringify(st.textureLevels)} ([image, wanted, drawn]), ${st.textureBytesRead} texture bytes read in ${st.textureRequests} requests, ${st.textureResidentBytes} resident; panel "${st.textures}"; decoded ${JSON.stringify(st.imagesDecoded.map((i) => [i.mime, i.width, i.height, Math.round(i.ms)]))}`);
+    assert.ok(f.textureBytesRead <= coarsest.size && f.textureRequests === 1, 'the first textured frame read only the coarsest level');
+    assert.ok(st.textureLevels.length === 1 && st.textureLevels[0][2] === st.textureLevels[0][1], `drawn at the wanted level: ${JSON.stringify(st.textureLevels)}`);
+    const drawnLevel = tex.levels[tex.images[0].levels[st.textureLevels[0][2]]];
+    assert.ok(st.imagesDecoded.some((i) => i.mime === IMAGE_MIME[tex.images[0].codec] && i.width === drawnLevel.width && i.height === drawnLevel.height), 'the drawn level decoded');
+    assert.ok(st.textureResidentBytes >= 4 * (drawnLevel.width * drawnLevel.height + coarsest.width * coarsest.height));
+    assert.ok(st.residentBytes <= st.budget);
+    assert.match(st.textures, /^\d+(\.\d)? KB \(\d+\) \/ \d+(\.\d)? (KB|MB)$/);
+    const m = await compareWithRender(p, models.globe, cam, t);
+    t.diagnostic(`globe vs strata render (base color image): silhouette IoU ${m.iou.toFixed(4)}, mean colour difference ${m.meanDiff.toFixed(2)}/255, pixels differing by more than 24: ${(m.farShare * 100).toFixed(2)} % of ${m.covered}`);
+    assert.ok(m.iou >= 0.98, `silhouette IoU ${m.iou}`);
+    assert.ok(m.meanDiff <= 8, `mean colour difference ${m.meanDiff}`);
+    assert.ok(m.farShare <= 0.05, `share of very different pixels ${m.farShare}`);
+    // Untextured, the same globe is today's material colour: the image is what made the difference.
+    await p.evaluate(() => window.strata.setColor('plain'));
+    await within(p.evaluate(() => window.strata.idle()), 60000, 'plain');
+    const plain = await compareWithRender(p, models.globe, cam, t);
+    t.diagnostic(`globe drawn plain vs strata render with the image: mean colour difference ${plain.meanDiff.toFixed(2)}/255`);
+    assert.ok(plain.meanDiff > 4 * m.meanDiff, 'the image changes the picture');
+    assert.deepEqual(errors, []);
+    await p.close();
   });
 
   await sub('terrain opens from above and shows where it lies', async (t) => {
