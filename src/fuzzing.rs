@@ -43,7 +43,18 @@ pub fn read_everything(bytes: &[u8]) -> Reached {
                 let _ = crate::texture::decode(im.codec, &b);
             }
         }
-        let _ = crate::texture::draw::read_base_color_chains(&rd);
+        // Hostile UVs and images through the textured renderer.
+        let all: Vec<u32> = (0..rd.textures().images.len() as u32).collect();
+        let chains = crate::texture::draw::read_chains(&rd, &all, &mut Vec::new());
+        let (lo, hi) = (rd.header().min, rd.header().max);
+        let camera = crate::camera::Camera::framing((lo + hi) * 0.5, (hi - lo).length().max(1e-3), glam::Vec3::ONE, 1.0, 16, 16);
+        let mut image = crate::render::Image::new(16, 16);
+        for i in 0..nodes.min(64) {
+            if let Ok(g) = rd.read_node(i) {
+                let parts = crate::texture::draw::node_parts(&g, rd.materials(), &|k| chains.get(k as usize)?.as_ref());
+                image.draw_parts(&camera, &parts);
+            }
+        }
         let _ = rd.chunks();
         let selections = [
             inspect::Selection { depth: Some(u32::MAX), level: None, node: None },

@@ -15,6 +15,7 @@
 use crate::atomic::write_file;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::format::Wrap;
 use crate::texture::sample::MipChain;
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -65,17 +66,20 @@ pub struct Part<'a> {
     /// Per vertex, as positions; empty without a texture.
     pub uvs: &'a [Vec2],
     pub texture: Option<&'a MipChain>,
+    /// How UVs outside [0, 1] wrap, along u and v.
+    pub wrap: [Wrap; 2],
 }
 
 impl<'a> Part<'a> {
     /// An untextured part.
     pub fn new(positions: &'a [Vec3], normals: &'a [Vec3], indices: &'a [u32], color: [u8; 4]) -> Part<'a> {
-        Part { positions, normals, indices, color, uvs: &[], texture: None }
+        Part { positions, normals, indices, color, uvs: &[], texture: None, wrap: [Wrap::Repeat; 2] }
     }
 
-    /// This part with `texture` sampled at `uvs` (one per position; otherwise drawn untextured).
-    pub fn textured(self, uvs: &'a [Vec2], texture: &'a MipChain) -> Part<'a> {
-        Part { uvs, texture: (uvs.len() == self.positions.len() && !texture.is_empty()).then_some(texture), ..self }
+    /// This part with `texture` sampled at `uvs` (one per position; otherwise drawn untextured),
+    /// wrapping as `wrap` says.
+    pub fn textured(self, uvs: &'a [Vec2], texture: &'a MipChain, wrap: [Wrap; 2]) -> Part<'a> {
+        Part { uvs, texture: (uvs.len() == self.positions.len() && !texture.is_empty()).then_some(texture), wrap, ..self }
     }
 }
 
@@ -718,7 +722,10 @@ fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4], tex: 
 
 /// Fill the rows `first_row ..= last_row` of a face into a band of the image.
 fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32], parts: &[Part<'_>]) {
-    let texture = s.tex.and_then(|t| Some((t, parts.get(t.part as usize)?.texture?)));
+    let texture = s.tex.and_then(|t| {
+        let part = parts.get(t.part as usize)?;
+        Some((t, part.texture?, part.wrap))
+    });
     let (y0, y1) = (s.y0.max(first_row), s.y1.min(last_row));
     let step = 1i64 << SUBPIXEL_BITS;
     // Edge k runs from vertex k to k + 1; on a top edge (horizontal, going right) or a left edge
@@ -748,10 +755,10 @@ fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], d
                     let l = (s.shade[0] + s.shade[1] * cx + s.shade[2] * cy).clamp(0.0, 1.0);
                     let px = match texture {
                         None => [(r * l) as u8, (g * l) as u8, (b * l) as u8, a as u8],
-                        Some((t, chain)) => {
+                        Some((t, chain, wrap)) => {
                             let at = |p: [f32; 3]| p[0] + p[1] * cx + p[2] * cy;
                             let iw = at(t.iw);
-                            let texel = chain.sample(t.level as usize, at(t.uw) / iw, at(t.vw) / iw);
+                            let texel = chain.sample(t.level as usize, at(t.uw) / iw, at(t.vw) / iw, wrap);
                             let k = l / 255.0;
                             [(texel[0] as f32 * r * k) as u8, (texel[1] as f32 * g * k) as u8, (texel[2] as f32 * b * k) as u8, a as u8]
                         }

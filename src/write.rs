@@ -213,26 +213,30 @@ fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
 }
 
 /// UV units per model unit over the faces of `faces` whose material has an image map: the square
-/// root of their UV area over their area (0 when there are none, or no UVs).
+/// root of their UV area over their area; 0 when there are none (or no UVs). Mapped faces whose
+/// UVs have no extent (a palette texture: a texel per face) give the smallest density, so that they
+/// get the full image, where each texel keeps its color.
 fn uv_density(mesh: &Mesh, faces: &[u32]) -> f32 {
     if mesh.uvs.is_empty() {
         return 0.0;
     }
-    let (mut uv_area, mut area) = (0f64, 0f64);
+    let (mut uv_area, mut area, mut mapped) = (0f64, 0f64, false);
     for &f in faces {
         let f = f as usize;
         let textured = mesh.materials.get(material_of(mesh, f) as usize).is_some_and(|m| m.maps.iter().any(Option::is_some));
         if !textured {
             continue;
         }
+        mapped = true;
         let [a, b, c] = [0, 1, 2].map(|k| mesh.uvs[3 * f + k].as_dvec2());
         uv_area += 0.5 * (b - a).perp_dot(c - a).abs();
         area += mesh.face_areas.get(f).copied().unwrap_or(0.0) as f64;
     }
-    if area > 0.0 && uv_area.is_finite() {
-        (uv_area / area).sqrt() as f32
-    } else {
-        0.0
+    let d = if area > 0.0 && uv_area.is_finite() { (uv_area / area).sqrt() as f32 } else { 0.0 };
+    match mapped {
+        false => 0.0,
+        true if d > f32::MIN_POSITIVE => d,
+        true => f32::MIN_POSITIVE,
     }
 }
 

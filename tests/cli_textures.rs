@@ -145,7 +145,7 @@ fn a_missing_image_is_a_warning_and_the_model_converts() {
     strata(&["verify", &out.display().to_string()]);
     let inspected: serde_json::Value = serde_json::from_slice(&strata(&["inspect", "--json", &out.display().to_string()]).stdout).unwrap();
     assert_eq!(inspected["images"], serde_json::json!([]));
-    assert_eq!(inspected["version"], "2.0", "no images, no format 2.2");
+    assert_eq!(inspected["version"], "2.2", "UVs, so 2.2 even without images");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -69,7 +69,8 @@ fn read_everything(bytes: &[u8]) {
         for l in &rd.textures().levels {
             let _ = rd.read_image_level(l.image, l.level);
         }
-        let _ = strata::texture::draw::read_base_color_chains(&rd);
+        let all: Vec<u32> = (0..rd.textures().images.len() as u32).collect();
+        let _ = strata::texture::draw::read_chains(&rd, &all, &mut Vec::new());
         let _ = rd.chunks();
         let select = inspect::Selection { depth: Some(9), level: Some(0), node: Some(0) };
         let _ = inspect::inspect(&rd, select);

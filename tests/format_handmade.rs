@@ -571,6 +571,12 @@ fn images_follow_the_spec() {
     strata::write::write_to(&mut cur, &hierarchy(), &lv, &opts).expect("write");
     assert_eq!(cur.into_inner(), d.bytes, "the writer follows §7.5");
 
+    // Images are 2.2: the same file marked 2.1 reads (a 2.1 reader skips TEXR) but verify reports it.
+    let older = build(MAJOR, 1, false, false, Some(&t));
+    assert!(Reader::open(Cursor::new(&older.bytes)).is_ok());
+    let v = format::verify(Cursor::new(&older.bytes), std::path::Path::new("older"));
+    assert!(v.problems.iter().any(|p| p.to_string().contains("TEXR chunk in a format 2.1 file")), "{:?}", v.problems);
+
     // A level whose header says 3 pixels wide, every checksum resealed, so that only the rule
     // against the entry catches it.
     let mut bad = d.bytes.clone();

@@ -772,6 +772,7 @@ export const MAP_KINDS = ['baseColor', 'normal', 'metallicRoughness', 'occlusion
 const LEVEL_ENTRY_BYTES = 24;
 const MAX_IMAGE_LEVELS = 32;
 const MAX_IMAGE_SIDE = 65536;
+const MAX_IMAGE_PIXELS = 2 ** 28;
 const MAX_IMAGE_NAME = 4096;
 const NO_IMAGE = 0xffffffff;
 /** Media types of the image codecs (1 PNG, 2 JPEG). */
@@ -798,6 +799,9 @@ function decodeTexr(b, t, N, materials, levelsStart, fileLength) {
   const count = u32(b, p), entries = u32(b, p + 4);
   p += 8;
   if (count === 0) throw err(t.ps, 'holds no image; a file without images has no TEXR chunk');
+  // Every image record takes at least 8 bytes and every entry 24: refused before allocating.
+  const least = count * 8 + entries * LEVEL_ENTRY_BYTES;
+  if (least > end - p) throw err(t.ps, `${count} images and ${entries} level entries need at least ${least} bytes, ${end - p} left`);
   const images = [];
   let total = 0;
   for (let i = 0; i < count; i++) {
@@ -816,6 +820,7 @@ function decodeTexr(b, t, N, materials, levelsStart, fileLength) {
     }
     p += 4;
     total += k;
+    if (total > entries) throw err(at, `image ${i}: images with more levels than the ${entries} level entries`);
     images.push({ name, codec, levels: new Array(k).fill(-1) });
   }
   if (entries !== total) throw err(t.ps + 4, `${entries} level entries for images with ${total} levels`);
@@ -832,8 +837,8 @@ function decodeTexr(b, t, N, materials, levelsStart, fileLength) {
     if (level >= rec.levels.length) throw bad(`level ${level} of image ${image}'s ${rec.levels.length}`);
     if (rec.levels[level] !== -1) throw bad(`level ${level} of image ${image} a second time`);
     rec.levels[level] = e;
-    if (width === 0 || height === 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE) {
-      throw bad(`${width} × ${height} pixels (1..=${MAX_IMAGE_SIDE} a side)`);
+    if (width === 0 || height === 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE || width * height > MAX_IMAGE_PIXELS) {
+      throw bad(`${width} × ${height} pixels (1..=${MAX_IMAGE_SIDE} a side, at most ${MAX_IMAGE_PIXELS} in all)`);
     }
     if (size < FRAME + TRAILER + 1) throw bad(`a chunk of ${size} bytes`);
     const stop = offset + size;

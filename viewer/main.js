@@ -29,6 +29,8 @@ let openStart = 0;
 let opens = 0;
 let firstFrameRequests = null;
 let firstFrameBytes = null;
+/** The first frame drawn with an image level: time from the open, bytes read, texture bytes read. */
+let firstTextured = null;
 let picks = [];
 let measuring = false;
 /** The last click in measure mode (time and place), to tell a double-click from two clicks. */
@@ -113,8 +115,13 @@ function frame() {
   clip();
   const drawn = streamer.update(camera);
   const s = streamer.skeleton;
-  renderer.draw(camera, streamer.localOrigin, drawn.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials);
+  const images = (image) => streamer.imageHandle(image);
+  renderer.draw(camera, streamer.localOrigin, drawn.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials, images);
   frameMs = performance.now() - t0;
+  if (firstTextured === null && streamer.textureLevels().some(([, , level]) => level !== null)) {
+    const { textureBytesRead, textureRequests } = streamer;
+    firstTextured = { ms: performance.now() - openStart, bytesRead: streamer.source.bytes, textureBytesRead, textureRequests };
+  }
   if (firstFrameMs === null) {
     firstFrameMs = performance.now() - openStart;
     firstFrameRequests = before.requests;
@@ -141,6 +148,11 @@ function stats() {
   $('s-read').textContent = `${fmtBytes(streamer.source.bytes)} of ${fmtBytes(streamer.source.length ?? 0)}`;
   $('s-requests').textContent = `${streamer.source.requests} (${streamer.inFlight})`;
   $('s-resident').textContent = `${fmtBytes(streamer.residentBytes)} (${fmtBytes(streamer.peakResidentBytes)}) / ${fmtBytes(streamer.budget)}`;
+  $('r-textures').hidden = $('r-textures-resident').hidden = streamer.usedImages.length === 0;
+  $('s-textures').textContent = `${fmtBytes(streamer.textureBytesRead)} (${streamer.textureRequests})`;
+  $('s-textures-resident').textContent = fmtBytes(streamer.textureResidentBytes);
+  // An image level the browser cannot decode is left out (a coarser one stands in), and said so.
+  if (streamer.imageErrors.size > 0) showWarning([streamer.source.warning, ...streamer.imageErrors.values()].filter(Boolean).join(' '));
   $('s-frame').textContent = `${frameMs.toFixed(1)} ms`;
   $('s-first').textContent = firstFrameMs === null ? '–' : `${firstFrameMs.toFixed(0)} ms, ${firstFrameRequests} requests, ${fmtBytes(firstFrameBytes)}`;
 }
@@ -157,6 +169,7 @@ async function open(source) {
   $('picked').textContent = '';
   $('name').textContent = source.name;
   firstFrameMs = null;
+  firstTextured = null;
   try {
     // The first read goes out before WebGL starts up, which takes a while in a software renderer.
     const opening = Streamer.open(source, {
@@ -164,6 +177,8 @@ async function open(source) {
       pixelError: pixelError(),
       onLoad: (i, g) => renderer.upload(g),
       onEvict: (i, handle) => renderer.release(handle),
+      onImage: (image, level, bytes, mime) => renderer.uploadImage(bytes, mime),
+      onImageEvict: (image, level, handle) => renderer.releaseImage(handle),
       onChange: () => {
         dirty = true;
       },
@@ -468,6 +483,14 @@ window.strata = {
       culled: streamer?.culled ?? [],
       residentBytes: streamer?.residentBytes,
       peakResidentBytes: streamer?.peakResidentBytes,
+      textureBytesRead: streamer?.textureBytesRead,
+      textureResidentBytes: streamer?.textureResidentBytes,
+      textureRequests: streamer?.textureRequests,
+      /** Per image drawn: [image, wanted level, level drawn or null]. */
+      textureLevels: streamer?.textureLevels() ?? [],
+      imagesDecoded: renderer?.decoded ?? [],
+      firstTextured,
+      textures: $('r-textures').hidden ? '' : `${$('s-textures').textContent}; ${$('s-textures-resident').textContent} resident`,
       budget: streamer?.budget,
       requests: streamer?.source.requests,
       bytesRead: streamer?.source.bytes,

@@ -11,9 +11,18 @@
 // coarse before fine, never with a hole; the top level stays resident to stand in for anything.
 // Drawn nodes and their ancestors are the most recently used, so moving away finds coarser nodes
 // still resident.
+//
+// Images (format 2.2, selection.md §4): once the drawn nodes' geometry is resident, their material
+// ranges tell which images they sample; each image gets the level its most demanding drawn node
+// needs. At the first textured frame one range fetches the coarsest level of every image the
+// materials use, which stays resident (it stands in for any finer level until that arrives); then
+// wanted levels are read as they change (where the budget lacks room for one, the finest coarser
+// level that fits). Decoded levels count 4·w·h bytes against the same budget as the geometry and
+// are evicted with it, least recently used first.
 
-import { FormatError, decodeNode, decodeSkeleton, openingRange } from './format.js';
+import { FormatError, IMAGE_MIME, MAP_KINDS, decodeImageLevel, decodeNode, decodeSkeleton, openingRange } from './format.js';
 import { Selector, recordBytes, sees } from './select.js';
+import { length, sub } from './camera.js';
 
 const NO_PARENT = 0xffffffff;
 
@@ -24,12 +33,71 @@ function concat(a, b) {
   return c;
 }
 
+/** Bytes a decoded image level counts against the memory budget (RGBA8, selection.md §4). */
+export const levelBytes = (entry) => 4 * entry.width * entry.height;
+
+/**
+ * The level of `image` a node needs (selection.md §4) where a model unit spans `pixelsPerUnit`
+ * pixels and `density` UV units: the largest level whose geometric-mean side reaches
+ * `pixelsPerUnit / density` texels, or 0 when even level 0 has fewer.
+ */
+export function neededLevel(skeleton, image, pixelsPerUnit, density) {
+  const { images, levels } = skeleton.textures;
+  const entries = images[image].levels;
+  const texels = pixelsPerUnit / density;
+  for (let l = entries.length - 1; l > 0; l--) {
+    const v = levels[entries[l]];
+    if (Math.sqrt(v.width * v.height) >= texels) return l;
+  }
+  return 0;
+}
+
+/**
+ * Each image's wanted level for the displayed nodes `nodes` (selection.md §4): the finest level any
+ * of them needs, over the maps of kinds `kinds` of the materials `materialsOf(i)` lists for node i
+ * (its geometry's material ranges; null while its geometry is not known). A node of UV density 0
+ * needs none. Returns a Map image → level, images ascending.
+ */
+export function wantedLevels(skeleton, nodes, materialsOf, camera, kinds = MAP_KINDS) {
+  const s = skeleton;
+  const wanted = new Map();
+  for (const i of nodes) {
+    const d = s.textures.uvDensity[i];
+    if (!(d > 0)) continue;
+    const materials = materialsOf(i);
+    if (!materials) continue;
+    const o = [s.center[3 * i], s.center[3 * i + 1], s.center[3 * i + 2]];
+    const pixels = camera.pixelsPerUnit(Math.max(length(sub(camera.eye, o)) - s.radius[i], 0));
+    for (const m of materials) {
+      const maps = s.materials[m]?.maps;
+      if (!maps) continue;
+      for (const kind of kinds) {
+        const slot = maps[kind];
+        if (!slot) continue;
+        const l = neededLevel(s, slot.image, pixels, d);
+        if (!(wanted.get(slot.image) <= l)) wanted.set(slot.image, l);
+      }
+    }
+  }
+  return new Map([...wanted].sort((a, b) => a[0] - b[0]));
+}
+
+/** Images the materials map in slots of `kinds`, ascending; none in a file without UVs (nothing is mapped). */
+export function usedImages(skeleton, kinds = MAP_KINDS) {
+  if (!skeleton.header.attributes.uvs) return [];
+  const used = new Set();
+  for (const m of skeleton.materials) for (const kind of kinds) if (m.maps?.[kind]) used.add(m.maps[kind].image);
+  return [...used].sort((a, b) => a - b);
+}
+
 export class Streamer {
   /**
    * Open `source` (source.js): read the skeleton and the top level, decode and check them.
    * `options`: `prefix` (first read, bytes), `budget` (resident bytes), `maxInFlight`,
    * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
-   * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`.
+   * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`; for images, `maps` (the map kinds
+   * drawn, whose images are read: `['baseColor']`), `onImage(image, level, fileBytes, mime)` → a handle or a promise of
+   * one (the renderer's texture; a rejection leaves that level out), `onImageEvict(image, level, handle)`.
    */
   static async open(source, options = {}) {
     const t0 = performance.now();
@@ -77,6 +145,26 @@ export class Streamer {
     this.onLoad = options.onLoad ?? (() => null);
     this.onEvict = options.onEvict ?? (() => {});
     this.onChange = options.onChange ?? (() => {});
+    this.maps = options.maps ?? ['baseColor'];
+    this.onImage = options.onImage ?? (() => null);
+    this.onImageEvict = options.onImageEvict ?? (() => {});
+    const t = skeleton.textures;
+    /** Images the drawn map kinds use; their coarsest levels stay resident from the first textured frame on. */
+    this.usedImages = usedImages(skeleton, this.maps);
+    this.coarsest = this.usedImages.map((image) => t.images[image].levels.at(-1));
+    this.pinnedBytes = this.coarsest.reduce((sum, e) => sum + levelBytes(t.levels[e]), 0);
+    /** level entry → `{image, level, handle, bytes, used}` (used: the last frame that drew or wanted it), least recently used first */
+    this.levelCache = new Map();
+    this.levelPending = new Set();
+    /** level entry → why the renderer could not take it (coarser levels stand in, or none: drawn untextured) */
+    this.imageErrors = new Map();
+    /** Per image the drawn nodes use: its wanted level, the level read for it (coarser when the budget lacks room) and the entry drawn. */
+    this.imagePlan = new Map();
+    /** Level entries the plan lacks: reads to make. */
+    this.imageMissing = [];
+    this.textureBytesRead = 0;
+    this.textureResidentBytes = 0;
+    this.textureRequests = 0;
     const [x, y, z] = skeleton.header.min.map((m, k) => (m + skeleton.header.max[k]) / 2);
     /** Positions are drawn relative to this point (model units, f64), so large coordinates keep their precision. */
     this.localOrigin = options.localOrigin ?? [x, y, z];
@@ -120,8 +208,9 @@ export class Streamer {
     const s = this.skeleton;
     this.frame++;
     const limits = this.limits();
-    // The top level stays resident (it stands in for everything): the front gets what it leaves.
-    limits.maxBytes -= this.topBytes;
+    // The top level and the images' coarsest levels stay resident (they stand in for everything):
+    // the front gets what they leave.
+    limits.maxBytes -= this.topBytes + this.pinnedBytes;
     const planes = camera.frustum();
     const cut = this.selector.select(camera, limits);
     this.front = cut.shown;
@@ -148,9 +237,153 @@ export class Streamer {
       for (let k = chain.length - 1; k >= 0; k--) this.touch(chain[k]);
       this.touch(i);
     }
+    this.planImages(camera);
+    this.requestImages(true);
     this.request();
+    this.requestImages(false);
     this.evict();
     return this.drawn;
+  }
+
+  /**
+   * Per image the drawn nodes use: the wanted level; the level to hold, the finest from the wanted
+   * one up whose bytes fit what the budget leaves after the geometry the front and the drawn nodes
+   * keep and the coarsest levels (images in order); and the level to draw, the finest resident at
+   * or above that one.
+   */
+  planImages(camera) {
+    this.imagePlan = new Map();
+    this.imageMissing = [];
+    if (this.usedImages.length === 0) return;
+    const s = this.skeleton, t = s.textures;
+    const materialsOf = (i) => this.cache.get(i)?.geometry.materialRanges.map((r) => r[0]) ?? null;
+    const wanted = wantedLevels(s, this.drawn, materialsOf, camera, this.maps);
+    if (wanted.size === 0) return;
+    const [top0, top1] = s.levelNodes(s.top());
+    let room = this.budget - this.topBytes - this.pinnedBytes;
+    for (const i of new Set([...this.front, ...this.drawn])) if (i < top0 || i >= top1) room -= recordBytes(s, i);
+    // From the first textured frame on, every used image's coarsest level is read and kept.
+    for (const e of this.coarsest) if (!this.levelCache.has(e) && !this.imageErrors.has(e)) this.imageMissing.push(e);
+    for (const [image, want] of wanted) {
+      const entries = t.images[image].levels;
+      const last = entries.length - 1;
+      let hold = last;
+      for (let l = want; l < last; l++) {
+        const bytes = levelBytes(t.levels[entries[l]]);
+        if (bytes <= room && !this.imageErrors.has(entries[l])) {
+          hold = l;
+          room -= bytes;
+          break;
+        }
+      }
+      if (hold < last && !this.levelCache.has(entries[hold])) this.imageMissing.push(entries[hold]);
+      let drawn = null;
+      for (let l = hold; l <= last && drawn === null; l++) if (this.levelCache.has(entries[l])) drawn = entries[l];
+      for (const e of [entries[hold], drawn]) this.touchLevel(e);
+      this.imagePlan.set(image, { wanted: want, hold, drawn });
+    }
+    this.imageMissing.sort((a, b) => a - b);
+  }
+
+  /** Mark level entry e used this frame: the recent end of the level cache's order. */
+  touchLevel(e) {
+    const v = this.levelCache.get(e);
+    if (!v) return;
+    v.used = this.frame;
+    this.levelCache.delete(e);
+    this.levelCache.set(e, v);
+  }
+
+  /**
+   * Start reads of missing image levels in file order, adjacent levels in one range: with `coarse`,
+   * the coarsest levels (one range where they lie together, as writers lay them out, whatever its
+   * size); otherwise, once those are resident, the levels held for the wanted ones.
+   */
+  requestImages(coarse) {
+    const s = this.skeleton, t = s.textures;
+    if (this.imageMissing.length === 0 || performance.now() < this.retryAt) return;
+    const isCoarse = (e) => t.levels[e].level === t.images[t.levels[e].image].levels.length - 1;
+    // Finer levels wait until every coarsest one is resident.
+    if (!coarse && this.imageMissing.some(isCoarse)) return;
+    const queue = this.imageMissing.filter((e) => isCoarse(e) === coarse && !this.levelPending.has(e));
+    const end = (e) => t.levels[e].offset + t.levels[e].size;
+    let k = 0;
+    while (this.inFlight < this.maxInFlight && k < queue.length && !this.error && !this.closed) {
+      const first = queue[k++];
+      const entries = [first];
+      let last = first;
+      while (
+        k < queue.length &&
+        t.levels[queue[k]].offset - end(last) <= this.maxGapBytes &&
+        (coarse || end(queue[k]) - t.levels[first].offset <= this.maxRequestBytes)
+      ) {
+        last = queue[k++];
+        entries.push(last);
+      }
+      this.readLevels(entries, t.levels[first].offset, end(last));
+    }
+  }
+
+  /** Read bytes [start, end) holding level entries `entries`, check each level and hand it to the renderer. */
+  readLevels(entries, start, end) {
+    const s = this.skeleton, t = s.textures;
+    for (const e of entries) this.levelPending.add(e);
+    this.inFlight++;
+    this.textureRequests++;
+    this.source
+      .read(start, end)
+      .then(async (bytes) => {
+        if (this.closed) return;
+        this.textureBytesRead += bytes.length;
+        const files = entries.map((e) => {
+          const lv = t.levels[e];
+          const at = lv.offset - start;
+          if (at + lv.size > bytes.length) {
+            throw new FormatError(`image ${lv.image} level ${lv.level}: the file ends before it (byte ${lv.offset + lv.size})`);
+          }
+          return decodeImageLevel(s, e, bytes.subarray(at, at + lv.size));
+        });
+        await Promise.all(
+          entries.map(async (e, k) => {
+            const lv = t.levels[e];
+            let handle;
+            try {
+              handle = await this.onImage(lv.image, lv.level, files[k], IMAGE_MIME[t.images[lv.image].codec]);
+            } catch (err) {
+              this.imageErrors.set(e, `image ${lv.image} (${t.images[lv.image].name}) level ${lv.level}: ${err?.message ?? err}`);
+              return;
+            }
+            if (this.closed) return this.onImageEvict(lv.image, lv.level, handle);
+            this.insertLevel(e, handle);
+          }),
+        );
+        this.failures = 0;
+        this.evict();
+      })
+      .catch((e) => {
+        if (e instanceof FormatError || ++this.failures > 3) this.error = e;
+        else {
+          const delay = 500 * 2 ** this.failures;
+          this.retryAt = performance.now() + delay;
+          setTimeout(() => !this.closed && this.onChange(), delay);
+        }
+      })
+      .finally(() => {
+        for (const e of entries) this.levelPending.delete(e);
+        this.inFlight--;
+        if (!this.closed) this.onChange();
+      });
+  }
+
+  /** Keep level entry e, decoded by the renderer into `handle`. */
+  insertLevel(e, handle) {
+    const lv = this.skeleton.textures.levels[e];
+    if (this.levelCache.has(e)) return this.onImageEvict(lv.image, lv.level, handle);
+    const bytes = levelBytes(lv);
+    this.levelCache.set(e, { image: lv.image, level: lv.level, handle, bytes, used: 0 });
+    this.textureResidentBytes += bytes;
+    this.residentBytes += bytes;
+    this.peakResidentBytes = Math.max(this.peakResidentBytes, this.residentBytes);
   }
 
   /** Move node i to the recent end of the cache's order (a Map keeps insertion order: the LRU list). */
@@ -215,18 +448,42 @@ export class Streamer {
     }
   }
 
-  /** Drop least-recently drawn nodes, neither drawn nor in the front nor of the top level, while over the budget. */
+  /**
+   * While over the budget, drop what was least recently used, nodes and image levels alike, but
+   * never the drawn nodes, the front, the top level, the image levels held or drawn, nor the
+   * coarsest levels.
+   */
   evict() {
     if (this.residentBytes <= this.budget) return;
     const s = this.skeleton;
     const [top0, top1] = s.levelNodes(s.top());
     const keep = new Set([...this.drawn, ...this.front]);
-    for (const [i, e] of this.cache) {
-      if (this.residentBytes <= this.budget) break;
-      if (keep.has(i) || (i >= top0 && i < top1)) continue;
-      this.onEvict(i, e.handle);
-      this.cache.delete(i);
-      this.residentBytes -= e.bytes;
+    const keepLevels = new Set(this.coarsest);
+    const entries = s.textures.images.map((r) => r.levels);
+    for (const [image, p] of this.imagePlan) keepLevels.add(entries[image][p.hold]).add(p.drawn);
+    const nodes = this.cache.entries(), levels = this.levelCache.entries();
+    const next = (it, skip) => {
+      for (let n = it.next(); !n.done; n = it.next()) if (!skip(n.value[0])) return n.value;
+      return null;
+    };
+    const skipNode = (i) => keep.has(i) || (i >= top0 && i < top1);
+    const skipLevel = (e) => keepLevels.has(e);
+    let node = next(nodes, skipNode), level = next(levels, skipLevel);
+    while (this.residentBytes > this.budget && (node || level)) {
+      if (node && (!level || this.touched[node[0]] <= level[1].used)) {
+        const [i, e] = node;
+        this.onEvict(i, e.handle);
+        this.cache.delete(i);
+        this.residentBytes -= e.bytes;
+        node = next(nodes, skipNode);
+      } else {
+        const [e, v] = level;
+        this.onImageEvict(v.image, v.level, v.handle);
+        this.levelCache.delete(e);
+        this.residentBytes -= v.bytes;
+        this.textureResidentBytes -= v.bytes;
+        level = next(levels, skipLevel);
+      }
     }
   }
 
@@ -235,12 +492,27 @@ export class Streamer {
     this.closed = true;
     for (const [i, e] of this.cache) this.onEvict(i, e.handle);
     this.cache.clear();
+    for (const v of this.levelCache.values()) this.onImageEvict(v.image, v.level, v.handle);
+    this.levelCache.clear();
     this.residentBytes = 0;
+    this.textureResidentBytes = 0;
   }
 
-  /** Nothing missing and nothing in flight: the drawn nodes are the selected front. */
+  /** Nothing missing and nothing in flight: the drawn nodes are the selected front, with the image levels it wants. */
   idle() {
-    return this.missing.length === 0 && this.inFlight === 0;
+    return this.missing.length === 0 && this.imageMissing.length === 0 && this.inFlight === 0;
+  }
+
+  /** The renderer's handle of the level of `image` to draw this frame, or null (drawn untextured). */
+  imageHandle(image) {
+    const e = this.imagePlan.get(image)?.drawn;
+    return e === undefined || e === null ? null : this.levelCache.get(e)?.handle ?? null;
+  }
+
+  /** Per image the drawn nodes use: [image, wanted level, level drawn or null], as `strata stream` reports them. */
+  textureLevels() {
+    const t = this.skeleton.textures;
+    return [...this.imagePlan].map(([image, p]) => [image, p.wanted, p.drawn === null ? null : t.levels[p.drawn].level]);
   }
 
   geometry(i) {

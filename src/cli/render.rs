@@ -51,7 +51,8 @@ pub enum RenderColor {
 pub fn run(a: Args) -> Result<()> {
     use strata::format::MapKind;
     use strata::render::{palette, Image, Part};
-    use strata::texture::draw::{node_parts, read_base_color_chains, source_chain, srgb_color};
+    use strata::stream::images::base_color_images;
+    use strata::texture::draw::{node_parts, read_chains, source_chain, srgb_color};
     anyhow::ensure!(a.width > 0 && a.height > 0, "--width and --height must be positive");
     strata::atomic::protect(&a.input);
     strata::atomic::check_output(&a.output)?;
@@ -69,7 +70,21 @@ pub fn run(a: Args) -> Result<()> {
             RenderColor::Auto => RenderColor::Plain,
             c => c,
         };
-        let chains = if color == RenderColor::Materials { read_base_color_chains(&rd)? } else { Vec::new() };
+        // The images the level's geometry samples: a first pass over its nodes finds them.
+        let mut chains = Vec::new();
+        if color == RenderColor::Materials && !rd.textures().is_empty() {
+            let mut used = Vec::new();
+            for node in rd.level_nodes(a.level) {
+                used.extend(base_color_images(&rd.read_node(node)?, rd.materials()));
+            }
+            used.sort_unstable();
+            used.dedup();
+            let mut warnings = Vec::new();
+            chains = read_chains(&rd, &used, &mut warnings);
+            for w in warnings {
+                eprintln!("warning: {}: {w}", a.input.display());
+            }
+        }
         for node in rd.level_nodes(a.level) {
             let g = rd.read_node(node)?;
             let parts = match color {
@@ -106,10 +121,7 @@ pub fn run(a: Args) -> Result<()> {
                 if let Some(slot) = mat.map(MapKind::BaseColor) {
                     if chains[slot.image as usize].is_none() {
                         match source_chain(&m.images[slot.image as usize], MapKind::BaseColor) {
-                            Ok(mut c) => {
-                                c.wrap = slot.wrap;
-                                chains[slot.image as usize] = Some(c);
-                            }
+                            Ok(c) => chains[slot.image as usize] = Some(c),
                             Err(e) => eprintln!("warning: {}: {}: {e}", a.input.display(), m.images[slot.image as usize].name),
                         }
                     }
@@ -128,8 +140,9 @@ pub fn run(a: Args) -> Result<()> {
                 .map(|(id, indices)| {
                     let mat = m.materials.get(id);
                     let part = Part::new(&corners, &m.normals, indices, mat.map_or(plain, |x| srgb_color(x.base_color)));
-                    match mat.and_then(|x| x.map(MapKind::BaseColor)).and_then(|s| chains[s.image as usize].as_ref()) {
-                        Some(c) => part.textured(&m.uvs, c),
+                    let slot = mat.and_then(|x| x.map(MapKind::BaseColor));
+                    match slot.and_then(|s| Some((s, chains[s.image as usize].as_ref()?))) {
+                        Some((s, c)) => part.textured(&m.uvs, c, s.wrap),
                         None => part,
                     }
                 })

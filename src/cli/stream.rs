@@ -165,6 +165,9 @@ pub fn run(a: Args) -> Result<()> {
         }
         Ok(())
     })?;
+    for w in streamer.take_warnings() {
+        eprintln!("warning: {}: {w}", a.file.display());
+    }
     if let Some(out) = &a.export_cut {
         let mesh = streamer.front_mesh()?;
         strata::export::write(out, &mesh)?;

@@ -1,7 +1,8 @@
 //! Write Wavefront OBJ, plus a sibling .mtl when the mesh has materials beyond a single default,
 //! and the images its materials' base color, normal and emissive maps sample (`map_Kd`, `norm`,
-//! `map_Ke`) as files beside it, named after the OBJ so that they never replace another file's
-//! images. OBJ's UVs count v up from the bottom of the image: v is flipped on the way out.
+//! `map_Ke`) as files beside it, named after the OBJ; an image file already there with other
+//! contents is refused, never replaced. OBJ's UVs count v up from the bottom of the image: v is
+//! flipped on the way out.
 //!
 //! Numbers are printed in the shortest form that parses back to the same f32, so positions survive
 //! exactly. Identical normals and UVs are written once. Per-corner colors use the common
@@ -9,7 +10,7 @@
 //! one `v` line per color. Face order is kept, with a `usemtl` at the start of every material run.
 
 use super::check;
-use crate::atomic::{write_file, AtomicFile};
+use crate::atomic::AtomicFile;
 use crate::error::{Error, Result};
 use crate::format::MapKind;
 use crate::mesh::{Material, Mesh};
@@ -26,16 +27,39 @@ pub fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     let mtllib = mtl_path.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned());
     let stem = path.file_stem().map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
     let files = if mtl_path.is_some() { image_files(mesh, &stem) } else { Vec::new() };
-    let mut file = AtomicFile::create(path)?;
-    write_obj(file.writer(), mesh, mtllib.as_deref()).map_err(|e| Error::io(path, e))?;
     let dir = path.parent().unwrap_or(Path::new(""));
+    // Every file is written under a temporary name first and all are renamed at the end, so a
+    // failure leaves none of them. An image file already there is kept when it holds the same
+    // bytes and refused otherwise: it may be another model's texture.
+    let mut staged = Vec::new();
     for (image, name) in mesh.images.iter().zip(&files) {
-        if let Some(name) = name {
-            write_file(&dir.join(name), |w| w.write_all(&image.bytes))?;
+        let Some(name) = name else { continue };
+        let dest = dir.join(name);
+        match std::fs::read(&dest) {
+            Ok(existing) if existing == *image.bytes => continue,
+            Ok(_) => {
+                return Err(Error::invalid(
+                    &dest,
+                    None,
+                    "exists with other contents; an OBJ export does not replace it (remove it, or export under another name)",
+                ))
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+            Err(e) => return Err(Error::io(&dest, e)),
         }
+        let mut f = AtomicFile::create(&dest)?;
+        f.writer().write_all(&image.bytes).map_err(|e| Error::io(&dest, e))?;
+        staged.push(f);
     }
     if let Some(mtl_path) = &mtl_path {
-        write_file(mtl_path, |w| write_mtl(w, mesh, &files))?;
+        let mut f = AtomicFile::create(mtl_path)?;
+        write_mtl(f.writer(), mesh, &files).map_err(|e| Error::io(mtl_path, e))?;
+        staged.push(f);
+    }
+    let mut file = AtomicFile::create(path)?;
+    write_obj(file.writer(), mesh, mtllib.as_deref()).map_err(|e| Error::io(path, e))?;
+    for f in staged {
+        f.commit()?;
     }
     file.commit()
 }
@@ -70,9 +94,12 @@ pub fn image_files(mesh: &Mesh, stem: &str) -> Vec<Option<String>> {
             let base = base.rsplit_once('.').map_or(base, |(b, _)| b);
             let safe: String = base.chars().map(|c| if c.is_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
             let safe = if safe.is_empty() { format!("image{i}") } else { safe };
-            let mut name = format!("{stem}_{safe}.{}", image.codec.extension());
+            let ext = image.codec.extension();
+            let mut name = format!("{stem}_{safe}.{ext}");
+            let mut k = 1;
             while !taken.insert(name.clone()) {
-                name = format!("{stem}_{safe}_{i}.{}", image.codec.extension());
+                name = format!("{stem}_{safe}_{k}.{ext}");
+                k += 1;
             }
             Some(name)
         })
@@ -328,6 +355,24 @@ mod tests {
         assert_eq!(lines(&mtl, "norm"), ["norm -clamp on box_wall_paper.png"]);
         assert_eq!(std::fs::read(dir.join("box_wall_paper.png")).unwrap(), png);
         assert!(!dir.join("box_unused.png").exists(), "an image no map uses is not written");
+        // Again: the same image is kept; another image of that name is not replaced.
+        write(&path, &m).unwrap();
+        let other = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(3, 3), 90).unwrap();
+        let mut changed = m.clone();
+        changed.images[0] = crate::texture::SourceImage::new("maps/wall paper.png".into(), other).unwrap();
+        let e = write(&dir.join("box.obj"), &changed).unwrap_err().to_string();
+        assert!(e.contains("box_wall_paper.png") && e.contains("does not replace it"), "{e}");
+        assert_eq!(std::fs::read(dir.join("box_wall_paper.png")).unwrap(), png);
+        // Names that collide get numbered until free.
+        let mut many = m.clone();
+        let named = |n: &str| crate::texture::SourceImage::new(n.into(), png.clone()).unwrap();
+        many.images = vec![named("x_1.png"), named("x.png"), named("sub/x.png"), named("x.png")];
+        for (k, mat) in many.materials.iter_mut().enumerate() {
+            mat.maps[MapKind::BaseColor as usize] = Some(crate::format::TextureSlot { image: k as u32, ..slot });
+            mat.maps[MapKind::Emissive as usize] = Some(crate::format::TextureSlot { image: 2 + k as u32, ..slot });
+        }
+        let names: Vec<String> = image_files(&many, "o").into_iter().flatten().collect();
+        assert_eq!(names, ["o_x_1.png", "o_x.png", "o_x_2.png", "o_x_3.png"]);
         // Read back: the same image, the same maps, the same UVs.
         let back = crate::import::import(&path, None).unwrap().mesh;
         assert_eq!(&back.images[0].bytes[..], &png[..]);

@@ -15,6 +15,7 @@
 //! - [`codes`]: the position grid and the u16 codes of angles and radii; [`octa`]: normals;
 //! - [`skeleton`]: `HEAD` and `SKEL`, encoded and decoded; [`georef`]: `GEOR`, where terrain sits;
 //!   [`texture`]: `TEXR` and `TEXL`, the images materials use, as pyramids of resolutions;
+//!   [`image`]: the PNG and JPEG files of their levels decoded into pixels;
 //! - [`geom`]: a node's geometry, one codec per format version ([`geom::v2`]);
 //! - [`source`]: [`ByteSource`], where bytes come from;
 //! - [`read`]: [`Reader`], the lazy reader; [`rules`]: what every reader checks (spec §10);
@@ -27,6 +28,7 @@ pub mod chunk;
 pub mod codes;
 pub mod geom;
 pub mod georef;
+pub mod image;
 pub mod inspect;
 pub mod octa;
 pub mod read;

@@ -16,6 +16,8 @@ pub const MATERIAL_SLOTS_BYTES: u64 = 8 * MAP_KINDS as u64;
 pub const MAX_LEVELS: u32 = 32;
 /// Largest image side.
 pub const MAX_SIDE: u32 = 1 << 16;
+/// Most pixels of one level: 16384², a GiB as RGBA8.
+pub const MAX_PIXELS: u64 = 1 << 28;
 /// Longest image name, in bytes.
 pub const MAX_NAME_BYTES: u32 = 4096;
 /// Marks an empty material slot.
@@ -117,6 +119,12 @@ pub fn decode_texr(f: &mut Fields, cx: &TexrContext, materials: &mut [Material])
     if count == 0 {
         return Err(f.error("holds no image; a file without images has no TEXR chunk"));
     }
+    // Every image record takes at least 8 bytes and every entry 24: counts the payload cannot hold
+    // are refused before anything is allocated for them.
+    let least = count as u64 * 8 + entries as u64 * LEVEL_ENTRY_BYTES;
+    if least > f.remaining() as u64 {
+        return Err(f.error(format!("{count} images and {entries} level entries need at least {least} bytes, {} left", f.remaining())));
+    }
     let mut images = Vec::new();
     let mut total = 0u64;
     for i in 0..count {
@@ -135,6 +143,9 @@ pub fn decode_texr(f: &mut Fields, cx: &TexrContext, materials: &mut [Material])
             return Err(f.error_at(at, format!("image {i}: {levels} levels (1..={MAX_LEVELS}) or non-zero reserved bytes")));
         }
         total += levels as u64;
+        if total > entries as u64 {
+            return Err(f.error_at(at, format!("image {i}: images with more levels than the {entries} level entries")));
+        }
         images.push(ImageRecord { name, codec, levels: vec![u32::MAX; levels as usize] });
     }
     if entries as u64 != total {
@@ -159,8 +170,8 @@ pub fn decode_texr(f: &mut Fields, cx: &TexrContext, materials: &mut [Material])
             return Err(bad(format!("level {level} of image {image} a second time")));
         }
         *slot = e;
-        if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
-            return Err(bad(format!("{width} × {height} pixels (1..={MAX_SIDE} a side)")));
+        if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE || width as u64 * height as u64 > MAX_PIXELS {
+            return Err(bad(format!("{width} × {height} pixels (1..={MAX_SIDE} a side, at most {MAX_PIXELS} in all)")));
         }
         if (size as u64) < HEADER_BYTES + TRAILER_BYTES + 1 {
             return Err(bad(format!("a chunk of {size} bytes")));

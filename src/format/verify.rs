@@ -117,8 +117,12 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     if rd.header().major == 2 && rd.header().minor == 1 && !chunks.iter().any(|c| c.id == "GEOR") {
         v.push(Error::invalid(&path, None, "format 2.1 without a GEOR chunk: 2.1 is written only for a file with one (spec §5.2)"));
     }
-    if rd.header().major == 2 && rd.header().minor == 2 && rd.textures().is_empty() {
-        v.push(Error::invalid(&path, None, "format 2.2 without a TEXR chunk: 2.2 is written only for a file with images (spec §7.5)"));
+    let (major, minor) = (rd.header().major, rd.header().minor);
+    if major == 2 && minor == 2 && rd.textures().is_empty() && !rd.header().attributes.uvs {
+        v.push(Error::invalid(&path, None, "format 2.2 without images or UVs: 2.2 is written only for a file with them (spec §0, §7.5)"));
+    }
+    if major == 2 && minor < 2 && !rd.textures().is_empty() {
+        v.push(Error::invalid(&path, None, format!("a TEXR chunk in a format 2.{minor} file: images are 2.2 (spec §7.5)")));
     }
     let levels: Vec<(u64, u64)> = rd.textures().levels.iter().map(|l| (l.offset, l.size as u64)).collect();
     if texls != levels {
@@ -128,11 +132,18 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
             format!("image level entry {k}"),
             format!("the file holds {} TEXL chunks but TEXR lists {}, first differing at entry {k}", texls.len(), levels.len()),
         ));
-    } else {
-        for l in &rd.textures().levels {
-            if let Err(e) = rd.read_image_level(l.image, l.level) {
-                v.push(e);
+    }
+    // Every level read, checked and decoded: a file whose images a renderer cannot decode is not
+    // sound, whatever its checksums.
+    for l in &rd.textures().levels {
+        let Some(rec) = rd.textures().images.get(l.image as usize) else { continue };
+        match rd.read_image_level(l.image, l.level) {
+            Ok(b) => {
+                if let Err(e) = super::image::decode(rec.codec, &b) {
+                    v.push(Error::at_byte(&path, l.offset, format!("image {} level {}: {e}", l.image, l.level)));
+                }
             }
+            Err(e) => v.push(e),
         }
     }
     if let Some(last) = chunks.last() {

@@ -188,6 +188,9 @@ impl<W: Write> Writer<W> {
         if opts.levels == 0 || opts.levels == u32::MAX {
             return Err(bad(format!("{} levels", opts.levels)));
         }
+        if opts.major != 2 && !opts.images.is_empty() {
+            return Err(bad("format 3 does not store images yet: write format 2".into()));
+        }
         check_images(&opts).map_err(bad)?;
         let mut spills = Vec::with_capacity(opts.levels as usize);
         for _ in 0..opts.levels {
@@ -385,11 +388,12 @@ impl<W: Write> Writer<W> {
 
         let top = level_first[nl - 1] as usize..(level_first[nl - 1] + levels[nl - 1].nodes) as usize;
         let grid = self.opts.grid;
-        // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images.
+        // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images
+        // and UVs in glTF's orientation (so a file with UVs is 2.2 with or without images).
         let images = &self.opts.images;
-        let minor = match (self.opts.major, images.is_empty(), self.opts.georef.is_some()) {
-            (2, false, _) => MINOR,
-            (2, true, true) => 1,
+        let minor = match (self.opts.major, !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some()) {
+            (2, true, _) => MINOR,
+            (2, false, true) => 1,
             _ => 0,
         };
         let mut header = Header {
@@ -482,7 +486,12 @@ fn check_images(opts: &WriterOptions) -> std::result::Result<(), String> {
             return Err(format!("image {i} ({name}): {} levels, name of {} bytes", im.levels.len(), name.len()));
         }
         for (l, v) in im.levels.iter().enumerate() {
-            if v.width == 0 || v.height == 0 || v.width > texture::MAX_SIDE || v.height > texture::MAX_SIDE {
+            if v.width == 0
+                || v.height == 0
+                || v.width > texture::MAX_SIDE
+                || v.height > texture::MAX_SIDE
+                || v.width as u64 * v.height as u64 > texture::MAX_PIXELS
+            {
                 return Err(format!("image {i} ({name}) level {l}: {} × {}", v.width, v.height));
             }
             if l > 0 {

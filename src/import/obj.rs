@@ -50,8 +50,8 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
     let mut reader = Cursor::new(prefix.as_bytes()).chain(Cursor::new(text.as_bytes()));
 
     let mtl_warnings = RefCell::new(Vec::<String>::new());
-    // The folder of each loaded library and how many materials it gave, in load order: texture
-    // paths are relative to their library's folder.
+    // The folder of each loaded library (relative to the model's, as `mtllib` named it) and how
+    // many materials it gave, in load order: texture paths are relative to their library's folder.
     let libraries = RefCell::new(Vec::<(PathBuf, usize)>::new());
     let dir = path.parent().unwrap_or(Path::new(""));
     let load_material_library = |lib: &Path| -> tobj::MTLLoadResult {
@@ -59,7 +59,7 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
             let materials: Vec<tobj::Material> =
                 scan.usemtl_names.iter().map(|n| tobj::Material { name: n.clone(), ..Default::default() }).collect();
             let map = scan.usemtl_names.iter().enumerate().map(|(i, n)| (n.clone(), i)).collect();
-            libraries.borrow_mut().push((dir.to_path_buf(), materials.len()));
+            libraries.borrow_mut().push((PathBuf::new(), materials.len()));
             return Ok((materials, map));
         }
         let full = dir.join(lib);
@@ -74,7 +74,7 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
                     ws.push(w);
                 }
             }
-            Ok((m, _)) => libraries.borrow_mut().push((full.parent().unwrap_or(Path::new("")).to_path_buf(), m.len())),
+            Ok((m, _)) => libraries.borrow_mut().push((lib.parent().unwrap_or(Path::new("")).to_path_buf(), m.len())),
         }
         result
     };
@@ -95,7 +95,7 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
     let mut images = Images::default();
     for (out, source) in sources.iter().enumerate() {
         let (Some(id), Some(m)) = (*source, source.and_then(|i| materials.get(i))) else { continue };
-        let folder = folder_of(id).map_or(dir, |(f, _)| f.as_path());
+        let folder = folder_of(id).map_or(Path::new(""), |(f, _)| f.as_path());
         let maps = [
             (MapKind::BaseColor, m.diffuse_texture.as_deref()),
             (MapKind::Normal, m.unknown_param.get("norm").map(String::as_str)),
@@ -104,7 +104,7 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
         for (kind, statement) in maps {
             let Some(statement) = statement else { continue };
             let (file, clamp) = texture_file(statement);
-            if let Some(image) = images.load(folder, &file, import.allow_outside_files, &mut mesh, warnings) {
+            if let Some(image) = images.load(dir, &folder.join(&file), import.allow_outside_files, &mut mesh, warnings) {
                 let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
                 mesh.materials[out].maps[kind as usize] = Some(TextureSlot { image, wrap: [wrap; 2] });
             }
@@ -152,24 +152,23 @@ struct Images {
 }
 
 impl Images {
-    /// The image `file` (relative to `folder`) names, read once into `mesh.images`; a warning and
-    /// `None` when it is missing, unreadable, outside the folder without `allow_outside`, or
-    /// neither PNG nor JPEG.
-    fn load(&mut self, folder: &Path, file: &str, allow_outside: bool, mesh: &mut Mesh, warnings: &mut Vec<String>) -> Option<u32> {
-        if file.is_empty() {
-            return None;
-        }
-        let path = folder.join(file);
+    /// The image `file` (relative to the model's folder `dir`: a library's folder joined with the
+    /// map's path) names, read once into `mesh.images`; a warning and `None` when it is missing,
+    /// unreadable, outside the model's folder without `allow_outside`, or neither PNG nor JPEG.
+    fn load(&mut self, dir: &Path, file: &Path, allow_outside: bool, mesh: &mut Mesh, warnings: &mut Vec<String>) -> Option<u32> {
+        file.file_name()?;
+        let path = dir.join(file);
         if let Some(&known) = self.by_path.get(&path) {
             return known;
         }
         crate::atomic::protect(&path);
-        let result = if !allow_outside && !super::stays_inside(Path::new(file)) {
-            Err(format!("{file} lies outside the model's folder (--allow-outside-files reads it)"))
+        let name = file.to_string_lossy().replace('\\', "/");
+        let result = if !allow_outside && !super::stays_inside(file) {
+            Err(format!("{name} lies outside the model's folder (--allow-outside-files reads it)"))
         } else {
             super::read_regular_file(&path, 1 << 30)
                 .map_err(|e| format!("{}: {e}", path.display()))
-                .and_then(|b| SourceImage::new(file.to_string(), b).map_err(|e| format!("{}: {e}", path.display())))
+                .and_then(|b| SourceImage::new(name.clone(), b).map_err(|e| format!("{}: {e}", path.display())))
         };
         let index = match result {
             Ok(image) => {
@@ -640,7 +639,7 @@ mod tests {
         let (mesh, warnings) = dir.read("m.obj");
         let mesh = mesh.unwrap();
         assert_eq!(mesh.images.len(), 1, "one image, read once for both materials");
-        assert_eq!(mesh.images[0].name, "tex/a b.png");
+        assert_eq!(mesh.images[0].name, "lib/tex/a b.png");
         assert_eq!(&mesh.images[0].bytes[..], &png[..]);
         let (a, b) = (&mesh.materials[0], &mesh.materials[1]);
         assert_eq!(a.map(MapKind::BaseColor), Some(TextureSlot { image: 0, wrap: [Wrap::Clamp; 2] }));
@@ -649,6 +648,26 @@ mod tests {
         assert_eq!(warnings.len(), 2, "{warnings:?}");
         assert!(warnings.iter().any(|w| w.contains("n.png") && w.contains("neither a PNG nor a JPEG")), "{warnings:?}");
         assert!(warnings.iter().any(|w| w.contains("gone.png")), "{warnings:?}");
+    }
+
+    #[test]
+    fn a_library_outside_the_folder_does_not_bring_images_from_there() {
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
+        let dir = TempDir::with(&[]);
+        std::fs::create_dir_all(dir.0.join("model")).unwrap();
+        std::fs::create_dir_all(dir.0.join("secret")).unwrap();
+        std::fs::write(dir.0.join("secret/lib.mtl"), "newmtl a\nmap_Kd secret.png\n").unwrap();
+        std::fs::write(dir.0.join("secret/secret.png"), &png).unwrap();
+        let obj = format!("mtllib ../secret/lib.mtl\n{SQUARE}usemtl a\nf 1 2 3\n");
+        std::fs::write(dir.0.join("model/m.obj"), obj).unwrap();
+        let (mesh, warnings) = dir.read("model/m.obj");
+        let mesh = mesh.unwrap();
+        assert!(mesh.images.is_empty());
+        assert!(warnings.iter().any(|w| w.contains("outside the model's folder")), "{warnings:?}");
+        let mut allowed = Vec::new();
+        let opts = ImportOptions { allow_outside_files: true, ..ImportOptions::default() };
+        let mesh = read_mesh(&dir.0.join("model/m.obj"), &opts, &mut allowed).unwrap();
+        assert_eq!(mesh.images.len(), 1, "{allowed:?}");
     }
 
     #[test]

@@ -14,7 +14,8 @@ use crate::format::skeleton::Skeleton;
 use crate::format::{ByteSource, MapKind, Material, NodeGeometry, Reader, Textures};
 use crate::texture::sample::MipChain;
 use crate::texture::{decode, Rgba8};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::Arc;
 
 /// The level of `image` a node with UV density `density` needs where a model unit spans
 /// `pixels_per_unit` pixels: the largest level whose geometric-mean side reaches `pixels_per_unit
@@ -56,7 +57,10 @@ pub fn wanted(skeleton: &Skeleton, camera: &Camera, front: &[u32], geometry: &dy
 /// Image levels in memory.
 #[derive(Default)]
 pub struct ImageCache {
-    held: HashMap<(u32, u32), Rgba8>,
+    held: HashMap<(u32, u32), Arc<Rgba8>>,
+    /// Levels that could not be read or decoded: never tried again, a coarser one is drawn.
+    failed: HashSet<(u32, u32)>,
+    warnings: Vec<String>,
     resident: u64,
     read: u64,
     requests: u64,
@@ -86,6 +90,11 @@ impl ImageCache {
         &self.drawn
     }
 
+    /// Levels that could not be read or decoded, each said once; taken by the caller.
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.warnings)
+    }
+
     /// What the renderer samples for `image`: its drawn level.
     pub fn chain(&self, image: u32) -> Option<&MipChain> {
         self.chains.get(&image)
@@ -102,39 +111,52 @@ impl ImageCache {
 
     /// Hold each image's `wanted` level (and its coarsest), reading what is missing, within `room`
     /// bytes for all image levels if given: where the wanted level does not fit, the finest coarser
-    /// one that does is held instead. Levels neither wanted, drawn nor coarsest are dropped.
+    /// one that does is held instead. Levels neither wanted, drawn nor coarsest are dropped, and
+    /// finer held levels too while the held ones exceed `room`. An image first used is drawn at its
+    /// coarsest level this frame. A level that cannot be read or decoded is a warning
+    /// ([`ImageCache::take_warnings`]) and a coarser one is drawn; an image with no readable level is
+    /// drawn untextured.
     pub fn update<S: ByteSource>(&mut self, reader: &Reader<S>, wanted: &BTreeMap<u32, u32>, room: Option<u64>) -> Result<()> {
         let t = reader.textures();
         let coarsest = |i: u32| t.level_count(i).saturating_sub(1);
-        // Drop what no longer serves: levels of images the front does not use beyond their coarsest,
-        // and levels finer than wanted.
         let keep = |&(i, l): &(u32, u32)| l == coarsest(i) || wanted.get(&i).is_some_and(|&w| l >= w);
         let dropped: Vec<(u32, u32)> = self.held.keys().copied().filter(|k| !keep(k)).collect();
         for k in dropped {
             self.release(k);
         }
+        // Room shrinks when the displayed geometry grows: give back the finest levels first.
+        if let Some(r) = room {
+            let mut finer: Vec<(u32, u32)> = self.held.keys().copied().filter(|&(i, l)| l != coarsest(i)).collect();
+            finer.sort_by_key(|&(i, l)| (l, i));
+            for k in finer {
+                if self.resident <= r {
+                    break;
+                }
+                self.release(k);
+            }
+        }
         let mut drawn = BTreeMap::new();
         for (&image, &want) in wanted {
             let Some(full) = t.level(image, 0) else { continue };
             let (full_w, full_h) = (full.width, full.height);
-            // An image first used this frame is drawn at its coarsest level, its wanted one read from
-            // the next frame on: coarse first, as the geometry.
             let first_use = !self.held.contains_key(&(image, coarsest(image)));
-            self.load(reader, image, coarsest(image))?;
-            // The finest level from `want` up that is held or fits.
-            let mut level = coarsest(image);
-            for l in (want..coarsest(image)).filter(|_| !first_use) {
-                if self.held.contains_key(&(image, l)) {
-                    level = l;
-                    break;
-                }
-                let bytes = t.level(image, l).map_or(0, |v| v.decoded_bytes());
-                if room.is_none_or(|r| self.resident + bytes <= r) {
-                    self.load(reader, image, l)?;
-                    level = l;
-                    break;
+            self.load(reader, image, coarsest(image));
+            let mut level = None;
+            if !first_use {
+                for l in want..coarsest(image) {
+                    if self.held.contains_key(&(image, l)) {
+                        level = Some(l);
+                        break;
+                    }
+                    let bytes = t.level(image, l).map_or(0, |v| v.decoded_bytes());
+                    if room.is_none_or(|r| self.resident + bytes <= r) && self.load(reader, image, l) {
+                        level = Some(l);
+                        break;
+                    }
                 }
             }
+            let level = level.unwrap_or(coarsest(image));
+            let Some(pixels) = self.held.get(&(image, level)).cloned() else { continue };
             // Coarser held levels than the drawn one, other than the coarsest, are of no use now.
             let spare: Vec<(u32, u32)> =
                 self.held.keys().copied().filter(|&(i, l)| i == image && l > level && l != coarsest(image)).collect();
@@ -142,15 +164,7 @@ impl ImageCache {
                 self.release(k);
             }
             if self.chains.get(&image).is_none_or(|c| c.first_level != level) {
-                let pixels = self.held[&(image, level)].clone();
-                let wrap = reader
-                    .materials()
-                    .iter()
-                    .find_map(|m| m.map(MapKind::BaseColor).filter(|s| s.image == image))
-                    .map_or([Default::default(); 2], |s| s.wrap);
-                let mut chain = MipChain::new(level, vec![pixels], full_w, full_h);
-                chain.wrap = wrap;
-                self.chains.insert(image, chain);
+                self.chains.insert(image, MipChain::new(level, vec![pixels], full_w, full_h));
             }
             drawn.insert(image, (want, level));
         }
@@ -159,23 +173,39 @@ impl ImageCache {
         Ok(())
     }
 
-    fn load<S: ByteSource>(&mut self, reader: &Reader<S>, image: u32, level: u32) -> Result<()> {
+    /// Read and decode a level unless held; false when it is not held after (it failed).
+    fn load<S: ByteSource>(&mut self, reader: &Reader<S>, image: u32, level: u32) -> bool {
         if self.held.contains_key(&(image, level)) {
-            return Ok(());
+            return true;
+        }
+        if self.failed.contains(&(image, level)) {
+            return false;
         }
         let t = reader.textures();
-        let codec = t
+        let result = t
             .images
             .get(image as usize)
-            .map(|r| r.codec)
-            .ok_or_else(|| Error::at_element(reader.path(), format!("image {image}"), "no such image"))?;
-        let bytes = reader.read_image_level(image, level)?;
-        let pixels = decode(codec, &bytes).map_err(|e| Error::at_element(reader.path(), format!("image {image} level {level}"), e))?;
-        self.read += bytes.len() as u64;
-        self.requests += 1;
-        self.resident += 4 * pixels.width as u64 * pixels.height as u64;
-        self.held.insert((image, level), pixels);
-        Ok(())
+            .ok_or_else(|| Error::at_element(reader.path(), format!("image {image}"), "no such image"))
+            .and_then(|rec| {
+                let bytes = reader.read_image_level(image, level)?;
+                let pixels =
+                    decode(rec.codec, &bytes).map_err(|e| Error::at_element(reader.path(), format!("image {image} level {level}"), e))?;
+                Ok((bytes.len(), pixels))
+            });
+        match result {
+            Ok((len, pixels)) => {
+                self.read += len as u64;
+                self.requests += 1;
+                self.resident += 4 * pixels.width as u64 * pixels.height as u64;
+                self.held.insert((image, level), Arc::new(pixels));
+                true
+            }
+            Err(e) => {
+                self.failed.insert((image, level));
+                self.warnings.push(format!("image level left undrawn: {e}"));
+                false
+            }
+        }
     }
 
     fn release(&mut self, key: (u32, u32)) {

@@ -165,6 +165,12 @@ impl<S: ByteSource> Streamer<S> {
         self.cache.get(node)
     }
 
+    /// Image levels that could not be read or decoded since the last call, each said once: they are
+    /// drawn at a coarser level or untextured, not fatal.
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        self.images.take_warnings()
+    }
+
     /// What a renderer samples for image `image` this frame: its drawn level.
     pub fn image(&self, image: u32) -> Option<&crate::texture::sample::MipChain> {
         self.images.chain(image)

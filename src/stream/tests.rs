@@ -372,4 +372,48 @@ fn images_stream_coarse_first_within_the_budget() {
     }
     assert!(finest < 3, "the orbit's close-ups draw a finer level than the coarsest");
     assert!(finest > 0, "the budget keeps the full image out");
+    // Cameras jumping near and far: held levels give way when the displayed geometry grows.
+    let mut seed = 7u64;
+    let mut next = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 33) as f32 / (1u64 << 31) as f32
+    };
+    for i in 0..60 {
+        let dir = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Z);
+        let distance = radius * (1.2 + 6.0 * next());
+        let mut camera = orbit(center, radius, i, 60, 800, 600);
+        camera.eye = center + dir * distance;
+        camera.target = center + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * radius;
+        let st = s.update(&camera, None).unwrap().stats;
+        assert!(
+            st.resident_bytes + st.texture_resident_bytes <= budget,
+            "jump {i}: {} + {} > {budget}",
+            st.resident_bytes,
+            st.texture_resident_bytes
+        );
+    }
+}
+
+#[test]
+fn faces_mapped_without_uv_extent_want_the_full_image() {
+    // A palette texture: every face of the globe samples one UV point.
+    let dir = std::env::temp_dir().join(format!("strata-stream-palette-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut mesh = crate::fixtures::textured_globe(16, 128);
+    for uv in &mut mesh.uvs {
+        *uv = glam::Vec2::splat(0.3);
+    }
+    let input = dir.join("palette.glb");
+    crate::export::glb::write(&input, &mesh).unwrap();
+    let out = dir.join("palette.strata");
+    convert(&input, &Default::default(), &out, &ConvertOptions::default(), &mut Silent).unwrap();
+    let r = Reader::open_path(&out).unwrap();
+    assert!(r.textures().uv_density.iter().all(|&d| d > 0.0 && d <= f32::MIN_POSITIVE), "{:?}", r.textures().uv_density);
+    let (center, radius) = sphere(&r);
+    let mut s = Streamer::new(r, Budgets::default()).unwrap();
+    let far = orbit(center, radius, 0, 8, 320, 240);
+    s.update(&far, None).unwrap();
+    let st = s.update(&far, None).unwrap().stats;
+    assert_eq!(st.texture_levels, vec![[0, 0, 0]], "from far too, the full image");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

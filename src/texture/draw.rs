@@ -8,6 +8,7 @@ use super::{decode, SourceImage};
 use crate::error::{Error, Result};
 use crate::format::{ByteSource, MapKind, Material, NodeGeometry, Reader};
 use crate::render::Part;
+use std::sync::Arc;
 
 /// The sRGB bytes of a linear RGBA color (alpha kept linear).
 pub fn srgb_color(linear: [f32; 4]) -> [u8; 4] {
@@ -21,7 +22,7 @@ pub fn srgb_color(linear: [f32; 4]) -> [u8; 4] {
 
 /// The parts of one node's geometry: one per material range, in the material's color, textured
 /// with `chain(image)` where the material's base color map names an image that has one (and the
-/// node has UVs).
+/// node has UVs), wrapping as the map says.
 pub fn node_parts<'a>(g: &'a NodeGeometry, materials: &[Material], chain: &dyn Fn(u32) -> Option<&'a MipChain>) -> Vec<Part<'a>> {
     g.material_ranges
         .iter()
@@ -30,49 +31,70 @@ pub fn node_parts<'a>(g: &'a NodeGeometry, materials: &[Material], chain: &dyn F
             let m = materials.get(r.material as usize);
             let color = m.map_or([200, 200, 200, 255], |m| srgb_color(m.base_color));
             let part = Part::new(&g.positions, &g.normals, indices, color);
-            let chain = m.and_then(|m| m.map(MapKind::BaseColor)).and_then(|s| chain(s.image));
-            Some(match chain {
-                Some(c) => part.textured(&g.uvs, c),
+            let slot = m.and_then(|m| m.map(MapKind::BaseColor));
+            Some(match slot.and_then(|s| Some((s, chain(s.image)?))) {
+                Some((s, c)) => part.textured(&g.uvs, c, s.wrap),
                 None => part,
             })
         })
         .collect()
 }
 
-/// Levels `from..` of image `image` of a chunk file, decoded into a chain with the wrap modes of
-/// `wrap_of`'s slot.
-pub fn read_chain<S: ByteSource>(rd: &Reader<S>, image: u32, from: u32, wrap: [crate::format::Wrap; 2]) -> Result<MipChain> {
+/// Decoded bytes one image may take in a render: 4096² RGBA8. Finer levels are left out.
+pub const IMAGE_BYTES: u64 = 64 << 20;
+/// Decoded bytes all images of a render may take together; past it, the largest images start at a
+/// coarser level.
+pub const TOTAL_BYTES: u64 = 512 << 20;
+
+/// Levels `from..` of image `image` of a chunk file, decoded into a chain.
+pub fn read_chain<S: ByteSource>(rd: &Reader<S>, image: u32, from: u32) -> Result<MipChain> {
     let t = rd.textures();
     let rec = t.images.get(image as usize).ok_or_else(|| Error::at_element(rd.path(), format!("image {image}"), "no such image"))?;
     let full = t.level(image, 0).ok_or_else(|| Error::at_element(rd.path(), format!("image {image}"), "no levels"))?;
     let mut levels = Vec::new();
     for l in from..t.level_count(image) {
         let bytes = rd.read_image_level(image, l)?;
-        levels.push(decode(rec.codec, &bytes).map_err(|e| Error::at_element(rd.path(), format!("image {image} level {l}"), e))?);
+        let pixels = decode(rec.codec, &bytes).map_err(|e| Error::at_element(rd.path(), format!("image {image} level {l}"), e))?;
+        levels.push(Arc::new(pixels));
     }
-    let mut chain = MipChain::new(from, levels, full.width, full.height);
-    chain.wrap = wrap;
-    Ok(chain)
+    Ok(MipChain::new(from, levels, full.width, full.height))
 }
 
-/// Every base color image of a chunk file's materials as a chain of all its levels (`None` for
-/// images no material samples as base color).
-pub fn read_base_color_chains<S: ByteSource>(rd: &Reader<S>) -> Result<Vec<Option<MipChain>>> {
-    let mut chains: Vec<Option<MipChain>> = vec![None; rd.textures().images.len()];
-    for m in rd.materials() {
-        if let Some(s) = m.map(MapKind::BaseColor) {
-            if chains[s.image as usize].is_none() {
-                chains[s.image as usize] = Some(read_chain(rd, s.image, 0, s.wrap)?);
-            }
+/// The chains of images `used` (indices into the file's images) for a render: each from its
+/// finest level within [`IMAGE_BYTES`], all within [`TOTAL_BYTES`]. An image that cannot be read
+/// or decoded is a warning (its parts are drawn in their material's color); `chains[image]` is
+/// `None` for it and for images not used.
+pub fn read_chains<S: ByteSource>(rd: &Reader<S>, used: &[u32], warnings: &mut Vec<String>) -> Vec<Option<MipChain>> {
+    let t = rd.textures();
+    let bytes = |i: u32, l: u32| t.level(i, l).map_or(0, |v| v.decoded_bytes() * 4 / 3);
+    let mut from: Vec<(u32, u32)> = Vec::new();
+    for &i in used {
+        match (0..t.level_count(i)).find(|&l| bytes(i, l) <= IMAGE_BYTES) {
+            Some(l) => from.push((i, l)),
+            None => warnings.push(format!("image {i} drawn untextured: no level within {} MiB decoded", IMAGE_BYTES >> 20)),
         }
     }
-    Ok(chains)
+    while from.iter().map(|&(i, l)| bytes(i, l)).sum::<u64>() > TOTAL_BYTES {
+        let Some(k) = (0..from.len()).filter(|&k| from[k].1 + 1 < t.level_count(from[k].0)).max_by_key(|&k| bytes(from[k].0, from[k].1))
+        else {
+            break;
+        };
+        from[k].1 += 1;
+    }
+    let mut chains: Vec<Option<MipChain>> = vec![None; t.images.len()];
+    for (i, l) in from {
+        match read_chain(rd, i, l) {
+            Ok(c) => chains[i as usize] = Some(c),
+            Err(e) => warnings.push(format!("image {i} drawn untextured: {e}")),
+        }
+    }
+    chains
 }
 
 /// A source image's levels as a chain (as a chunk file would store them).
 pub fn source_chain(image: &SourceImage, kind: MapKind) -> std::result::Result<MipChain, String> {
     let levels = build(image, Filter::for_map(kind))?;
-    let decoded = levels.iter().map(|l| decode(image.codec, &l.bytes)).collect::<std::result::Result<Vec<_>, _>>()?;
+    let decoded = levels.iter().map(|l| decode(image.codec, &l.bytes).map(Arc::new)).collect::<std::result::Result<Vec<_>, _>>()?;
     let (w, h) = (levels[0].width, levels[0].height);
     Ok(MipChain::new(0, decoded, w, h))
 }

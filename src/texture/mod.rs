@@ -2,7 +2,8 @@
 //!
 //! - [`SourceImage`]: an image as an importer found it (its file's bytes, PNG or JPEG), which
 //!   [`crate::mesh::Mesh::images`] holds and materials' maps index;
-//! - [`decode`]: PNG or JPEG bytes into RGBA8 pixels, within size limits;
+//! - [`decode`] (from the format layer, which checks that image levels decode): PNG or JPEG bytes
+//!   into RGBA8 pixels, within size limits;
 //! - [`pyramid`]: the resolutions a chunk file stores (spec §7.5), halving down to a small level,
 //!   filtered in linear light for colors and renormalized for normal maps;
 //! - [`sample`]: bilinear sampling from a chain of levels, for the software renderer;
@@ -15,10 +16,7 @@ pub mod sample;
 pub use crate::format::{ImageCodec, MapKind};
 use std::sync::Arc;
 
-/// Largest side of an image strata decodes (the format's limit, spec §7.5).
-pub const MAX_SIDE: u32 = crate::format::texture::MAX_SIDE;
-/// Most pixels of an image strata decodes: 16384², 1 GiB as RGBA8.
-pub const MAX_PIXELS: u64 = 1 << 28;
+pub use crate::format::texture::{MAX_PIXELS, MAX_SIDE};
 
 /// An image as a source file holds it: one PNG or JPEG file's bytes.
 #[derive(Clone, PartialEq, Eq)]
@@ -55,81 +53,7 @@ pub fn sniff(bytes: &[u8]) -> Option<ImageCodec> {
     }
 }
 
-/// Pixels as RGBA8, rows top first.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Rgba8 {
-    pub width: u32,
-    pub height: u32,
-    pub pixels: Vec<u8>,
-}
-
-impl Rgba8 {
-    pub fn new(width: u32, height: u32) -> Rgba8 {
-        Rgba8 { width, height, pixels: vec![0; 4 * width as usize * height as usize] }
-    }
-
-    #[inline]
-    pub fn get(&self, x: u32, y: u32) -> [u8; 4] {
-        let i = 4 * (y as usize * self.width as usize + x as usize);
-        [self.pixels[i], self.pixels[i + 1], self.pixels[i + 2], self.pixels[i + 3]]
-    }
-}
-
-/// Decode a PNG or JPEG file into RGBA8 (grey, palette, 16-bit and alpha-less images expanded),
-/// refusing images beyond [`MAX_SIDE`] a side or [`MAX_PIXELS`] before allocating their pixels.
-pub fn decode(codec: ImageCodec, bytes: &[u8]) -> Result<Rgba8, String> {
-    let check = |w: u32, h: u32| {
-        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || w as u64 * h as u64 > MAX_PIXELS {
-            Err(format!("a {w} × {h} image (at most {MAX_SIDE} a side and {MAX_PIXELS} pixels)"))
-        } else {
-            Ok(())
-        }
-    };
-    match codec {
-        ImageCodec::Png => {
-            let mut d = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), png::Limits { bytes: 4 * MAX_PIXELS as usize });
-            d.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16 | png::Transformations::ALPHA);
-            let mut r = d.read_info().map_err(|e| format!("not a readable PNG: {e}"))?;
-            let (w, h) = (r.info().width, r.info().height);
-            check(w, h)?;
-            let size = r.output_buffer_size().ok_or("PNG too large")?;
-            let mut buf = vec![0; size];
-            let info = r.next_frame(&mut buf).map_err(|e| format!("not a readable PNG: {e}"))?;
-            buf.truncate(info.buffer_size());
-            let n = w as usize * h as usize;
-            let pixels = match info.color_type {
-                png::ColorType::Rgba => buf,
-                png::ColorType::Rgb => buf.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect(),
-                png::ColorType::GrayscaleAlpha => buf.chunks_exact(2).flat_map(|p| [p[0], p[0], p[0], p[1]]).collect(),
-                png::ColorType::Grayscale => buf.iter().flat_map(|&g| [g, g, g, 255]).collect(),
-                png::ColorType::Indexed => return Err("an indexed PNG left unexpanded".into()),
-            };
-            if pixels.len() != 4 * n {
-                return Err(format!("PNG decoded to {} bytes for {w} × {h} pixels", pixels.len()));
-            }
-            Ok(Rgba8 { width: w, height: h, pixels })
-        }
-        ImageCodec::Jpeg => {
-            use zune_core::bytestream::ZCursor;
-            use zune_core::colorspace::ColorSpace;
-            use zune_core::options::DecoderOptions;
-            let options = DecoderOptions::default()
-                .jpeg_set_out_colorspace(ColorSpace::RGBA)
-                .set_max_width(MAX_SIDE as usize)
-                .set_max_height(MAX_SIDE as usize);
-            let mut d = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
-            d.decode_headers().map_err(|e| format!("not a readable JPEG: {e:?}"))?;
-            let info = d.info().ok_or("not a readable JPEG: no frame header")?;
-            let (w, h) = (info.width as u32, info.height as u32);
-            check(w, h)?;
-            let pixels = d.decode().map_err(|e| format!("not a readable JPEG: {e:?}"))?;
-            if pixels.len() != 4 * w as usize * h as usize {
-                return Err(format!("JPEG decoded to {} bytes for {w} × {h} pixels", pixels.len()));
-            }
-            Ok(Rgba8 { width: w, height: h, pixels })
-        }
-    }
-}
+pub use crate::format::image::{decode, Rgba8};
 
 /// Encode RGBA8 pixels as `codec`: PNG keeps alpha (and drops it when every pixel is opaque);
 /// JPEG at `quality` (1..=100), without alpha.

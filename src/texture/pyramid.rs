@@ -112,8 +112,14 @@ pub fn downsample(image: &Rgba8, filter: Filter) -> Rgba8 {
             let px = match filter {
                 Filter::Linear => std::array::from_fn(|c| ((texels.iter().map(|t| t[c] as u32).sum::<u32>() + 2) / 4) as u8),
                 Filter::Srgb => {
-                    let mean = |c: usize| texels.iter().map(|t| lin[t[c] as usize]).sum::<f32>() / 4.0;
-                    let alpha = ((texels.iter().map(|t| t[3] as u32).sum::<u32>() + 2) / 4) as u8;
+                    // Weighted by alpha, so that transparent texels (whose color is often junk) do not
+                    // bleed into the visible ones; all transparent: a plain mean.
+                    let weight: u32 = texels.iter().map(|t| t[3] as u32).sum();
+                    let mean = |c: usize| match weight {
+                        0 => texels.iter().map(|t| lin[t[c] as usize]).sum::<f32>() / 4.0,
+                        w => texels.iter().map(|t| lin[t[c] as usize] * t[3] as f32).sum::<f32>() / w as f32,
+                    };
+                    let alpha = ((weight + 2) / 4) as u8;
                     [linear_to_srgb(mean(0)), linear_to_srgb(mean(1)), linear_to_srgb(mean(2)), alpha]
                 }
                 Filter::Normal => {
@@ -148,10 +154,29 @@ pub fn prepare(mesh: &mut crate::mesh::Mesh, warnings: &mut Vec<String>, progres
             mesh.materials.iter().flat_map(|m| MapKind::ALL.into_iter().filter(|&k| m.map(k).is_some_and(|s| s.image == i as u32))).next();
         let Some(kind) = first_use.filter(|_| !mesh.uvs.is_empty()) else { continue };
         progress();
-        match build(image, Filter::for_map(kind)) {
+        // What the file's image table holds must pass the writer's checks: the header's size is
+        // the decoded one (a JPEG the decoder forgives but whose markers do not state it is left
+        // out), and the name fits (cut at a character boundary).
+        let checked = build(image, Filter::for_map(kind)).and_then(|levels| {
+            let stated = crate::format::texture::image_size(image.codec, &levels[0].bytes)?;
+            if stated != (levels[0].width, levels[0].height) {
+                return Err(format!(
+                    "its header states {} × {}, it decodes to {} × {}",
+                    stated.0, stated.1, levels[0].width, levels[0].height
+                ));
+            }
+            Ok(levels)
+        });
+        match checked {
             Ok(levels) => {
+                let mut name = image.name.clone();
+                let max = crate::format::texture::MAX_NAME_BYTES as usize;
+                if name.len() > max {
+                    let cut = (0..=max).rev().find(|&k| name.is_char_boundary(k)).unwrap_or(0);
+                    name.truncate(cut);
+                }
                 renumber[i] = Some(out.len() as u32);
-                out.push(ImageIn { name: image.name.clone(), codec: image.codec, levels });
+                out.push(ImageIn { name, codec: image.codec, levels });
             }
             Err(e) => warnings.push(format!("texture left out: {}: {e}", image.name)),
         }
@@ -190,6 +215,10 @@ mod tests {
         // Half of full intensity in linear light is sRGB 188, not 128.
         assert_eq!(half.get(0, 0), [188, 188, 188, 255]);
         assert_eq!(downsample(&im, Filter::Linear).get(0, 0)[0], 128);
+        // A transparent texel's color does not bleed into an opaque one's.
+        let mut cut = Rgba8::new(2, 1);
+        cut.pixels.copy_from_slice(&[255, 0, 0, 255, 0, 255, 0, 0]);
+        assert_eq!(downsample(&cut, Filter::Srgb).get(0, 0), [255, 0, 0, 128]);
     }
 
     #[test]

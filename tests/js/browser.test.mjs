@@ -390,19 +390,24 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     await within(p.evaluate(() => window.strata.idle()), 120000, 'full detail');
     const st = await p.evaluate(() => window.strata.state());
     const f = st.firstTextured;
-    t.diagnostic(`globe: first textured frame ${f.ms.toFixed(0)} ms after page load, ${f.textureBytesRead} texture bytes read in ${f.textureRequests} request(s) (the coarsest level is ${coarsest.size} bytes); at rest ${JSON.stringify(st.textureLevels)} ([image, wanted, drawn]), ${st.textureBytesRead} texture bytes read in ${st.textureRequests} requests, ${st.textureResidentBytes} resident; panel "${st.textures}"; decoded ${JSON.stringify(st.imagesDecoded.map((i) => [i.mime, i.width, i.height, Math.round(i.ms)]))}`);
-    assert.ok(f.textureBytesRead <= coarsest.size && f.textureRequests === 1, 'the first textured frame read only the coarsest level');
+    t.diagnostic(`globe: first textured frame ${f.ms.toFixed(0)} ms after page load, ${f.textureBytesRead} texture bytes read, ${f.textureRequests} request(s) started (the coarsest level is ${coarsest.size} bytes); at rest ${JSON.stringify(st.textureLevels)} ([image, wanted, drawn]), ${st.textureBytesRead} texture bytes read in ${st.textureRequests} requests, ${st.textureResidentBytes} resident; panel "${st.textures}"; decoded ${JSON.stringify(st.imagesDecoded.map((i) => [i.mime, i.width, i.height, Math.round(i.ms)]))}`);
+    assert.ok(f.textureBytesRead <= coarsest.size, `${f.textureBytesRead} texture bytes read before the first textured frame, the coarsest level is ${coarsest.size}`);
     assert.ok(st.textureLevels.length === 1 && st.textureLevels[0][2] === st.textureLevels[0][1], `drawn at the wanted level: ${JSON.stringify(st.textureLevels)}`);
     const drawnLevel = tex.levels[tex.images[0].levels[st.textureLevels[0][2]]];
     assert.ok(st.imagesDecoded.some((i) => i.mime === IMAGE_MIME[tex.images[0].codec] && i.width === drawnLevel.width && i.height === drawnLevel.height), 'the drawn level decoded');
     assert.ok(st.textureResidentBytes >= 4 * (drawnLevel.width * drawnLevel.height + coarsest.width * coarsest.height));
     assert.ok(st.residentBytes <= st.budget);
-    assert.match(st.textures, /^\d+(\.\d)? KB \(\d+\) \/ \d+(\.\d)? (KB|MB)$/);
+    assert.match(st.textures, /^\d+(\.\d)? KB \(\d+\); \d+(\.\d)? (KB|MB) resident$/);
     const m = await compareWithRender(p, models.globe, cam, t);
     t.diagnostic(`globe vs strata render (base color image): silhouette IoU ${m.iou.toFixed(4)}, mean colour difference ${m.meanDiff.toFixed(2)}/255, pixels differing by more than 24: ${(m.farShare * 100).toFixed(2)} % of ${m.covered}`);
+    // Measured: IoU 0.9998, mean difference 3.9, 2.3 % of pixels off by more than 24, with no bias
+    // (signed means under 0.5 a channel). The differences lie on the image's thin dark lines, most
+    // toward the silhouette: WebGL filters trilinearly by the steeper screen derivative, strata
+    // render picks one level per face by area, so lines seen at a grazing angle blur differently.
+    // A v flipped or a wrong level would move whole tiles (the untextured globe differs by 145).
     assert.ok(m.iou >= 0.98, `silhouette IoU ${m.iou}`);
-    assert.ok(m.meanDiff <= 8, `mean colour difference ${m.meanDiff}`);
-    assert.ok(m.farShare <= 0.05, `share of very different pixels ${m.farShare}`);
+    assert.ok(m.meanDiff <= 6, `mean colour difference ${m.meanDiff}`);
+    assert.ok(m.farShare <= 0.04, `share of very different pixels ${m.farShare}`);
     // Untextured, the same globe is today's material colour: the image is what made the difference.
     await p.evaluate(() => window.strata.setColor('plain'));
     await within(p.evaluate(() => window.strata.idle()), 60000, 'plain');

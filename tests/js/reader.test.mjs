@@ -592,7 +592,7 @@ test('a newer minor version is read with what it may add; unknown chunks are ski
   const bytes = read('sphere.strata');
   const base = decodeAll(bytes);
   const tree = parseTree(bytes);
-  const same = (b, what, minor = 0) => {
+  const same = (b, what, minor = base.sk.minor) => {
     const { sk, geoms } = decodeAll(b);
     const a = dump(sk, geoms), e = dump(base.sk, base.geoms);
     e.version = `2.${minor}`;

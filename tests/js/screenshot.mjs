@@ -24,7 +24,7 @@ try {
   await page.screenshot({ path: out });
   console.log(`${out}: ${JSON.stringify(await page.evaluate(() => {
     const s = window.strata.state();
-    return { nodes: s.drawn.length, requests: s.requests, bytesRead: s.bytesRead, fileLength: s.fileLength, firstFrameMs: s.firstFrameMs };
+    return { nodes: s.drawn.length, requests: s.requests, bytesRead: s.bytesRead, fileLength: s.fileLength, firstFrameMs: s.firstFrameMs, textureBytesRead: s.textureBytesRead };
   }))}`);
 } finally {
   await browser.close();

@@ -350,3 +350,21 @@ test('the converted globe under small budgets: image levels and geometry stay wi
   assert.deepEqual(runs[0].atNear, [[0, 0, 1]], 'level 1 stands in where level 0 does not fit');
   assert.deepEqual(runs[1].atNear, [[0, 0, 0]]);
 });
+
+test('an image level the renderer cannot take is left out: a coarser level stands in, and the session comes to rest', async () => {
+  const bytes = new Uint8Array(readFileSync(globe()));
+  // The browser fails to decode level 0: level 1 is what the budget leaves next, and is drawn.
+  const st = await Streamer.open(new SlowSource(bytes, 0), {
+    pixelError: 0.5,
+    onImage: (image, level) => {
+      if (level === 0) throw new Error('cannot decode');
+      return { image, level };
+    },
+  });
+  const tex = st.skeleton.textures;
+  const near = orbitCamera(st.skeleton, 0, 12, 0.3);
+  await settle(st, near);
+  assert.deepEqual(st.textureLevels(), [[0, 0, 1]]);
+  assert.deepEqual([...st.imageErrors.keys()], [tex.images[0].levels[0]]);
+  assert.match([...st.imageErrors.values()][0], /^image 0 \(.+\) level 0: cannot decode$/);
+});
