@@ -172,3 +172,37 @@ fn obj_maps_bring_their_images_and_export_beside_the_obj() {
     assert!(diff < 6.0, "OBJ and GLB renders differ by {diff:.1} per channel: a UV flip gone wrong?");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn jpeg_images_keep_their_codec_through_every_level() {
+    // The globe with its image as a JPEG, as photogrammetry delivers textures, through OBJ.
+    let dir = temp_dir("jpeg");
+    let mut mesh = strata::fixtures::textured_globe(48, 512);
+    let pixels = decode(ImageCodec::Png, &mesh.images[0].bytes).unwrap();
+    let jpeg = strata::texture::encode(ImageCodec::Jpeg, &pixels, 92).unwrap();
+    mesh.images[0] = strata::texture::SourceImage::new("globe.jpg".into(), jpeg.clone()).unwrap();
+    let obj = dir.join("globe.obj");
+    strata::export::write(&obj, &mesh).unwrap();
+    assert!(dir.join("globe_globe.jpg").exists());
+    let file = dir.join("globe.strata");
+    strata(&["convert", "-q", &obj.display().to_string(), &file.display().to_string()]);
+    strata(&["verify", &file.display().to_string()]);
+    let rd = strata::format::Reader::open_path(&file).unwrap();
+    let t = rd.textures();
+    assert_eq!(t.images[0].codec, ImageCodec::Jpeg);
+    assert_eq!(rd.read_image_level(0, 0).unwrap(), jpeg, "level 0 is the source file");
+    for l in 1..t.level_count(0) {
+        let bytes = rd.read_image_level(0, l).unwrap();
+        assert_eq!(strata::texture::sniff(&bytes), Some(ImageCodec::Jpeg), "level {l}");
+        let im = decode(ImageCodec::Jpeg, &bytes).unwrap();
+        let v = t.level(0, l).unwrap();
+        assert_eq!((im.width, im.height), (v.width, v.height));
+    }
+    // Drawn like the PNG original, within JPEG's loss.
+    let png_globe = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/textured_globe.glb");
+    let a = render(&file, &dir.join("jpeg.png"), "auto");
+    let b = render(&png_globe, &dir.join("png.png"), "auto");
+    let (colors, diff) = compare(&a, &b);
+    assert!(colors > 200 && diff < 8.0, "{colors} colors, {diff:.1} per channel from the PNG globe");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -19,9 +19,11 @@ pub mod ply;
 use crate::error::{Error, Result};
 use crate::format::Georef;
 use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
+use crate::texture::SourceImage;
 use glam::Vec2;
 pub use heightfield::{DemCrs, DemEncoding, DemOptions, GridSummary};
-use std::path::{Component, Path};
+use std::collections::HashMap;
+use std::path::{Component, Path, PathBuf};
 use std::time::Instant;
 
 /// A mesh file format strata reads: its name on the command line, the file name extensions that
@@ -283,6 +285,53 @@ pub(crate) fn stays_inside(name: &Path) -> bool {
         }
     }
     true
+}
+
+/// Image files importers have read, by resolved path, each into a mesh's images once.
+#[derive(Default)]
+pub(crate) struct ImageFiles {
+    by_path: HashMap<PathBuf, Option<u32>>,
+}
+
+impl ImageFiles {
+    /// The image `file` (relative to the model's folder `dir`: a library's folder joined with the
+    /// map's path) names, read once into `mesh.images`; a warning and `None` when it is missing,
+    /// unreadable, outside the model's folder without `allow_outside`, or neither PNG nor JPEG.
+    pub(crate) fn load(
+        &mut self,
+        dir: &Path,
+        file: &Path,
+        allow_outside: bool,
+        mesh: &mut Mesh,
+        warnings: &mut Vec<String>,
+    ) -> Option<u32> {
+        file.file_name()?;
+        let path = dir.join(file);
+        if let Some(&known) = self.by_path.get(&path) {
+            return known;
+        }
+        crate::atomic::protect(&path);
+        let name = file.to_string_lossy().replace('\\', "/");
+        let result = if !allow_outside && !stays_inside(file) {
+            Err(format!("{name} lies outside the model's folder (--allow-outside-files reads it)"))
+        } else {
+            read_regular_file(&path, 1 << 30)
+                .map_err(|e| format!("{}: {e}", path.display()))
+                .and_then(|b| SourceImage::new(name.clone(), b).map_err(|e| format!("{}: {e}", path.display())))
+        };
+        let index = match result {
+            Ok(image) => {
+                mesh.images.push(image);
+                Some(mesh.images.len() as u32 - 1)
+            }
+            Err(e) => {
+                warnings.push(format!("texture left out: {e}"));
+                None
+            }
+        };
+        self.by_path.insert(path, index);
+        index
+    }
 }
 
 #[cfg(test)]

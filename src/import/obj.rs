@@ -13,7 +13,6 @@ use super::{ImportOptions, Raw};
 use crate::error::{Error, Result};
 use crate::format::{MapKind, TextureSlot, Wrap};
 use crate::mesh::{coordinate_problem, Material, Mesh};
-use crate::texture::SourceImage;
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 use std::cell::RefCell;
@@ -92,7 +91,7 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
             tobj_id < first
         })
     };
-    let mut images = Images::default();
+    let mut images = super::ImageFiles::default();
     for (out, source) in sources.iter().enumerate() {
         let (Some(id), Some(m)) = (*source, source.and_then(|i| materials.get(i))) else { continue };
         let folder = folder_of(id).map_or(Path::new(""), |(f, _)| f.as_path());
@@ -143,46 +142,6 @@ fn texture_file(value: &str) -> (String, bool) {
         }
     }
     (words[i..].join(" ").replace('\\', "/"), clamp)
-}
-
-/// Images read so far, by resolved path.
-#[derive(Default)]
-struct Images {
-    by_path: HashMap<PathBuf, Option<u32>>,
-}
-
-impl Images {
-    /// The image `file` (relative to the model's folder `dir`: a library's folder joined with the
-    /// map's path) names, read once into `mesh.images`; a warning and `None` when it is missing,
-    /// unreadable, outside the model's folder without `allow_outside`, or neither PNG nor JPEG.
-    fn load(&mut self, dir: &Path, file: &Path, allow_outside: bool, mesh: &mut Mesh, warnings: &mut Vec<String>) -> Option<u32> {
-        file.file_name()?;
-        let path = dir.join(file);
-        if let Some(&known) = self.by_path.get(&path) {
-            return known;
-        }
-        crate::atomic::protect(&path);
-        let name = file.to_string_lossy().replace('\\', "/");
-        let result = if !allow_outside && !super::stays_inside(file) {
-            Err(format!("{name} lies outside the model's folder (--allow-outside-files reads it)"))
-        } else {
-            super::read_regular_file(&path, 1 << 30)
-                .map_err(|e| format!("{}: {e}", path.display()))
-                .and_then(|b| SourceImage::new(name.clone(), b).map_err(|e| format!("{}: {e}", path.display())))
-        };
-        let index = match result {
-            Ok(image) => {
-                mesh.images.push(image);
-                Some(mesh.images.len() as u32 - 1)
-            }
-            Err(e) => {
-                warnings.push(format!("texture left out: {e}"));
-                None
-            }
-        };
-        self.by_path.insert(path, index);
-        index
-    }
 }
 
 /// The text tobj gets: line elements (`l`), which its fan triangulation would turn into polygons,

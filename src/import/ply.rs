@@ -3,7 +3,9 @@
 //! Hand-written rather than a crate so errors can name the byte offset, line or element that is
 //! wrong, and so large binary files read at close to memory speed. The vertex element gives
 //! positions and optional normals, colors and texture coordinates (v flipped to glTF's convention); `face` polygons are
-//! fan-triangulated and `tristrips` expanded with alternating winding. Every other element is
+//! fan-triangulated and `tristrips` expanded with alternating winding; MeshLab's `comment
+//! TextureFile <name>` lines become materials whose base color is that image (read from the
+//! file's folder), faces choosing theirs by `texnumber`. Every other element is
 //! skipped by its declared types. Vertex attributes are copied onto each triangle corner.
 //!
 //! Ascii records are read one per line, as PLY writes them: a line with more or fewer values than
@@ -12,6 +14,7 @@
 
 use super::{ImportOptions, Raw};
 use crate::error::{Error, Location, Result};
+use crate::format::{MapKind, TextureSlot, Wrap};
 use crate::mesh::{coordinate_problem, Material, Mesh};
 use byteorder::{BigEndian, ByteOrder, LittleEndian};
 use glam::{Vec2, Vec3};
@@ -20,8 +23,18 @@ use std::path::Path;
 
 /// Read a PLY file into a raw, uncleaned mesh: positions as in the file, one triangle list.
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
-pub fn read(path: &Path, _options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
-    read_mesh(path, warnings).map(|mesh| Raw { mesh, metres_per_unit: None, georef: None, grid: None })
+pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
+    let mut mesh = read_mesh(path, warnings)?;
+    // MeshLab's `TextureFile` comments name images beside the file: each material's base color.
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut files = super::ImageFiles::default();
+    for m in 0..mesh.materials.len() {
+        let Some(name) = mesh.materials[m].texture.clone() else { continue };
+        if let Some(image) = files.load(dir, Path::new(&name), options.allow_outside_files, &mut mesh, warnings) {
+            mesh.materials[m].maps[MapKind::BaseColor as usize] = Some(TextureSlot { image, wrap: [Wrap::Repeat; 2] });
+        }
+    }
+    Ok(Raw { mesh, metres_per_unit: None, georef: None, grid: None })
 }
 
 fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
@@ -41,7 +54,7 @@ fn parse(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Mesh> 
         Encoding::Little => reader.run(&header, &plan, &mut Binary::<LittleEndian>::new(body, header.body_start))?,
         Encoding::Big => reader.run(&header, &plan, &mut Binary::<BigEndian>::new(body, header.body_start))?,
     }
-    Ok(reader.finish(&plan, warnings))
+    Ok(reader.finish(&plan, &header.texture_files, warnings))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -132,6 +145,9 @@ struct Element {
 struct Header {
     encoding: Encoding,
     elements: Vec<Element>,
+    /// `comment TextureFile <name>` lines (MeshLab's convention), in order: face `texnumber` k
+    /// samples the k-th.
+    texture_files: Vec<String>,
     body_start: usize,
     /// Line number of the first body line (for ascii errors).
     body_line: usize,
@@ -142,6 +158,7 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
         return Err(Error::at_byte(path, 0, super::EMPTY));
     }
     let mut encoding = None;
+    let mut texture_files = Vec::new();
     let mut elements: Vec<Element> = Vec::new();
     let mut pos = 0;
     let mut line = 0;
@@ -164,6 +181,12 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
         let text = text.ok_or_else(|| Error::at_line(path, line, "header line is not text"))?;
         let words: Vec<&str> = text.split_ascii_whitespace().collect();
         match words.first().copied() {
+            Some("comment") if words.get(1).is_some_and(|w| w.eq_ignore_ascii_case("TextureFile")) => {
+                let rest = text.trim_start()["comment".len()..].trim_start()["TextureFile".len()..].trim();
+                if !rest.is_empty() {
+                    texture_files.push(rest.to_string());
+                }
+            }
             None | Some("comment") | Some("obj_info") => {}
             Some("format") => {
                 if encoding.is_some() {
@@ -191,7 +214,7 @@ fn parse_header(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result
         }
     }
     let encoding = encoding.ok_or_else(|| Error::at_line(path, line, "the header has no format line"))?;
-    Ok(Header { encoding, elements, body_start: pos, body_line: line + 1 })
+    Ok(Header { encoding, elements, texture_files, body_start: pos, body_line: line + 1 })
 }
 
 fn parse_format(words: &[&str]) -> std::result::Result<Encoding, String> {
@@ -300,6 +323,8 @@ struct FaceProps {
     count_type: Scalar,
     index_type: Scalar,
     texcoord: Option<usize>,
+    /// A scalar `texnumber`: which `TextureFile` the face samples.
+    texnumber: Option<usize>,
     strips: bool,
 }
 
@@ -385,7 +410,8 @@ fn face_props(path: &Path, e: &Element) -> Result<FaceProps> {
         }
     };
     let texcoord = e.props.iter().position(|p| p.name == "texcoord" && matches!(p.kind, Kind::List(..)));
-    Ok(FaceProps { indices, count_type, index_type, texcoord, strips: e.name == "tristrips" })
+    let texnumber = e.props.iter().position(|p| p.name == "texnumber" && matches!(p.kind, Kind::Scalar(_)));
+    Ok(FaceProps { indices, count_type, index_type, texcoord, texnumber, strips: e.name == "tristrips" })
 }
 
 /// Why reading a value failed, and where.
@@ -711,6 +737,8 @@ struct Reader<'p> {
     triangles: Vec<[u32; 3]>,
     /// Per-corner UVs from face `texcoord` lists, for the triangles that had them.
     corner_uvs: Vec<Vec2>,
+    /// Per triangle, its face's `texnumber`, when faces have one.
+    texnumbers: Vec<i64>,
     short_faces: usize,
 }
 
@@ -725,6 +753,7 @@ impl<'p> Reader<'p> {
             uvs: Vec::new(),
             triangles: Vec::new(),
             corner_uvs: Vec::new(),
+            texnumbers: Vec::new(),
             short_faces: 0,
         }
     }
@@ -798,6 +827,7 @@ impl<'p> Reader<'p> {
         self.triangles.reserve(e.count as usize);
         let mut indices: Vec<i64> = Vec::new();
         let mut texcoords: Vec<f64> = Vec::new();
+        let mut texnumber = 0i64;
         for r in 0..e.count {
             src.begin_record();
             if fast {
@@ -813,15 +843,21 @@ impl<'p> Reader<'p> {
                 let got = match p.kind {
                     Kind::List(c, t) if k == face.indices => read_list(src, c, t, &mut indices, |s, t| s.int(t)),
                     Kind::List(c, t) if Some(k) == face.texcoord => read_list(src, c, t, &mut texcoords, |s, t| s.value(t)),
+                    Kind::Scalar(t) if Some(k) == face.texnumber => src.value(t).map(|v| texnumber = v as i64),
                     _ => skip_property(src, p),
                 };
                 got.map_err(|f| fault_error(self.path, f, e, r, Some(p)))?;
             }
             src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
+            let before = self.triangles.len();
             if face.strips {
                 self.strip(&indices, e, r)?;
             } else {
                 self.polygon(&indices, &texcoords, e, r)?;
+            }
+            if face.texnumber.is_some() {
+                self.texnumbers.resize(before, 0);
+                self.texnumbers.resize(self.triangles.len(), texnumber);
             }
         }
         Ok(())
@@ -874,7 +910,7 @@ impl<'p> Reader<'p> {
         Ok(())
     }
 
-    fn finish(self, plan: &Plan, warnings: &mut Vec<String>) -> Mesh {
+    fn finish(self, plan: &Plan, texture_files: &[String], warnings: &mut Vec<String>) -> Mesh {
         if self.short_faces > 0 {
             warnings.push(format!("skipped {} faces with fewer than 3 vertices", self.short_faces));
         }
@@ -888,12 +924,27 @@ impl<'p> Reader<'p> {
             }
             Vec::new()
         };
+        // One material per texture file, named after it; faces pick theirs by `texnumber` (the
+        // first without one, or with one out of range).
+        let (materials, face_materials) = if texture_files.is_empty() {
+            (vec![Material::default()], vec![0; self.triangles.len()])
+        } else {
+            let n = texture_files.len() as i64;
+            let faces: Vec<u32> = (0..self.triangles.len())
+                .map(|f| self.texnumbers.get(f).filter(|&&t| (0..n).contains(&t)).map_or(0, |&t| t as u32))
+                .collect();
+            let materials = texture_files
+                .iter()
+                .map(|t| Material { name: t.clone(), base_color: [1.0; 4], texture: Some(t.clone()), ..Material::default() })
+                .collect();
+            (materials, faces)
+        };
         Mesh {
             normals: per_corner(&self.triangles, &self.normals),
             colors: per_corner(&self.triangles, &self.colors),
             uvs,
-            face_materials: vec![0; self.triangles.len()],
-            materials: vec![Material::default()],
+            face_materials,
+            materials,
             positions: self.positions,
             triangles: self.triangles,
             ..Default::default()
@@ -1550,5 +1601,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn texture_file_comments_become_materials_with_their_images() {
+        let dir = std::env::temp_dir().join(format!("strata-ply-tex-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
+        std::fs::write(dir.join("a.png"), &png).unwrap();
+        let text = "ply\nformat ascii 1.0\ncomment TextureFile a.png\ncomment TextureFile missing b.png\nelement vertex 4\n\
+                    property float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\n\
+                    property list uchar float texcoord\nproperty int texnumber\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n\
+                    3 0 1 2 6 0 0 1 0 1 1 1\n3 0 2 3 6 0 0 1 1 0 1 0\n";
+        let path = dir.join("m.ply");
+        std::fs::write(&path, text).unwrap();
+        let mut warnings = Vec::new();
+        let raw = read(&path, &ImportOptions::default(), &mut warnings).unwrap();
+        let m = raw.mesh;
+        assert_eq!(m.materials.iter().map(|x| x.name.as_str()).collect::<Vec<_>>(), ["a.png", "missing b.png"]);
+        assert_eq!(m.face_materials, vec![1, 0]);
+        assert_eq!(m.images.len(), 1);
+        assert_eq!(m.materials[0].map(MapKind::BaseColor).map(|s| s.image), Some(0));
+        assert_eq!(m.materials[1].map(MapKind::BaseColor), None);
+        assert!(warnings.iter().any(|w| w.contains("missing b.png")), "{warnings:?}");
+        assert_eq!(m.uvs[0], Vec2::new(0.0, 1.0), "v flipped");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
