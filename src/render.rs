@@ -68,12 +68,20 @@ pub struct Part<'a> {
     pub texture: Option<&'a MipChain>,
     /// How UVs outside [0, 1] wrap, along u and v.
     pub wrap: [Wrap; 2],
+    /// Draw face ids instead of colors: face k's pixels get `first + k` as little-endian RGBA
+    /// bytes, unshaded (an id buffer, for measuring what is visible). [`Image::draw_parts`] only.
+    pub ids: Option<u32>,
 }
 
 impl<'a> Part<'a> {
     /// An untextured part.
     pub fn new(positions: &'a [Vec3], normals: &'a [Vec3], indices: &'a [u32], color: [u8; 4]) -> Part<'a> {
-        Part { positions, normals, indices, color, uvs: &[], texture: None, wrap: [Wrap::Repeat; 2] }
+        Part { positions, normals, indices, color, uvs: &[], texture: None, wrap: [Wrap::Repeat; 2], ids: None }
+    }
+
+    /// This part drawn as face ids from `first` on ([`Part::ids`]).
+    pub fn with_ids(self, first: u32) -> Part<'a> {
+        Part { ids: Some(first), texture: None, ..self }
     }
 
     /// This part with `texture` sampled at `uvs` (one per position; otherwise drawn untextured),
@@ -192,7 +200,7 @@ impl Image {
         let chunks: Vec<(Vec<Setup>, usize)> = work
             .par_iter()
             .map_init(Clip::default, |clip, &(k, c)| {
-                let Part { positions, indices, color, uvs, texture, .. } = parts[k];
+                let Part { positions, indices, color, uvs, texture, ids, .. } = parts[k];
                 let tex = texture.map(|chain| FaceTexture { part: k as u32, chain });
                 let vertex_shade = &vertex_shades[k];
                 let face_count = indices.len() / 3;
@@ -207,11 +215,14 @@ impl Image {
                     if !p.iter().all(|v| v.is_finite()) {
                         continue;
                     }
-                    let shade = if vertex_shade.is_empty() {
+                    let shade = if ids.is_some() {
+                        [1.0; 3]
+                    } else if vertex_shade.is_empty() {
                         [lit((p[1] - p[0]).cross(p[2] - p[0]), light); 3]
                     } else {
                         tri.map(|i| vertex_shade[i as usize])
                     };
+                    let color = ids.map_or(color, |first| first.wrapping_add(f as u32).to_le_bytes());
                     let uv = |k: usize| if tex.is_some() { uvs[tri[k] as usize] } else { Vec2::ZERO };
                     let corners: [ClipVertex; 3] =
                         std::array::from_fn(|k| ClipVertex { p: view_projection * p[k].extend(1.0), shade: shade[k], uv: uv(k) });
@@ -1081,6 +1092,23 @@ mod tests {
                 assert!(d >= 8, "palette({i}) = {:?} and palette({j}) = {:?}", colors[i], colors[j]);
             }
         }
+    }
+
+    #[test]
+    fn id_parts_write_face_ids() {
+        let (positions, indices) = sphere(1.0);
+        let mut image = Image::new(64, 64);
+        image.draw_parts(&ortho(), &[Part::new(&positions, &[], &indices, [9; 4]).with_ids(1000)]);
+        let faces = indices.len() as u32 / 3;
+        let mut seen = std::collections::BTreeSet::new();
+        for px in image.rgba.chunks_exact(4) {
+            let id = u32::from_le_bytes([px[0], px[1], px[2], px[3]]);
+            if px != BACKGROUND {
+                assert!((1000..1000 + faces).contains(&id), "{id}");
+                seen.insert(id);
+            }
+        }
+        assert!(seen.len() > 10);
     }
 
     #[test]
