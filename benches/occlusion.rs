@@ -134,7 +134,7 @@ fn main() {
                     (c, v)
                 };
                 let clusters: Vec<std::ops::Range<usize>> = if g.clusters.is_empty() {
-                    vec![0..g.face_count()]
+                    std::iter::once(0..g.face_count()).collect()
                 } else {
                     g.clusters.iter().map(|c| c.first_face as usize..(c.first_face + c.face_count) as usize).collect()
                 };
