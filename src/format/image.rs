@@ -98,3 +98,32 @@ pub fn decode(codec: ImageCodec, bytes: &[u8]) -> Result<Rgba8, String> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PNG signature and IHDR claiming `w` × `h`, then nothing useful.
+    fn claiming(w: u32, h: u32) -> Vec<u8> {
+        let mut b = b"\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR".to_vec();
+        b.extend_from_slice(&w.to_be_bytes());
+        b.extend_from_slice(&h.to_be_bytes());
+        b.extend_from_slice(&[8, 6, 0, 0, 0, 0, 0, 0, 0]);
+        b
+    }
+
+    #[test]
+    fn a_header_claiming_more_than_its_bytes_hold_is_refused_before_decoding() {
+        let e = decode(ImageCodec::Png, &claiming(16384, 16384)).unwrap_err();
+        assert!(e.contains("more than its bytes can hold"), "{e}");
+        let e = decode(ImageCodec::Png, &claiming(70000, 4)).unwrap_err();
+        assert!(e.contains("at most 65536 a side"), "{e}");
+        // A small claim passes the bound and fails as the truncated file it is.
+        let e = decode(ImageCodec::Png, &claiming(64, 64)).unwrap_err();
+        assert!(e.contains("not a readable PNG"), "{e}");
+        // JPEG: a start-of-frame claiming 16384² in a few bytes.
+        let jpeg = [0xFF, 0xD8, 0xFF, 0xC0, 0, 11, 8, 0x40, 0, 0x40, 0, 3, 1, 0x11, 0];
+        let e = decode(ImageCodec::Jpeg, &jpeg).unwrap_err();
+        assert!(e.contains("more than its bytes can hold") || e.contains("not a readable JPEG"), "{e}");
+    }
+}

@@ -98,3 +98,31 @@ pub fn source_chain(image: &SourceImage, kind: MapKind) -> std::result::Result<M
     let (w, h) = (levels[0].width, levels[0].height);
     Ok(MipChain::new(0, decoded, w, h))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::{MaterialRange, TextureSlot, Wrap};
+
+    #[test]
+    fn each_part_wraps_as_its_material_map_says() {
+        let g = NodeGeometry {
+            positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+            uvs: vec![glam::Vec2::ZERO; 3],
+            indices: vec![0, 1, 2, 0, 1, 2],
+            material_ranges: vec![
+                MaterialRange { material: 0, first_index: 0, index_count: 3 },
+                MaterialRange { material: 1, first_index: 3, index_count: 3 },
+            ],
+            ..NodeGeometry::default()
+        };
+        let slot = |w| Some(TextureSlot { image: 0, wrap: [w; 2] });
+        let mut materials = vec![Material::default(), Material::default()];
+        materials[0].maps[MapKind::BaseColor as usize] = slot(Wrap::Clamp);
+        materials[1].maps[MapKind::BaseColor as usize] = slot(Wrap::Mirror);
+        let chain = MipChain::new(0, vec![Arc::new(crate::texture::Rgba8::new(2, 2))], 2, 2);
+        let parts = node_parts(&g, &materials, &|_| Some(&chain));
+        assert_eq!(parts.iter().map(|p| p.wrap).collect::<Vec<_>>(), [[Wrap::Clamp; 2], [Wrap::Mirror; 2]]);
+        assert!(parts.iter().all(|p| p.texture.is_some()));
+    }
+}
