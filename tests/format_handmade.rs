@@ -537,7 +537,7 @@ fn georeference_chunk_follows_the_spec() {
 #[test]
 fn images_follow_the_spec() {
     let t = Texturing::new();
-    let d = build(MAJOR, MINOR, false, false, Some(&t));
+    let d = build(MAJOR, 2, false, false, Some(&t));
     let rd = Reader::open(Cursor::new(&d.bytes)).expect("open");
     assert_eq!((rd.header().major, rd.header().minor), (2, 2));
     let tx = rd.textures();

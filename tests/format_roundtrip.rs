@@ -140,7 +140,8 @@ fn layout_is_breadth_first_and_coarsest_first() {
         }
     }
     let total: u64 = rd.levels().iter().map(|l| l.bytes).sum();
-    assert_eq!(total, rd.file_size() - nodes[0].offset, "geometry fills the file after the skeleton");
+    assert_eq!(total, rd.planes_offset() - nodes[0].offset, "geometry fills the file after the skeleton, up to the planes");
+    assert!(!rd.read_planes().unwrap().is_empty(), "siblings get separating planes");
 }
 
 #[test]

@@ -18,7 +18,7 @@
 // bounds-checked first, every size taken from the file is checked against counts and lengths before
 // anything is allocated with it, and u64 fields beyond 2^53 are refused.
 
-export const MAJOR = 2, MINOR = 2;
+export const MAJOR = 2, MINOR = 3;
 
 /** A file that breaks the format; `offset` is the byte offset the message names, `node` the node. */
 export class FormatError extends Error {
@@ -762,6 +762,70 @@ export function decodeSkeleton(bytes, fileLength) {
   // Where the node table lies, for errors naming a node's record.
   Object.defineProperty(sk, '_nodeTable', { value: { at: node.at, ps: node.ps }, enumerable: false });
   return sk;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Separating planes (§7.6, format 2.3).
+
+/** Where the ORDR chunk starts if the file has one: after the last GEOM or TEXL and its padding. */
+export function planesOffset(sk) {
+  let end = sk.skeletonEnd + sk.levels.reduce((a, l) => a + l.bytes, 0);
+  for (const l of sk.textures.levels) end = Math.max(end, l.offset + l.size + ((8 - ((l.offset + l.size) % 8)) % 8));
+  return end;
+}
+
+/**
+ * The ORDR chunk from `bytes`, the file from planesOffset(sk) on (empty: no planes; chunks of newer minors may follow):
+ * `{ starts, entries }`, starts[p]..starts[p+1] the entries of parent p (0 = the virtual root,
+ * i + 1 = node i), each `{ first, second, normal, firstMax, secondMin }`.
+ */
+export function decodePlanes(sk, bytes) {
+  if (bytes.length === 0) return { starts: [], entries: [] };
+  const at = planesOffset(sk);
+  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const err = (o, msg) => chunkFail(at + o, 'ORDR', at, msg);
+  if (bytes.length < FRAME + 4) throw err(0, `${bytes.length} bytes after the geometry, too few for a chunk`);
+  const id = String.fromCharCode(...bytes.subarray(0, 4));
+  if (id !== 'ORDR') throw err(0, `${id} follows the geometry and images; only ORDR may`);
+  const width = dv.getUint32(4, true);
+  const size = Number(dv.getBigUint64(8, true));
+  const end = FRAME + size + 4;
+  if (!(end <= bytes.length)) throw err(8, `size ${size} runs past the end of the file`);
+  const stored = dv.getUint32(FRAME + size, true), actual = crc32(bytes, FRAME, FRAME + size);
+  if (stored !== actual) throw err(FRAME + size, `CRC ${hex(actual)} != stored ${hex(stored)}`);
+  if (width !== 2 && width !== 4) throw err(4, `entry index width ${width}; must be 2 or 4`);
+  const parents = sk.nodeCount + 1;
+  if (size < 4 * parents) throw err(FRAME, `holds ${size} bytes; the counts of ${parents} parents need ${4 * parents}`);
+  const starts = [0];
+  let total = 0;
+  for (let p = 0; p < parents; p++) starts.push((total += dv.getUint32(FRAME + 4 * p, true)));
+  const entry = 2 * width + 12;
+  if (size - 4 * parents !== total * entry) {
+    throw err(FRAME, `${total} entries of ${entry} bytes need ${total * entry}; ${size - 4 * parents} follow the counts`);
+  }
+  const top = sk.levels[sk.levels.length - 1].nodes;
+  const entries = [];
+  let o = FRAME + 4 * parents;
+  for (let p = 0; p < parents; p++) {
+    const children = p === 0 ? top : sk.childCount[p - 1];
+    const who = p === 0 ? 'the top level' : `node ${p - 1}`;
+    let last = null;
+    for (let k = starts[p]; k < starts[p + 1]; k++, o += entry) {
+      const idx = (q) => (width === 2 ? dv.getUint16(q, true) : dv.getUint32(q, true));
+      const first = idx(o), second = idx(o + width);
+      const normal = [dv.getInt16(o + 2 * width, true), dv.getInt16(o + 2 * width + 2, true)];
+      const firstMax = dv.getFloat32(o + 2 * width + 4, true), secondMin = dv.getFloat32(o + 2 * width + 8, true);
+      const lo = Math.min(first, second), hi = Math.max(first, second);
+      if (first === second || hi >= children) throw err(o, `${who}: a plane between children ${first} and ${second} of ${children}`);
+      if (last && (last[0] > lo || (last[0] === lo && last[1] >= hi))) {
+        throw err(o, `${who}: the plane between children ${lo} and ${hi} is out of order or repeated`);
+      }
+      if (!(Number.isFinite(firstMax) && Number.isFinite(secondMin))) throw err(o, `${who}: plane bounds ${firstMax} and ${secondMin} must be finite`);
+      last = [lo, hi];
+      entries.push({ first, second, normal, firstMax, secondMin });
+    }
+  }
+  return { starts, entries };
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -51,6 +51,9 @@ pub fn run(a: Args) -> Result<()> {
         let (start, end) = (v.images.iter().map(|i| i.start).min().unwrap_or(0), v.images.iter().map(|i| i.end).max().unwrap_or(0));
         println!("  TEXL x{texl} ({} images) at {start}..{end}", v.images.len());
     }
+    if let Some(p) = &v.planes {
+        println!("  ORDR at {} ({} bytes): {} separating planes under {} parents", p.offset, p.bytes, p.entries, p.parents);
+    }
     println!(
         "{:>5} {:>6} {:>10} {:>10} {:>11} {:>10} {:>9} {:>10}",
         "level", "nodes", "faces", "vertices", "bytes", "bytes/face", "cone max", "error max"

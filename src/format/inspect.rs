@@ -89,6 +89,20 @@ pub struct Inspection {
     pub nodes: Vec<NodeView>,
     /// The images materials use (`TEXR`, `TEXL`), empty without.
     pub images: Vec<ImageView>,
+    /// The separating planes (`ORDR`, 2.3), absent without.
+    pub planes: Option<PlanesView>,
+}
+
+/// Where the separating planes lie and how many there are.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PlanesView {
+    /// File offset of the `ORDR` chunk, and the bytes from there to the end of the file (the chunk
+    /// and any a newer minor appends).
+    pub offset: u64,
+    pub bytes: u64,
+    pub entries: u64,
+    /// Parents (the virtual root included) with at least one entry.
+    pub parents: u64,
 }
 
 /// One image and its levels.
@@ -205,6 +219,15 @@ pub fn inspect<S: ByteSource>(rd: &Reader<S>, select: Selection) -> Result<Inspe
         levels,
         nodes,
         images,
+        planes: {
+            let p = rd.read_planes()?;
+            (!p.is_empty()).then(|| PlanesView {
+                offset: rd.planes_offset(),
+                bytes: rd.file_size() - rd.planes_offset(),
+                entries: p.entries.len() as u64,
+                parents: p.starts.windows(2).filter(|w| w[1] > w[0]).count() as u64,
+            })
+        },
     })
 }
 
@@ -305,6 +328,20 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
         })).collect::<Vec<_>>(),
         "nodes": nodes,
     });
+    let planes = rd.read_planes()?;
+    if !planes.is_empty() {
+        // Files with separating planes (2.3): per parent (-1 = the virtual root), its entries.
+        let mut list = Vec::with_capacity(planes.entries.len());
+        for (p, w) in planes.starts.windows(2).enumerate() {
+            for e in &planes.entries[w[0] as usize..w[1] as usize] {
+                list.push(json!({
+                    "parent": p as i64 - 1, "first": e.first, "second": e.second, "normal": e.normal,
+                    "first_max": f(e.first_max), "second_min": f(e.second_min),
+                }));
+            }
+        }
+        out["planes"] = json!(list);
+    }
     let t = rd.textures();
     if !t.is_empty() {
         // Files with images (2.2) also list them; the level files' bytes by length and CRC-32.

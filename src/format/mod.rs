@@ -15,7 +15,8 @@
 //! - [`codes`]: the position grid and the u16 codes of angles and radii; [`octa`]: normals;
 //! - [`skeleton`]: `HEAD` and `SKEL`, encoded and decoded; [`georef`]: `GEOR`, where terrain sits;
 //!   [`texture`]: `TEXR` and `TEXL`, the images materials use, as pyramids of resolutions;
-//!   [`image`]: the PNG and JPEG files of their levels decoded into pixels;
+//!   [`image`]: the PNG and JPEG files of their levels decoded into pixels; [`planes`]: `ORDR`,
+//!   separating planes between siblings for drawing front to back;
 //! - [`geom`]: a node's geometry, one codec per format version ([`geom::v2`]);
 //! - [`source`]: [`ByteSource`], where bytes come from;
 //! - [`read`]: [`Reader`], the lazy reader; [`rules`]: what every reader checks (spec §10);
@@ -31,6 +32,7 @@ pub mod georef;
 pub mod image;
 pub mod inspect;
 pub mod octa;
+pub mod planes;
 pub mod read;
 pub mod records;
 pub mod rules;
@@ -58,11 +60,11 @@ pub const MAJOR: u16 = 2;
 /// (format-spec/strata-v3.md).
 pub const NEWEST_MAJOR: u16 = 3;
 /// Minor format version this reader knows: a newer minor only adds chunk kinds, which older readers
-/// skip. Writers write the lowest minor that holds what a file carries: 2 with images (`TEXR`,
-/// `TEXL`), 1 with a `GEOR` chunk, else 0.
-pub const MINOR: u16 = 2;
+/// skip. Writers write the lowest minor that holds what a file carries: 3 with separating planes
+/// (`ORDR`), 2 with images (`TEXR`, `TEXL`) or UVs, 1 with a `GEOR` chunk, else 0.
+pub const MINOR: u16 = 3;
 /// The format version as the spec writes it.
-pub const VERSION: &str = "2.2";
+pub const VERSION: &str = "2.3";
 
 /// The first 8 bytes of every strata file.
 pub const MAGIC: [u8; 8] = *b"\x89STRATA\n";
@@ -104,4 +106,5 @@ pub mod id {
     pub const CLUS: [u8; 4] = *b"CLUS";
     pub const TEXR: [u8; 4] = *b"TEXR";
     pub const TEXL: [u8; 4] = *b"TEXL";
+    pub const ORDR: [u8; 4] = *b"ORDR";
 }

@@ -12,6 +12,7 @@
 use super::chunk;
 use super::geom::v2::{self, GeometryCodes};
 use super::geom::v3;
+use super::planes::{self, PlaneEntry, Planes, Support};
 use super::georef::{self, Georef};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
 use super::texture::{self, ImageIn};
@@ -159,6 +160,8 @@ struct Pending {
     padded: u32,
     span: u32,
     crc: u32,
+    /// Its geometry's extent along the plane directions (`ORDR`).
+    support: Support,
 }
 
 /// A file being built node by node.
@@ -260,6 +263,7 @@ impl<W: Write> Writer<W> {
             padded: self.buf.len() as u32,
             span,
             crc: chunk::crc32(&payload),
+            support: Support::of(&g.points),
         });
         Ok(())
     }
@@ -391,9 +395,13 @@ impl<W: Write> Writer<W> {
         // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images
         // and UVs in glTF's orientation (so a file with UVs is 2.2 with or without images).
         let images = &self.opts.images;
-        let minor = match (self.opts.major, !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some()) {
-            (2, true, _) => MINOR,
-            (2, false, true) => 1,
+        let supports: Vec<&Support> = (0..nl).rev().flat_map(|l| order[l].iter().map(move |&k| (l, k))).map(|(l, k)| &self.levels[l][k].support).collect();
+        // Format 3 is a draft without a spec of its own: it carries no ORDR yet.
+        let planes = if self.opts.major == 2 { order_planes(&records, &codes, &supports, levels[nl - 1].nodes) } else { Planes::default() };
+        let minor = match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some()) {
+            (2, true, _, _) => MINOR,
+            (2, false, true, _) => 2,
+            (2, false, false, true) => 1,
             _ => 0,
         };
         let mut header = Header {
@@ -427,7 +435,14 @@ impl<W: Write> Writer<W> {
                 end + chunk::padding(end)
             })
             .sum();
-        header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>() + image_bytes;
+        let ordr = (!planes.entries.is_empty()).then(|| {
+            let (width, payload) = planes::encode_ordr(&planes);
+            let mut out = Vec::new();
+            chunk::put(&mut out, id::ORDR, width, &payload);
+            out
+        });
+        let ordr = ordr.unwrap_or_default();
+        header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>() + image_bytes + ordr.len() as u64;
 
         let mut prologue = Vec::with_capacity(16);
         prologue.extend_from_slice(&MAGIC);
@@ -454,6 +469,7 @@ impl<W: Write> Writer<W> {
             chunk::put(&mut buf, id::TEXL, 0, &images[i as usize].levels[l as usize].bytes);
             self.out.write_all(&buf).map_err(io)?;
         }
+        self.out.write_all(&ordr).map_err(io)?;
         self.out.flush().map_err(io)?;
 
         Ok(WriteSummary {
@@ -476,6 +492,62 @@ impl<W: Write> Writer<W> {
 /// Images are consistent: levels halve (rounding up) from the full image, at most
 /// [`texture::MAX_LEVELS`] of at most [`texture::MAX_SIDE`] a side, each level's header states its
 /// size, and every material slot names an image.
+/// Separating planes between the children of every parent (the virtual root first, then nodes in
+/// file order): every pair of up to 16 siblings, else each child with its 8 nearest siblings by box
+/// gap; a pair gets a plane when one of [`planes::directions`] leaves a slab no thicker than a
+/// quarter of the smaller box's diagonal.
+fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: &[&Support], top: u32) -> Planes {
+    let mut subtree: Vec<Support> = supports.iter().map(|s| (*s).clone()).collect();
+    for i in (0..records.len()).rev() {
+        let p = records[i].parent;
+        if p != NO_PARENT {
+            let (head, tail) = subtree.split_at_mut(i);
+            head[p as usize].union(&tail[0]);
+        }
+    }
+    let diag = |i: usize| {
+        let c = &codes[i];
+        (0..3).map(|k| (c.max[k] as f64 - c.min[k] as f64).powi(2)).sum::<f64>().sqrt()
+    };
+    let gap = |a: usize, b: usize| {
+        let (x, y) = (&codes[a], &codes[b]);
+        (0..3).map(|k| (x.min[k].max(y.min[k]) as i64 - x.max[k].min(y.max[k]) as i64).max(0)).max().unwrap_or(0)
+    };
+    let parents = std::iter::once((0u32, top)).chain(records.iter().map(|r| (r.first_child, r.child_count)));
+    let mut out = Planes { starts: vec![0], entries: Vec::new() };
+    for (first, count) in parents {
+        let kids = first as usize..(first + count) as usize;
+        let mut pairs: Vec<(u32, u32)> = Vec::new();
+        if count <= 16 {
+            for a in 0..count {
+                pairs.extend((a + 1..count).map(|b| (a, b)));
+            }
+        } else {
+            for a in kids.clone() {
+                let mut near: Vec<(i64, usize)> = kids.clone().filter(|&b| b != a).map(|b| (gap(a, b), b)).collect();
+                let nth = 7.min(near.len() - 1);
+                near.select_nth_unstable(nth);
+                for &(_, b) in near.iter().take(8) {
+                    let (x, y) = ((a - first as usize) as u32, (b - first as usize) as u32);
+                    pairs.push((x.min(y), x.max(y)));
+                }
+            }
+            pairs.sort_unstable();
+            pairs.dedup();
+        }
+        for (a, b) in pairs {
+            let (ia, ib) = (first as usize + a as usize, first as usize + b as usize);
+            let slack = 0.25 * diag(ia).min(diag(ib));
+            if let Some(e) = planes::separate(&subtree[ia], &subtree[ib], slack) {
+                let (x, y) = if e.first == 0 { (a, b) } else { (b, a) };
+                out.entries.push(PlaneEntry { first: x, second: y, ..e });
+            }
+        }
+        out.starts.push(out.entries.len() as u32);
+    }
+    out
+}
+
 fn check_images(opts: &WriterOptions) -> std::result::Result<(), String> {
     if opts.images.len() > u32::MAX as usize - 1 {
         return Err(format!("{} images", opts.images.len()));

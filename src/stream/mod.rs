@@ -16,6 +16,7 @@ pub mod images;
 pub mod play;
 pub mod refine;
 pub mod retention;
+pub mod order;
 pub mod session;
 #[cfg(test)]
 mod tests;

@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode, decodeImageLevel, MAP_KINDS } from '../../viewer/format.js';
+import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -28,7 +28,8 @@ function decodeAll(bytes, opts) {
   const geoms = [];
   for (let i = 0; i < sk.nodeCount; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
   const images = sk.textures.levels.map((l, e) => decodeImageLevel(sk, e, bytes.subarray(l.offset, l.offset + l.size)));
-  return { sk, geoms, images };
+  const planes = decodePlanes(sk, bytes.subarray(Math.min(planesOffset(sk), bytes.length)));
+  return { sk, geoms, images, planes };
 }
 
 /** Whether the file is refused (true) or read (false); anything but a FormatError fails the test. */
@@ -46,7 +47,7 @@ function refused(bytes, what) {
 
 /** The JSON `strata::format::inspect::dump` makes of a file (src/format/inspect.rs); `images` are
  * the image files of the level entries, for files with images. */
-function dump(sk, geoms, images = []) {
+function dump(sk, geoms, images = [], planes = { starts: [], entries: [] }) {
   const v3 = (a, o) => [a[o], a[o + 1], a[o + 2]];
   const rows = (a, k) => Array.from({ length: a ? a.length / k : 0 }, (_, j) => Array.from(a.subarray(k * j, k * j + k)));
   const h = sk.header;
@@ -110,6 +111,20 @@ function dump(sk, geoms, images = []) {
         })),
       },
     })),
+    ...(planes.starts.length
+      ? {
+          planes: planes.starts.slice(0, -1).flatMap((a, p) =>
+            planes.entries.slice(a, planes.starts[p + 1]).map((e) => ({
+              parent: p - 1,
+              first: e.first,
+              second: e.second,
+              normal: e.normal,
+              first_max: e.firstMax,
+              second_min: e.secondMin,
+            })),
+          ),
+        }
+      : {}),
     ...(sk.textures.images.length
       ? {
           textures: {
@@ -310,8 +325,8 @@ test('every valid golden vector decodes to its JSON, bit for bit', () => {
     const expected = JSON.parse(readFileSync(join(VECTORS, `${name}.json`), 'utf8'));
     if (expected.refused) continue;
     const bytes = read(`${name}.strata`);
-    const { sk, geoms, images } = decodeAll(bytes);
-    const d = difference(expected, dump(sk, geoms, images));
+    const { sk, geoms, images, planes } = decodeAll(bytes);
+    const d = difference(expected, dump(sk, geoms, images, planes));
     assert.equal(d, null, `${name}: ${d}`);
     // The struct of arrays is typed as promised.
     assert.ok(sk.level instanceof Uint16Array && sk.parent instanceof Uint32Array && sk.offset instanceof Float64Array);
@@ -425,12 +440,19 @@ test('openingRange refuses a bad prologue, an unsupported major version and a ba
 
 /**
  * The bytes no check of a reader covers: the flags of top-level chunks of kinds that define none
- * (ignored, §4.3; a sub-chunk's frame lies inside its parent's CRC), and the padding after each GEOM
- * chunk (a node is read as its `size` bytes, padding excluded).
+ * (ignored, §4.3; a sub-chunk's frame lies inside its parent's CRC), the padding after each GEOM
+ * chunk (a node is read as its `size` bytes, padding excluded) and after ORDR.
  */
 function uncheckedBytes(bytes) {
   const out = new Set();
   for (const c of parseTree(bytes).chunks) {
+    if (c.id === 'ORDR') {
+      // Its flags are the index width (checked); the padding after it, at the end of the file, is
+      // read by no reader.
+      const e = c.at + 20 + c.payload.length;
+      for (let k = e; k < e + pad8(e); k++) out.add(k);
+      continue;
+    }
     for (let k = 4; k < 8; k++) out.add(c.at + k);
     if (c.id !== 'GEOM') continue;
     const e = c.at + 20 + c.subs.reduce((n, s) => n + 20 + s.payload.length + pad8(20 + s.payload.length), 0);
@@ -451,8 +473,7 @@ test('every byte of sphere.strata flipped: refused with a FormatError, or read o
       if (!refused(b, `byte ${k} ^ ${x}`)) {
         accepted[x].push(k);
         assert.ok(free.has(k), `byte ${k} ^ 0x${x.toString(16)} was read although a check covers it`);
-        const { sk, geoms } = decodeAll(b);
-        assert.equal(JSON.stringify(dump(sk, geoms)), original, `byte ${k}: read, but differently`);
+        assert.equal(JSON.stringify(dump(...Object.values(decodeAll(b)))), original, `byte ${k}: read, but differently`);
       }
     }
   }
@@ -617,14 +638,14 @@ test('a newer minor version is read with what it may add; unknown chunks are ski
   same(variant((v) => v.chunks.filter((c) => c.id === 'GEOM').forEach((c) => c.subs.splice(1, 0, unknown('GMX1', 3)))), 'unknown sub-chunks in GEOM');
   // A newer minor: unknown attribute bits, fields after the tool string and after the last material.
   const newer = (v) => {
-    v.minor = 3;
+    v.minor = MINOR + 1;
     const h = find(v.chunks, 'HEAD');
     h.payload = concat([h.payload, new Uint8Array(24).fill(7)]);
     le(h.payload).setUint32(40, le(h.payload).getUint32(40, true) | 0x100, true);
     const m = find(find(v.chunks, 'SKEL').subs, 'MATL');
     m.payload = concat([m.payload, new Uint8Array(5).fill(9)]);
   };
-  same(variant(newer), 'minor 3 with additions', 3);
+  same(variant(newer), `minor ${MINOR + 1} with additions`, MINOR + 1);
   // The same additions in a 2.0 file are errors.
   const b = variant((v) => {
     newer(v);
