@@ -191,6 +191,7 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
     let mut ortho = cameras[5];
     ortho.projection = Projection::Orthographic { height: 2.5 * radius };
     cameras.push(ortho);
+    let mut orderer = strata::stream::order::Orderer::new(skeleton, rd.read_planes().expect("planes"));
     let mut out = Vec::new();
     for camera in &cameras {
         for (pixel_error, max_faces, priority) in [
@@ -205,6 +206,8 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
                 continue;
             }
             let (shown, culled) = front(skeleton, camera, &limits);
+            let mut order = Vec::new();
+            orderer.order(skeleton, &shown, camera, &mut order);
             let priority = match priority {
                 Priority::Error => "error",
                 Priority::Silhouette => "silhouette",
@@ -217,6 +220,7 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
                 "held": [],
                 "front": shown,
                 "culled": culled,
+                "order": order,
             }));
         }
     }

@@ -21,6 +21,7 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Color of pixels no face covers.
 pub const BACKGROUND: [u8; 4] = [28, 30, 36, 255];
@@ -71,17 +72,25 @@ pub struct Part<'a> {
     /// Draw face ids instead of colors: face k's pixels get `first + k` as little-endian RGBA
     /// bytes, unshaded (an id buffer, for measuring what is visible). [`Image::draw_parts`] only.
     pub ids: Option<u32>,
+    /// A box holding every position (its node's box), for [`Strips`]'s occlusion test.
+    pub bounds: Option<(Vec3, Vec3)>,
 }
 
 impl<'a> Part<'a> {
     /// An untextured part.
     pub fn new(positions: &'a [Vec3], normals: &'a [Vec3], indices: &'a [u32], color: [u8; 4]) -> Part<'a> {
-        Part { positions, normals, indices, color, uvs: &[], texture: None, wrap: [Wrap::Repeat; 2], ids: None }
+        Part { positions, normals, indices, color, uvs: &[], texture: None, wrap: [Wrap::Repeat; 2], ids: None, bounds: None }
     }
 
     /// This part drawn as face ids from `first` on ([`Part::ids`]).
     pub fn with_ids(self, first: u32) -> Part<'a> {
         Part { ids: Some(first), texture: None, ..self }
+    }
+
+    /// This part with a box that holds all its positions: with occlusion culling on, [`Strips`]
+    /// skips it wherever the box lies behind what is already drawn.
+    pub fn with_bounds(self, lo: Vec3, hi: Vec3) -> Part<'a> {
+        Part { bounds: Some((lo, hi)), ..self }
     }
 
     /// This part with `texture` sampled at `uvs` (one per position; otherwise drawn untextured),
@@ -311,6 +320,85 @@ struct StripFrame<'a> {
     light: Vec3,
     width: u32,
     height: u32,
+    /// Per part, with occlusion culling on: where its box projects ([`Hull`]).
+    hulls: &'a [Hull],
+    /// Per part: drawn in some strip this frame.
+    drawn: &'a [AtomicBool],
+}
+
+/// A part's box on screen, for the occlusion test: pixels `x0..=x1` × `y0..=y1` (a pixel wider
+/// than the corners' projections each way) and the nearest depth any of its points can have.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Hull {
+    /// No box, or one reaching to or behind the near plane: always drawn.
+    Unknown,
+    /// The box projects outside the image: nothing of the part can be drawn.
+    Outside,
+    Rect {
+        x0: u32,
+        x1: u32,
+        y0: u32,
+        y1: u32,
+        z: f32,
+    },
+}
+
+/// Depth below a box's least corner depth that a fragment of a face inside it can still reach
+/// through rounding; the occlusion test leaves this much to spare.
+const HULL_DEPTH_MARGIN: f32 = 1e-5;
+
+impl Hull {
+    fn of(part: &Part<'_>, view_projection: &glam::Mat4, width: u32, height: u32) -> Hull {
+        let Some((lo, hi)) = part.bounds else { return Hull::Unknown };
+        let (mut x0, mut x1, mut y0, mut y1, mut z) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY);
+        for k in 0..8 {
+            let c =
+                Vec3::new(if k & 1 == 0 { lo.x } else { hi.x }, if k & 2 == 0 { lo.y } else { hi.y }, if k & 4 == 0 { lo.z } else { hi.z });
+            let clip = *view_projection * c.extend(1.0);
+            // Depth along the view is linear over the box, so its least value is at a corner; a
+            // corner at or before the near plane leaves the box's depth unbounded below.
+            if !clip.is_finite() || clip.w <= 0.0 || clip.z < -clip.w {
+                return Hull::Unknown;
+            }
+            let n = clip.truncate() / clip.w;
+            let (px, py) = ((n.x + 1.0) * 0.5 * width as f32, (1.0 - n.y) * 0.5 * height as f32);
+            (x0, x1, y0, y1, z) = (x0.min(px), x1.max(px), y0.min(py), y1.max(py), z.min(n.z));
+        }
+        if !(x0.is_finite() && x1.is_finite() && y0.is_finite() && y1.is_finite() && z.is_finite()) {
+            return Hull::Unknown;
+        }
+        let (x0, y0) = ((x0.floor() - 1.0).max(0.0), (y0.floor() - 1.0).max(0.0));
+        let (x1, y1) = ((x1.ceil() + 1.0).min(width as f32 - 1.0), (y1.ceil() + 1.0).min(height as f32 - 1.0));
+        if x0 > x1 || y0 > y1 {
+            return Hull::Outside;
+        }
+        Hull::Rect { x0: x0 as u32, x1: x1 as u32, y0: y0 as u32, y1: y1 as u32, z: z - HULL_DEPTH_MARGIN }
+    }
+
+    /// Whether nothing of the part can show in the strip whose rows `first..=last` have `depth`:
+    /// every pixel its box reaches there already holds something nearer than the box. A part
+    /// whose box misses these rows is hidden here too (it has no pixels in them).
+    fn hidden(&self, first: u32, last: u32, width: u32, depth: &[f32]) -> bool {
+        match *self {
+            Hull::Unknown => false,
+            Hull::Outside => true,
+            Hull::Rect { x0, x1, y0, y1, z } => {
+                let (a, b) = (y0.max(first), y1.min(last));
+                (a..=b).all(|row| {
+                    let line = (row - first) as usize * width as usize;
+                    depth[line + x0 as usize..=line + x1 as usize].iter().all(|&d| d < z)
+                })
+            }
+        }
+    }
+
+    fn reaches(&self, first: u32, last: u32) -> bool {
+        match *self {
+            Hull::Unknown => true,
+            Hull::Outside => false,
+            Hull::Rect { y0, y1, .. } => y0 <= last && y1 >= first,
+        }
+    }
 }
 
 impl StripFrame<'_> {
@@ -379,14 +467,14 @@ impl StripFrame<'_> {
 
     /// Draw every face reaching strip `strip` (rows `strip · STRIP_ROWS ..`) into its buffers, in
     /// input order, as [`Image::draw_parts`] draws them into the whole image. `blocks` are the
-    /// parts' block rows, one after the other. Returns the faces whose topmost pixel row lies in
+    /// parts' block rows, one after the other. Counts the faces whose topmost pixel row lies in
     /// this strip, so that each drawn face counts once.
-    fn draw_strip(&self, strip: u32, blocks: &[(i32, i32)], rgba: &mut [u8], depth: &mut [f32], s: &mut StripScratch) -> usize {
+    fn draw_strip(&self, strip: u32, blocks: &[(i32, i32)], rgba: &mut [u8], depth: &mut [f32], s: &mut StripScratch) -> DrawStats {
         let (width, height) = (self.width, self.height);
         let first = strip * STRIP_ROWS;
         let last = (first + STRIP_ROWS).min(height) - 1;
         let (lo, hi) = (first as i32, last as i32);
-        let mut drawn = 0;
+        let mut stats = DrawStats::default();
         let mut block = 0;
         for (part_index, part) in self.parts.iter().enumerate() {
             let tex = part.texture.map(|chain| FaceTexture { part: part_index as u32, chain });
@@ -395,6 +483,12 @@ impl StripFrame<'_> {
             block += count;
             if ranges.iter().all(|&(a, b)| b < lo || a > hi) {
                 continue;
+            }
+            if let Some(h) = self.hulls.get(part_index) {
+                if !h.reaches(first, last) || h.hidden(first, last, width, depth) {
+                    continue;
+                }
+                self.drawn[part_index].store(true, Ordering::Relaxed);
             }
             let n = part.positions.len();
             let smooth = part.normals.len() == n;
@@ -431,17 +525,20 @@ impl StripFrame<'_> {
                     s.setups.clear();
                     setup_face(corners, width, height, part.color, tex, &mut s.setups, &mut s.clip);
                     if s.setups.iter().map(|f| f.y0).min().is_some_and(|top| top / STRIP_ROWS == strip) {
-                        drawn += 1;
+                        stats.faces += 1;
                     }
                     for f in &s.setups {
                         if f.y1 >= first && f.y0 <= last {
-                            fill(f, width, first, last, rgba, depth, self.parts);
+                            let (fragments, writes) = fill(f, width, first, last, rgba, depth, self.parts);
+                            stats.fragments += fragments;
+                            stats.writes += writes;
                         }
                     }
                 }
             }
         }
-        drawn
+        stats.covered = depth.iter().filter(|d| d.is_finite()).count() as u64;
+        stats
     }
 }
 
@@ -509,6 +606,52 @@ pub struct Strips {
     slots: Vec<Slot>,
     /// Rows of each block of [`BLOCK_FACES`] faces, parts one after the other (this frame).
     blocks: Vec<(i32, i32)>,
+    occlusion: bool,
+    hulls: Vec<Hull>,
+    drawn: Vec<AtomicBool>,
+    stats: DrawStats,
+}
+
+/// What a [`Strips::draw`] did: its faces, overdraw and what occlusion culling skipped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct DrawStats {
+    /// Faces set up and filled, each counted once.
+    pub faces: usize,
+    /// Pixels inside drawn faces, and those of them that passed the depth test (were shaded).
+    pub fragments: u64,
+    pub writes: u64,
+    /// Pixels some face covers.
+    pub covered: u64,
+    /// Parts with bounds skipped by the occlusion test in every strip their box reaches, and
+    /// their faces.
+    pub parts_hidden: usize,
+    pub faces_hidden: u64,
+}
+
+impl DrawStats {
+    /// Depth-test failures per covered pixel.
+    pub fn failures_per_pixel(&self) -> f64 {
+        (self.fragments - self.writes) as f64 / self.covered.max(1) as f64
+    }
+
+    /// Shaded fragments per covered pixel (1 when every pixel is shaded once).
+    pub fn writes_per_pixel(&self) -> f64 {
+        self.writes as f64 / self.covered.max(1) as f64
+    }
+}
+
+impl std::ops::Add for DrawStats {
+    type Output = DrawStats;
+    fn add(self, o: DrawStats) -> DrawStats {
+        DrawStats {
+            faces: self.faces + o.faces,
+            fragments: self.fragments + o.fragments,
+            writes: self.writes + o.writes,
+            covered: self.covered + o.covered,
+            parts_hidden: self.parts_hidden + o.parts_hidden,
+            faces_hidden: self.faces_hidden + o.faces_hidden,
+        }
+    }
 }
 
 impl Strips {
@@ -519,7 +662,34 @@ impl Strips {
         let count = rayon::current_num_threads().clamp(1, strips);
         let n = width as usize * STRIP_ROWS as usize;
         let slots = (0..count).map(|_| Slot { rgba: vec![0; 4 * n], depth: vec![f32::INFINITY; n], ..Slot::default() }).collect();
-        Strips { width, height, slots, blocks: Vec::new() }
+        Strips {
+            width,
+            height,
+            slots,
+            blocks: Vec::new(),
+            occlusion: false,
+            hulls: Vec::new(),
+            drawn: Vec::new(),
+            stats: DrawStats::default(),
+        }
+    }
+
+    /// Occlusion culling: parts with [`Part::bounds`] are skipped in a strip where their box lies
+    /// behind what the parts before them drew there. Drawn front to back, this skips much of what
+    /// is hidden; the image is the same pixel for pixel either way (the test is conservative).
+    pub fn set_occlusion(&mut self, on: bool) {
+        self.occlusion = on;
+    }
+
+    /// What the last [`Strips::draw`] did.
+    pub fn stats(&self) -> DrawStats {
+        self.stats
+    }
+
+    /// Whether the last [`Strips::draw`] skipped part `k` in every strip its box reaches (only with
+    /// occlusion culling on, and a box on screen).
+    pub fn part_hidden(&self, k: usize) -> bool {
+        matches!(self.hulls.get(k), Some(Hull::Rect { .. })) && self.drawn.get(k).is_some_and(|d| !d.load(Ordering::Relaxed))
     }
 
     /// Draw `parts` seen by `camera` over the background, as [`Image::draw_parts`] would on a
@@ -527,7 +697,15 @@ impl Strips {
     /// top strip first. Returns the faces drawn.
     pub fn draw(&mut self, camera: &Camera, parts: &[Part<'_>], mut put_rows: impl FnMut(u32, &[u8])) -> usize {
         let (width, height) = (self.width, self.height);
-        let frame = StripFrame { parts, view_projection: camera.view_projection(), light: -camera.forward(), width, height };
+        let view_projection = camera.view_projection();
+        self.hulls.clear();
+        self.drawn.clear();
+        if self.occlusion {
+            self.hulls.extend(parts.iter().map(|p| Hull::of(p, &view_projection, width, height)));
+            self.drawn.extend(parts.iter().map(|_| AtomicBool::new(false)));
+        }
+        let (hulls, drawn_parts) = (&self.hulls[..], &self.drawn[..]);
+        let frame = StripFrame { parts, view_projection, light: -camera.forward(), width, height, hulls, drawn: drawn_parts };
         // Scratch is sized here, so that the workers do not allocate (their arenas would keep
         // the memory).
         for slot in &mut self.slots {
@@ -563,29 +741,37 @@ impl Strips {
         });
         let strips = height.div_ceil(STRIP_ROWS);
         let blocks = &self.blocks;
-        let mut drawn = 0;
+        let mut stats = DrawStats::default();
         for wave in (0..strips).step_by(self.slots.len()) {
             let busy = (strips - wave).min(self.slots.len() as u32) as usize;
-            drawn += self.slots[..busy]
-                .par_iter_mut()
-                .enumerate()
-                .map(|(k, slot)| {
-                    let strip = wave + k as u32;
-                    let n = (width * (((strip + 1) * STRIP_ROWS).min(height) - strip * STRIP_ROWS)) as usize;
-                    for px in slot.rgba[..4 * n].chunks_exact_mut(4) {
-                        px.copy_from_slice(&BACKGROUND);
-                    }
-                    slot.depth[..n].fill(f32::INFINITY);
-                    frame.draw_strip(strip, blocks, &mut slot.rgba[..4 * n], &mut slot.depth[..n], &mut slot.scratch)
-                })
-                .sum::<usize>();
+            stats = stats
+                + self.slots[..busy]
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(k, slot)| {
+                        let strip = wave + k as u32;
+                        let n = (width * (((strip + 1) * STRIP_ROWS).min(height) - strip * STRIP_ROWS)) as usize;
+                        for px in slot.rgba[..4 * n].chunks_exact_mut(4) {
+                            px.copy_from_slice(&BACKGROUND);
+                        }
+                        slot.depth[..n].fill(f32::INFINITY);
+                        frame.draw_strip(strip, blocks, &mut slot.rgba[..4 * n], &mut slot.depth[..n], &mut slot.scratch)
+                    })
+                    .reduce(DrawStats::default, |a, b| a + b);
             for (k, slot) in self.slots[..busy].iter().enumerate() {
                 let strip = wave + k as u32;
                 let n = (width * (((strip + 1) * STRIP_ROWS).min(height) - strip * STRIP_ROWS)) as usize;
                 put_rows(strip * STRIP_ROWS, &slot.rgba[..4 * n]);
             }
         }
-        drawn
+        self.stats = stats;
+        for (k, part) in parts.iter().enumerate() {
+            if self.part_hidden(k) {
+                self.stats.parts_hidden += 1;
+                self.stats.faces_hidden += (part.indices.len() / 3) as u64;
+            }
+        }
+        self.stats.faces
     }
 }
 
@@ -732,7 +918,8 @@ fn setup_triangle(v: [Screen; 3], width: u32, height: u32, color: [u8; 4], tex: 
 }
 
 /// Fill the rows `first_row ..= last_row` of a face into a band of the image.
-fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32], parts: &[Part<'_>]) {
+/// Returns the pixels inside the face (fragments) and those that passed the depth test.
+fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], depth: &mut [f32], parts: &[Part<'_>]) -> (u64, u64) {
     let texture = s.tex.and_then(|t| {
         let part = parts.get(t.part as usize)?;
         Some((t, part.texture?, part.wrap))
@@ -752,16 +939,19 @@ fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], d
         *e = (e0, -dy * step, dx * step);
     }
     let [r, g, b, a] = s.color.map(|c| c as f32);
+    let (mut fragments, mut writes) = (0u64, 0u64);
     for (row, py) in (y0..=y1).enumerate() {
         let mut e = edges.map(|(e0, _, per_row)| e0 + per_row * row as i64);
         let cy = py as f32 + 0.5 - s.origin[1];
         let line = (py - first_row) as usize * width as usize;
         for px in s.x0..=s.x1 {
             if (e[0] | e[1] | e[2]) >= 0 {
+                fragments += 1;
                 let cx = px as f32 + 0.5 - s.origin[0];
                 let z = s.z[0] + s.z[1] * cx + s.z[2] * cy;
                 let i = line + px as usize;
                 if z < depth[i] {
+                    writes += 1;
                     depth[i] = z;
                     let l = (s.shade[0] + s.shade[1] * cx + s.shade[2] * cy).clamp(0.0, 1.0);
                     let px = match texture {
@@ -782,6 +972,7 @@ fn fill(s: &Setup, width: u32, first_row: u32, last_row: u32, rgba: &mut [u8], d
             }
         }
     }
+    (fragments, writes)
 }
 
 /// A stable, distinct color per id (for group and level colors): hues a golden angle apart, with
@@ -976,6 +1167,61 @@ mod tests {
             assert!(rgba == whole.rgba, "{width}x{height} from {}: images differ", camera.eye);
             assert_eq!(strip_drawn, drawn, "{width}x{height} from {}", camera.eye);
             assert!(drawn > 0);
+        }
+    }
+
+    /// The strip renderer's rows with occlusion culling on, and its stats.
+    fn draw_occluded(camera: &Camera, parts: &[Part<'_>], width: u32, height: u32) -> (Vec<u8>, DrawStats) {
+        let mut rgba = vec![0; 4 * (width * height) as usize];
+        let mut strips = Strips::new(width, height);
+        strips.set_occlusion(true);
+        strips.draw(camera, parts, |row, rows| {
+            let at = 4 * (row * width) as usize;
+            rgba[at..at + rows.len()].copy_from_slice(rows);
+        });
+        (rgba, strips.stats())
+    }
+
+    #[test]
+    fn occlusion_culling_skips_what_is_behind_and_changes_no_pixel() {
+        // A grid of small spheres behind a large one, with their boxes; drawn near first.
+        let (unit, indices) = sphere(1.0);
+        let moved = |r: f32, d: Vec3| unit.iter().map(|p| *p * r + d).collect::<Vec<Vec3>>();
+        let mut meshes = vec![(moved(0.8, Vec3::new(0.0, 0.0, 1.0)), palette(0))];
+        for k in 0..25 {
+            let d = Vec3::new((k % 5) as f32 * 0.3 - 0.6, (k / 5) as f32 * 0.3 - 0.6, -1.0);
+            meshes.push((moved(0.12, d), palette(k + 1)));
+        }
+        let boxes: Vec<(Vec3, Vec3)> = meshes
+            .iter()
+            .map(|(p, _)| p.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v))))
+            .collect();
+        let parts: Vec<Part> =
+            meshes.iter().zip(&boxes).map(|((p, c), &(lo, hi))| Part::new(p, &[], &indices, *c).with_bounds(lo, hi)).collect();
+        let perspective = Camera {
+            eye: Vec3::new(0.3, 0.2, 4.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            projection: Projection::Perspective { fov_y: 50f32.to_radians() },
+            width: 120,
+            height: 90,
+            near: 0.05,
+            far: 20.0,
+        };
+        for camera in [ortho(), perspective] {
+            let (width, height) = (120, 90);
+            let (plain, faces) = draw_in_strips(&camera, &parts, width, height);
+            let (culled, stats) = draw_occluded(&camera, &parts, width, height);
+            assert!(culled == plain, "from {}: occlusion culling changed pixels", camera.eye);
+            assert!(stats.parts_hidden >= 4, "from {}: {stats:?}", camera.eye);
+            assert!(stats.faces < faces);
+            assert!(stats.faces_hidden > 0);
+            // Drawn back to front, nothing is behind what is drawn before it.
+            let reversed: Vec<Part> = parts.iter().rev().copied().collect();
+            let (back_first, stats) = draw_occluded(&camera, &reversed, width, height);
+            assert!(back_first == plain);
+            assert_eq!(stats.parts_hidden, 0);
+            assert!(stats.writes > stats.covered, "back to front shades pixels more than once");
         }
     }
 

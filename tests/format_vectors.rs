@@ -41,7 +41,7 @@ fn the_reader_agrees_with_every_golden_vector() {
 }
 
 /// The golden fronts of `format-spec/vectors/fronts.json` are what front selection
-/// (format-spec/selection.md) gives for their cameras and limits.
+/// (format-spec/selection.md) gives for their cameras and limits, in the drawing order of §5.
 #[test]
 fn front_selection_agrees_with_every_golden_front() {
     use strata::camera::Camera;
@@ -72,6 +72,9 @@ fn front_selection_agrees_with_every_golden_front() {
         let ids = |v: &serde_json::Value| v.as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect::<Vec<u32>>();
         assert_eq!(cut.shown, ids(&f["front"]), "front {k}");
         assert_eq!(cut.culled, ids(&f["culled"]), "culled roots {k}");
+        let mut order = Vec::new();
+        strata::stream::order::Orderer::new(rd.skeleton(), rd.read_planes().unwrap()).order(rd.skeleton(), &cut.shown, &camera, &mut order);
+        assert_eq!(order, ids(&f["order"]), "drawing order {k}");
         levels_seen.extend(cut.shown.iter().map(|&i| rd.nodes()[i as usize].level));
     }
     assert!(levels_seen.len() >= 3, "the golden fronts reach several levels: {levels_seen:?}");

@@ -185,7 +185,7 @@ const radiusSteps = (k) => (k & 0x7ff) * 2 ** (k >> 11);
  * Octahedral code (qx, qy) to a unit vector written at out[o..o+3], emulating Rust's f32 operations
  * (src/format/octa.rs and glam's Vec3::normalize) one by one.
  */
-function octaDecode(qx, qy, out, o) {
+export function octaDecode(qx, qy, out, o) {
   let x = fr(qx / 32767);
   if (x < -1) x = -1;
   else if (x > 1) x = 1;

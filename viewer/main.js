@@ -113,10 +113,11 @@ function frame() {
   const t0 = performance.now();
   const before = { requests: streamer.source.requests, bytes: streamer.source.bytes };
   clip();
-  const drawn = streamer.update(camera);
+  streamer.update(camera);
   const s = streamer.skeleton;
   const images = (image) => streamer.imageHandle(image);
-  renderer.draw(camera, streamer.localOrigin, drawn.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials, images);
+  // Front to back, so that the depth test rejects what lies behind before it is shaded.
+  renderer.draw(camera, streamer.localOrigin, streamer.drawOrder.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials, images);
   frameMs = performance.now() - t0;
   if (firstTextured === null && streamer.textureLevels().some(([, , level]) => level !== null)) {
     const { textureBytesRead, textureRequests } = streamer;
@@ -152,7 +153,10 @@ function stats() {
   $('s-textures').textContent = `${fmtBytes(streamer.textureBytesRead)} (${streamer.textureRequests})`;
   $('s-textures-resident').textContent = fmtBytes(streamer.textureResidentBytes);
   // An image level the browser cannot decode is left out (a coarser one stands in), and said so.
-  if (streamer.imageErrors.size > 0) showWarning([streamer.source.warning, ...streamer.imageErrors.values()].filter(Boolean).join(' '));
+  // So is a damaged table of separating planes: the model is drawn in the nearest-box order.
+  if (streamer.imageErrors.size > 0 || streamer.planesError) {
+    showWarning([streamer.source.warning, streamer.planesError, ...streamer.imageErrors.values()].filter(Boolean).join(' '));
+  }
   $('s-frame').textContent = `${frameMs.toFixed(1)} ms`;
   $('s-first').textContent = firstFrameMs === null ? '–' : `${firstFrameMs.toFixed(0)} ms, ${firstFrameRequests} requests, ${fmtBytes(firstFrameBytes)}`;
 }
@@ -480,6 +484,9 @@ window.strata = {
       place: $('r-place').hidden ? '' : $('s-place').textContent,
       front: streamer?.front ?? [],
       drawn: streamer?.drawn ?? [],
+      /** The drawn nodes in the order they were drawn (front to back), and whether the planes behind it are read. */
+      drawOrder: streamer?.drawOrder ?? [],
+      planes: streamer?.planes,
       culled: streamer?.culled ?? [],
       residentBytes: streamer?.residentBytes,
       peakResidentBytes: streamer?.peakResidentBytes,

@@ -20,7 +20,8 @@
 // level that fits). Decoded levels count 4·w·h bytes against the same budget as the geometry and
 // are evicted with it, least recently used first.
 
-import { FormatError, IMAGE_MIME, MAP_KINDS, decodeImageLevel, decodeNode, decodeSkeleton, openingRange } from './format.js';
+import { FormatError, IMAGE_MIME, MAP_KINDS, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
+import { Orderer } from './order.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
 
@@ -178,8 +179,38 @@ export class Streamer {
     this.front = [];
     this.culled = [];
     this.drawn = [];
+    /** The drawn nodes from front to back (selection.md §5), the order to draw them in. */
+    this.drawOrder = [];
+    /** Until the separating planes are read (once the first front is loaded), the nearest box goes first. */
+    this.orderer = new Orderer(skeleton, { starts: [], entries: [] });
+    this.planes = 'unread';
+    this.planesError = null;
     this.missing = [];
     this.error = null;
+  }
+
+  /** Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only leaves the order without them (planesError says why). */
+  async readPlanes() {
+    const at = planesOffset(this.skeleton), end = this.source.length;
+    if (!(end > at)) {
+      this.planes = 'none';
+      return;
+    }
+    this.planes = 'reading';
+    this.inFlight++;
+    try {
+      const bytes = await this.source.read(at, end);
+      const planes = decodePlanes(this.skeleton, bytes);
+      if (this.closed) return;
+      this.orderer = new Orderer(this.skeleton, planes);
+      this.planes = `${planes.entries.length} planes`;
+    } catch (e) {
+      this.planes = 'failed';
+      this.planesError = `${this.source.name}: the drawing order's planes: ${e.message}`;
+    } finally {
+      this.inFlight--;
+    }
+    if (!this.closed) this.onChange();
   }
 
   /** Decode and check node i from its bytes and keep it. */
@@ -229,6 +260,7 @@ export class Streamer {
       drawn = this.drawSelector.select(camera, limits, waiting).shown;
     }
     this.drawn = drawn;
+    this.drawOrder = this.orderer.order(drawn, camera);
     // Drawn nodes and their ancestors become the most recently used, ancestors first, so that
     // moving away finds the coarser nodes still resident.
     for (const i of drawn) {
@@ -242,6 +274,8 @@ export class Streamer {
     this.request();
     this.requestImages(false);
     this.evict();
+    // The planes only reorder what is drawn: they are read once nothing else is wanted.
+    if (this.planes === 'unread' && this.idle()) this.readPlanes();
     return this.drawn;
   }
 

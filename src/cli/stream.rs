@@ -61,6 +61,17 @@ pub struct Args {
     /// Write the last front as a mesh (.obj, .ply or .glb).
     #[arg(long, value_name = "OUT")]
     export_cut: Option<PathBuf>,
+    /// Draw the front in node order instead of front to back by the file's separating planes.
+    #[arg(long)]
+    unordered: bool,
+    /// Draw every node of the front, also those whose box lies behind what is already drawn (the
+    /// pixels are the same; for measuring what occlusion culling saves).
+    #[arg(long)]
+    no_occlusion: bool,
+    /// Also keep the nodes occlusion culling skipped from being refined in the next frame: fewer
+    /// reads, but a node coming into view is drawn at its held level for a frame.
+    #[arg(long, conflicts_with = "no_occlusion")]
+    hold_hidden: bool,
     /// Per frame, also draw the front and the full-detail model (level 0, read once, kept apart
     /// from the session's reader and budgets) in one plain color and report the shape retention.
     #[arg(long)]
@@ -112,9 +123,17 @@ pub fn run(a: Args) -> Result<()> {
     };
     let textured = !reader.textures().is_empty();
     let mut streamer = Streamer::new(reader, budgets)?;
-    let opts = play::PlayOptions { width, height, pixels: a.frames_dir.is_some(), compare_full: a.compare_full };
+    let opts = play::PlayOptions {
+        width,
+        height,
+        pixels: a.frames_dir.is_some(),
+        compare_full: a.compare_full,
+        ordered: !a.unordered,
+        occlusion: !a.no_occlusion,
+        hold_hidden: a.hold_hidden,
+    };
     play::play(&mut streamer, &cameras, opts, &full, opened, |f| {
-        let (rep, s) = (&f.report, &f.report.stats);
+        let (rep, s, d) = (&f.report, &f.report.stats, &f.draw);
         if let (Some(d), Some(rgba)) = (&a.frames_dir, f.rgba) {
             strata::render::write_rgba_png(&d.join(format!("frame{:05}.png", rep.frame)), width, height, rgba)?;
         }
@@ -123,7 +142,10 @@ pub fn run(a: Args) -> Result<()> {
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
-                "refine_ms": s.refine_ms, "draw_ms": f.draw_ms, "since_open_ms": f.since_open_ms,
+                "refine_ms": s.refine_ms, "order_ms": s.order_ms, "draw_ms": f.draw_ms, "since_open_ms": f.since_open_ms,
+                "faces_drawn": d.faces, "fragments": d.fragments, "shaded": d.writes, "covered_pixels": d.covered,
+                "depth_failures_per_pixel": d.failures_per_pixel(), "shaded_per_pixel": d.writes_per_pixel(),
+                "nodes_hidden": f.nodes_hidden, "faces_hidden": d.faces_hidden,
             });
             if let Some(r) = f.retained {
                 v["retained"] = serde_json::json!(r.shaded);
@@ -137,6 +159,7 @@ pub fn run(a: Args) -> Result<()> {
             if a.print_front {
                 v["camera"] = cameras[rep.frame as usize].to_json();
                 v["front"] = serde_json::json!(rep.front);
+                v["order"] = serde_json::json!(rep.order);
                 v["culled_roots"] = serde_json::json!(rep.culled);
             }
             println!("{v}");
@@ -156,6 +179,15 @@ pub fn run(a: Args) -> Result<()> {
                     levels.join(" ")
                 );
             }
+            println!(
+                "           drawn {} faces, {:.2} shaded and {:.2} rejected fragments per pixel, {} nodes ({} faces) hidden, order {:.3} ms",
+                d.faces,
+                d.writes_per_pixel(),
+                d.failures_per_pixel(),
+                f.nodes_hidden,
+                d.faces_hidden,
+                s.order_ms
+            );
             if rep.frame == 0 {
                 println!("           first frame ready {:.1} ms after opening the file", f.since_open_ms);
             }

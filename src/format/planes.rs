@@ -76,7 +76,16 @@ impl PlaneEntry {
     /// The rule of `selection.md` §5: the eye strictly below `second_min` sees `first` first,
     /// strictly above `first_max` sees `second` first; between, the plane decides nothing.
     pub fn decide(&self, eye: Eye) -> Decision {
-        let n = octa::decode(self.normal).as_dvec3();
+        self.decide_with(self.unit_normal(), eye)
+    }
+
+    /// The entry's direction, decoded (f32, as the writer measured along it).
+    pub fn unit_normal(&self) -> DVec3 {
+        octa::decode(self.normal).as_dvec3()
+    }
+
+    /// [`PlaneEntry::decide`] with the direction already decoded ([`PlaneEntry::unit_normal`]).
+    pub fn decide_with(&self, n: DVec3, eye: Eye) -> Decision {
         match eye {
             Eye::At(g) => {
                 let s = (n.x * g.x + n.y * g.y) + n.z * g.z;
@@ -143,7 +152,9 @@ pub fn decode_ordr(f: &mut Fields, width: u64, nodes: u32, child_counts: impl Fn
                 return Err(f.error_at(at, format!("{who}: a plane between children {first} and {second} of {children}")));
             }
             if last.is_some_and(|l| l >= pair) {
-                return Err(f.error_at(at, format!("{who}: the plane between children {} and {} is out of order or repeated", pair.0, pair.1)));
+                return Err(
+                    f.error_at(at, format!("{who}: the plane between children {} and {} is out of order or repeated", pair.0, pair.1))
+                );
             }
             if !(first_max.is_finite() && second_min.is_finite()) {
                 return Err(f.error_at(at, format!("{who}: plane bounds {first_max} and {second_min} must be finite")));
@@ -309,7 +320,8 @@ mod tests {
 
     #[test]
     fn interleaved_sets_get_no_plane() {
-        let corners = |lo: u32, hi: u32| -> Vec<[u32; 3]> { (0..8).map(|k| [0, 1, 2].map(|a| if k >> a & 1 == 1 { hi } else { lo })).collect() };
+        let corners =
+            |lo: u32, hi: u32| -> Vec<[u32; 3]> { (0..8).map(|k| [0, 1, 2].map(|a| if k >> a & 1 == 1 { hi } else { lo })).collect() };
         let a = Support::of(&corners(0, 30));
         let b = Support::of(&corners(10, 20));
         assert!(separate(&a, &b, 1.0).is_none());

@@ -7,9 +7,9 @@
 //! through a [`ByteSource`], so several threads can read nodes of one file at once.
 
 use super::chunk::{self, Fields, Frame, HEADER_BYTES, TRAILER_BYTES};
-use super::planes::{self, Planes};
 use super::geom::{self, NodeContext};
 use super::georef::{self, Georef};
+use super::planes::{self, Planes};
 use super::rules::{self, Sink};
 pub use super::skeleton::ChunkInfo;
 use super::skeleton::{self, Context, Skeleton};
@@ -217,7 +217,12 @@ impl<S: ByteSource> Reader<S> {
     /// `TEXL` chunk and its padding (spec §2).
     pub fn planes_offset(&self) -> u64 {
         let geometry = self.skeleton_end + self.skeleton.levels.iter().map(|l| l.bytes).sum::<u64>();
-        self.skeleton.textures.levels.iter().map(|l| l.offset + l.size as u64 + chunk::padding(l.offset + l.size as u64)).fold(geometry, u64::max)
+        self.skeleton
+            .textures
+            .levels
+            .iter()
+            .map(|l| l.offset + l.size as u64 + chunk::padding(l.offset + l.size as u64))
+            .fold(geometry, u64::max)
     }
 
     /// Read and check the separating planes (`ORDR`, spec §7.6), not read at open: a viewer needs
@@ -231,17 +236,24 @@ impl<S: ByteSource> Reader<S> {
         let bytes = self.read_at(at, self.len - at)?;
         let here = |msg: String| Error::at_byte(&self.path, at, format!("{}: {msg}", chunk::name(&id::ORDR, at)));
         let mut head = [0u8; 16];
-        head.copy_from_slice(bytes.get(..16).ok_or_else(|| here(format!("{} bytes after the geometry, too few for a chunk", bytes.len())))?);
+        head.copy_from_slice(
+            bytes.get(..16).ok_or_else(|| here(format!("{} bytes after the geometry, too few for a chunk", bytes.len())))?,
+        );
         let f = Frame::parse(&head);
         if f.id != id::ORDR {
             return Err(here(format!("{} follows the geometry and images; only ORDR may", chunk::id_str(&f.id))));
         }
-        let end = f.span().filter(|&s| s <= bytes.len() as u64).ok_or_else(|| here(format!("size {} runs past the end of the file", f.size)))?;
+        let end =
+            f.span().filter(|&s| s <= bytes.len() as u64).ok_or_else(|| here(format!("size {} runs past the end of the file", f.size)))?;
         let payload = &bytes[HEADER_BYTES as usize..(HEADER_BYTES + f.size) as usize];
         let stored = LE::read_u32(&bytes[(HEADER_BYTES + f.size) as usize..end as usize]);
         let actual = chunk::crc32(payload);
         if stored != actual {
-            return Err(Error::at_byte(&self.path, at + HEADER_BYTES + f.size, format!("{}: CRC {actual:08x} != stored {stored:08x}", chunk::name(&id::ORDR, at))));
+            return Err(Error::at_byte(
+                &self.path,
+                at + HEADER_BYTES + f.size,
+                format!("{}: CRC {actual:08x} != stored {stored:08x}", chunk::name(&id::ORDR, at)),
+            ));
         }
         let mut fields = Fields::new(&self.path, &id::ORDR, at, payload, at + HEADER_BYTES);
         let sk = &self.skeleton;

@@ -12,8 +12,8 @@
 use super::chunk;
 use super::geom::v2::{self, GeometryCodes};
 use super::geom::v3;
-use super::planes::{self, PlaneEntry, Planes, Support};
 use super::georef::{self, Georef};
+use super::planes::{self, PlaneEntry, Planes, Support};
 use super::skeleton::{encode_head, encode_skel, NodeCodes};
 use super::texture::{self, ImageIn};
 use super::{
@@ -395,15 +395,18 @@ impl<W: Write> Writer<W> {
         // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images
         // and UVs in glTF's orientation (so a file with UVs is 2.2 with or without images).
         let images = &self.opts.images;
-        let supports: Vec<&Support> = (0..nl).rev().flat_map(|l| order[l].iter().map(move |&k| (l, k))).map(|(l, k)| &self.levels[l][k].support).collect();
+        let supports: Vec<&Support> =
+            (0..nl).rev().flat_map(|l| order[l].iter().map(move |&k| (l, k))).map(|(l, k)| &self.levels[l][k].support).collect();
         // Format 3 is a draft without a spec of its own: it carries no ORDR yet.
         let planes = if self.opts.major == 2 { order_planes(&records, &codes, &supports, levels[nl - 1].nodes) } else { Planes::default() };
-        let minor = match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some()) {
-            (2, true, _, _) => MINOR,
-            (2, false, true, _) => 2,
-            (2, false, false, true) => 1,
-            _ => 0,
-        };
+        let minor =
+            match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some())
+            {
+                (2, true, _, _) => MINOR,
+                (2, false, true, _) => 2,
+                (2, false, false, true) => 1,
+                _ => 0,
+            };
         let mut header = Header {
             major: self.opts.major,
             minor,

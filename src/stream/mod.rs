@@ -5,6 +5,7 @@
 //!   the paper's priority first;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
 //! - [`images`]: which image levels the front needs, and those held (selection.md §4);
+//! - [`order`]: the front from front to back, by the file's separating planes (selection.md §5);
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
 //! - [`retention`]: shape retention of a front's image against the full-detail one;
 //! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines;
@@ -13,21 +14,23 @@
 pub mod budget;
 pub mod cache;
 pub mod images;
+pub mod order;
 pub mod play;
 pub mod refine;
 pub mod retention;
-pub mod order;
 pub mod session;
 #[cfg(test)]
 mod tests;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::format::planes::Planes;
 use crate::format::{ByteSource, NodeGeometry, NodeRecord, Reader};
 use crate::mesh::{Material, Mesh};
 use budget::FrameTime;
 use cache::{record_bytes, Cache};
 use images::ImageCache;
+use order::Orderer;
 pub use refine::Priority;
 use refine::{Limits, Mark, Refiner};
 use serde::Serialize;
@@ -74,6 +77,8 @@ pub struct Stats {
     pub pixel_error: f32,
     /// Time to select the front and load its geometry and image levels.
     pub refine_ms: f64,
+    /// Of that, the time to put the front in drawing order.
+    pub order_ms: f64,
     /// Bytes of image level files read so far, and image levels held as RGBA8 (counted in the
     /// memory budget with the geometry).
     pub texture_bytes_read: u64,
@@ -89,6 +94,9 @@ pub struct FrameReport {
     pub frame: u64,
     /// Displayed nodes, ascending.
     pub front: Vec<u32>,
+    /// The same nodes from front to back for the camera (selection.md §5): the order to draw them
+    /// in, nearest surfaces first, so that the depth test rejects what lies behind.
+    pub order: Vec<u32>,
     /// Nodes displayed now and not in the previous frame, ascending.
     pub added: Vec<u32>,
     /// Nodes displayed in the previous frame and not now, ascending.
@@ -112,10 +120,16 @@ pub struct Streamer<S> {
     images: ImageCache,
     /// Decoded bytes of every image's coarsest level, kept out of the geometry's share of the budget.
     pinned: u64,
+    orderer: Orderer,
+    warnings: Vec<String>,
+    /// Nodes the renderer found hidden in the last frame, ascending: not refined in the next.
+    hidden: Vec<u32>,
 }
 
 impl<S: ByteSource> Streamer<S> {
-    /// Start a session. Budgets must admit the whole top level, which the first frame shows.
+    /// Start a session. Budgets must admit the whole top level, which the first frame shows. The
+    /// separating planes (`ORDR`, a file's last chunk) are read here, for the drawing order; when
+    /// they are damaged, the front is ordered without them and [`Streamer::take_warnings`] says so.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
@@ -137,7 +151,14 @@ impl<S: ByteSource> Streamer<S> {
         if budgets.pixel_error.is_nan() || budgets.pixel_error < 0.0 {
             return Err(Error::invalid(reader.path(), None, "the pixel-error threshold must be zero or more"));
         }
+        let (planes, warnings) = match reader.read_planes() {
+            Ok(p) => (p, Vec::new()),
+            Err(e) => (Planes::default(), vec![format!("{e}; the front is drawn nearest box first, without the separating planes")]),
+        };
         Ok(Streamer {
+            warnings,
+            hidden: Vec::new(),
+            orderer: Orderer::new(reader.skeleton(), planes),
             cache: Cache::new(budgets.bytes.map(|b| b - pinned)),
             images: ImageCache::default(),
             pinned,
@@ -167,9 +188,11 @@ impl<S: ByteSource> Streamer<S> {
     }
 
     /// Image levels that could not be read or decoded since the last call, each said once: they are
-    /// drawn at a coarser level or untextured, not fatal.
+    /// drawn at a coarser level or untextured, not fatal; and damaged separating planes.
     pub fn take_warnings(&mut self) -> Vec<String> {
-        self.images.take_warnings()
+        let mut w = std::mem::take(&mut self.warnings);
+        w.extend(self.images.take_warnings());
+        w
     }
 
     /// What a renderer samples for image `image` this frame: its drawn level.
@@ -198,7 +221,13 @@ impl<S: ByteSource> Streamer<S> {
         // is drawn, from the last frame's cost per face: when it would overrun, it is selected
         // again with the predicted threshold.
         let predictive = self.budgets.predict && self.controller.is_some();
-        let held: &[u32] = if predictive { &self.culled } else { &[] };
+        let mut held: Vec<u32> = if predictive { self.culled.clone() } else { Vec::new() };
+        if !self.hidden.is_empty() {
+            held.extend(std::mem::take(&mut self.hidden));
+            held.sort_unstable();
+            held.dedup();
+        }
+        let held = &held[..];
         let mut cut = self.refiner.select(self.reader.skeleton(), camera, &limits, held, &bytes);
         let (mut added, mut removed) = diff(&self.front, &cut.shown);
         if let Some(c) = self.controller.as_mut().filter(|_| predictive) {
@@ -224,6 +253,10 @@ impl<S: ByteSource> Streamer<S> {
             }
         }
 
+        let ordered = Instant::now();
+        let mut order = Vec::with_capacity(cut.shown.len());
+        self.orderer.order(self.reader.skeleton(), &cut.shown, camera, &mut order);
+        let order_ms = ordered.elapsed().as_secs_f64() * 1e3;
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {
             levels[self.reader.nodes()[i as usize].level as usize] += 1;
@@ -237,6 +270,7 @@ impl<S: ByteSource> Streamer<S> {
             resident_bytes: self.cache.resident_bytes(),
             pixel_error: limits.pixel_error,
             refine_ms: start.elapsed().as_secs_f64() * 1e3,
+            order_ms,
             texture_bytes_read: self.images.bytes_read(),
             texture_resident_bytes: self.images.resident_bytes(),
             texture_levels: self.images.drawn().iter().map(|(&i, &(w, d))| [i, w, d]).collect(),
@@ -244,7 +278,7 @@ impl<S: ByteSource> Streamer<S> {
         self.front.clone_from(&cut.shown);
         self.culled.clone_from(&cut.culled);
         self.faces = cut.faces;
-        let report = FrameReport { frame: self.frame, front: cut.shown, added, removed, culled: cut.culled, stats };
+        let report = FrameReport { frame: self.frame, front: cut.shown, order, added, removed, culled: cut.culled, stats };
         self.frame += 1;
         Ok(report)
     }
@@ -269,6 +303,21 @@ impl<S: ByteSource> Streamer<S> {
         m.images = crate::assemble::images(&self.reader)?;
         m.compute_face_geometry();
         Ok(m)
+    }
+
+    /// Nodes of the front the renderer found hidden behind what it drew (occlusion culling): the
+    /// next [`Streamer::update`] does not refine them, so their children are neither read nor
+    /// drawn. Not conservative while the camera moves: a node that comes into view is shown at its
+    /// held level for one frame, then refined.
+    pub fn hold_hidden(&mut self, nodes: &[u32]) {
+        self.hidden.clear();
+        self.hidden.extend_from_slice(nodes);
+        self.hidden.sort_unstable();
+    }
+
+    /// The file's separating planes (empty for a file older than 2.3).
+    pub fn planes(&self) -> &Planes {
+        self.orderer.planes()
     }
 
     /// The mark node `i` got in the last frame.

@@ -14,18 +14,45 @@ const OFF: u8 = 0;
 const SHOWN: u8 = 1;
 const ABOVE: u8 = 2;
 
-/// Scratch space for ordering fronts of one file, kept between frames.
+/// Orders fronts of one file: its planes, their directions decoded once, and scratch space kept
+/// between frames, so that ordering a front allocates nothing once warm.
 #[derive(Clone, Debug, Default)]
 pub struct Orderer {
+    planes: Planes,
+    normals: Vec<DVec3>,
+    boxes: Vec<(DVec3, DVec3)>,
     state: Vec<u8>,
     touched: Vec<u32>,
+    /// One per depth of the walk.
+    scratch: Vec<Scratch>,
 }
+
+/// The working set of one parent's children.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    live: Vec<u32>,
+    local: Vec<u32>,
+    /// Per child, the children that must come before it (at most [`SMALL`] children).
+    before: Vec<u64>,
+    indegree: Vec<u32>,
+    edges: Vec<(u32, u32)>,
+    /// The edges' second children grouped by first child, and the groups' starts (and a cursor).
+    grouped: Vec<u32>,
+    first_edge: Vec<u32>,
+    fill: Vec<u32>,
+    keys: Vec<Key>,
+    ready: BinaryHeap<Reverse<(Key, u32)>>,
+    /// Every child by key, for breaking cycles (entries of taken children are skipped).
+    all: BinaryHeap<Reverse<(Key, u32)>>,
+    done: Vec<bool>,
+}
+
+/// Children ordered by pairwise masks rather than a heap, up to this many.
+const SMALL: usize = 32;
 
 /// The key a child is ordered by where no plane decides: the squared distance from the eye to its
 /// box (0 inside), or for an orthographic camera the least depth of its box along the view.
-fn key(sk: &Skeleton, node: u32, eye: Eye) -> f64 {
-    let (lo, hi) = sk.node_box(node);
-    let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
     match eye {
         Eye::At(e) => {
             let d = (lo - e).max(DVec3::ZERO).max(e - hi);
@@ -36,7 +63,7 @@ fn key(sk: &Skeleton, node: u32, eye: Eye) -> f64 {
 }
 
 /// A total order on f64 keys (they are finite: boxes and eye are checked finite).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Key(f64, u32);
 impl PartialEq for Key {
     fn eq(&self, o: &Self) -> bool {
@@ -58,15 +85,30 @@ impl Ord for Key {
 /// What one ordering walk reads: the file, and the eye for the planes and for the keys.
 struct View<'a> {
     sk: &'a Skeleton,
-    planes: &'a Planes,
     eye: Eye,
     key_eye: Eye,
 }
 
 impl Orderer {
-    /// `front` (any order) from front to back for `camera`, into `out`, by the file's `planes`
-    /// (`Reader::read_planes`; without them the nearest box goes first at every parent).
-    pub fn order(&mut self, sk: &Skeleton, planes: &Planes, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
+    /// An orderer for the file of `sk` by its `planes` (`Reader::read_planes`; without any, the
+    /// nearest box goes first at every parent).
+    pub fn new(sk: &Skeleton, planes: Planes) -> Orderer {
+        let normals = planes.entries.iter().map(|e| e.unit_normal()).collect();
+        let boxes = (0..sk.nodes.len() as u32)
+            .map(|i| {
+                let (lo, hi) = sk.node_box(i);
+                (lo.as_dvec3(), hi.as_dvec3())
+            })
+            .collect();
+        Orderer { planes, normals, boxes, ..Orderer::default() }
+    }
+
+    pub fn planes(&self) -> &Planes {
+        &self.planes
+    }
+
+    /// `front` (any order) from front to back for `camera`, into `out`.
+    pub fn order(&mut self, sk: &Skeleton, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
         out.clear();
         if self.state.len() != sk.nodes.len() {
             self.state = vec![OFF; sk.nodes.len()];
@@ -98,81 +140,175 @@ impl Orderer {
             }
         }
         let top = sk.level_nodes(sk.top());
-        self.walk(&View { sk, planes, eye, key_eye }, None, top, out);
+        self.walk(&View { sk, eye, key_eye }, None, top, 0, out);
         for &n in &self.touched {
             self.state[n as usize] = OFF;
         }
         self.touched.clear();
     }
 
-    fn walk(&self, v: &View, parent: Option<u32>, kids: std::ops::Range<u32>, out: &mut Vec<u32>) {
+    fn walk(&mut self, v: &View, mut parent: Option<u32>, mut kids: std::ops::Range<u32>, depth: usize, out: &mut Vec<u32>) {
         let sk = v.sk;
-        let live: Vec<u32> = kids.clone().filter(|&c| self.state[c as usize] != OFF).collect();
-        let visit = |c: u32, out: &mut Vec<u32>| {
+        // A chain of single children is followed without scratch space.
+        loop {
+            let mut live = kids.clone().filter(|&c| self.state[c as usize] != OFF);
+            match (live.next(), live.next()) {
+                (None, _) => return,
+                (Some(c), None) if self.state[c as usize] == SHOWN => return out.push(c),
+                (Some(c), None) => (parent, kids) = (Some(c), sk.children(c)),
+                _ => break,
+            }
+        }
+        if self.scratch.len() <= depth {
+            self.scratch.resize_with(depth + 1, Scratch::default);
+        }
+        let mut s = std::mem::take(&mut self.scratch[depth]);
+        s.live.clear();
+        s.live.extend(kids.clone().filter(|&c| self.state[c as usize] != OFF));
+        let n = s.live.len();
+        if n > 1 {
+            self.arrange(v, parent, kids, &mut s);
+        }
+        for k in 0..n {
+            let c = s.live[k];
             if self.state[c as usize] == SHOWN {
                 out.push(c);
             } else {
-                self.walk(v, Some(c), sk.children(c), out);
+                self.walk(v, Some(c), sk.children(c), depth + 1, out);
             }
-        };
-        if live.len() <= 1 {
-            if let Some(&c) = live.first() {
-                visit(c, out);
-            }
-            return;
         }
+        self.scratch[depth] = s;
+    }
+
+    /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
+    fn arrange(&self, v: &View, parent: Option<u32>, kids: std::ops::Range<u32>, s: &mut Scratch) {
+        let n = s.live.len();
         // Local index of each live child, edges "a before b" from the planes that decide.
-        let mut local = vec![u32::MAX; kids.len()];
-        for (k, &c) in live.iter().enumerate() {
-            local[(c - kids.start) as usize] = k as u32;
+        s.local.clear();
+        s.local.resize(kids.len(), u32::MAX);
+        for (k, &c) in s.live.iter().enumerate() {
+            s.local[(c - kids.start) as usize] = k as u32;
         }
-        let mut indegree = vec![0u32; live.len()];
-        let mut edges: Vec<(u32, u32)> = Vec::new();
-        for e in v.planes.of(parent) {
-            let (Some(&a), Some(&b)) = (local.get(e.first as usize), local.get(e.second as usize)) else { continue };
+        s.indegree.clear();
+        s.indegree.resize(n, 0);
+        s.edges.clear();
+        let p = parent.map_or(0, |i| i as usize + 1);
+        let range = match (self.planes.starts.get(p), self.planes.starts.get(p + 1)) {
+            (Some(&a), Some(&b)) => a as usize..b as usize,
+            _ => 0..0,
+        };
+        for (e, &normal) in self.planes.entries[range.clone()].iter().zip(&self.normals[range]) {
+            let (Some(&a), Some(&b)) = (s.local.get(e.first as usize), s.local.get(e.second as usize)) else { continue };
             if a == u32::MAX || b == u32::MAX {
                 continue;
             }
-            let edge = match e.decide(v.eye) {
+            let edge = match e.decide_with(normal, v.eye) {
                 Decision::FirstBeforeSecond => (a, b),
                 Decision::SecondBeforeFirst => (b, a),
                 Decision::Undecided => continue,
             };
-            indegree[edge.1 as usize] += 1;
-            edges.push(edge);
+            s.indegree[edge.1 as usize] += 1;
+            s.edges.push(edge);
         }
-        edges.sort_unstable();
-        let mut first_edge = vec![0u32; live.len() + 1];
-        for &(a, _) in &edges {
-            first_edge[a as usize + 1] += 1;
+        s.keys.clear();
+        s.keys.extend(s.live.iter().map(|&c| Key(key(self.boxes[c as usize], v.key_eye), c)));
+        if n <= SMALL {
+            return small(s);
         }
-        for k in 0..live.len() {
-            first_edge[k + 1] += first_edge[k];
+        // Edges grouped by their first child (a counting sort), each group's start in `first_edge`.
+        s.first_edge.clear();
+        s.first_edge.resize(n + 1, 0);
+        for &(a, _) in &s.edges {
+            s.first_edge[a as usize + 1] += 1;
         }
-        let keys: Vec<Key> = live.iter().map(|&c| Key(key(sk, c, v.key_eye), c)).collect();
-        let mut ready: BinaryHeap<Reverse<(Key, u32)>> =
-            (0..live.len() as u32).filter(|&k| indegree[k as usize] == 0).map(|k| Reverse((keys[k as usize], k))).collect();
-        let mut done = vec![false; live.len()];
-        for _ in 0..live.len() {
+        for k in 0..n {
+            s.first_edge[k + 1] += s.first_edge[k];
+        }
+        s.grouped.clear();
+        s.grouped.resize(s.edges.len(), 0);
+        s.fill.clear();
+        s.fill.extend_from_slice(&s.first_edge[..n]);
+        for &(a, b) in &s.edges {
+            s.grouped[s.fill[a as usize] as usize] = b;
+            s.fill[a as usize] += 1;
+        }
+        s.ready.clear();
+        for k in 0..n as u32 {
+            if s.indegree[k as usize] == 0 {
+                s.ready.push(Reverse((s.keys[k as usize], k)));
+            }
+        }
+        s.all.clear();
+        s.done.clear();
+        s.done.resize(n, false);
+        // The order is written over `local`'s first n slots, then copied back as node numbers.
+        let mut taken = 0;
+        while taken < n {
             let k = loop {
-                match ready.pop() {
-                    Some(Reverse((_, k))) if !done[k as usize] => break k,
+                match s.ready.pop() {
+                    Some(Reverse((_, k))) if !s.done[k as usize] => break k,
                     Some(_) => continue,
                     // A cycle: the nearest child left goes next, its remaining predecessors ignored.
-                    None => break (0..live.len() as u32).filter(|&k| !done[k as usize]).min_by_key(|&k| keys[k as usize]).unwrap(),
+                    None => {
+                        if s.all.is_empty() {
+                            s.all.extend((0..n as u32).filter(|&k| !s.done[k as usize]).map(|k| Reverse((s.keys[k as usize], k))));
+                        }
+                        match std::iter::from_fn(|| s.all.pop()).find(|Reverse((_, k))| !s.done[*k as usize]) {
+                            Some(Reverse((_, k))) => break k,
+                            None => return,
+                        }
+                    }
                 }
             };
-            done[k as usize] = true;
-            for &(_, b) in &edges[first_edge[k as usize] as usize..first_edge[k as usize + 1] as usize] {
-                let d = &mut indegree[b as usize];
+            s.done[k as usize] = true;
+            for &b in &s.grouped[s.first_edge[k as usize] as usize..s.first_edge[k as usize + 1] as usize] {
+                let d = &mut s.indegree[b as usize];
                 *d = d.saturating_sub(1);
-                if *d == 0 && !done[b as usize] {
-                    ready.push(Reverse((keys[b as usize], b)));
+                if *d == 0 && !s.done[b as usize] {
+                    s.ready.push(Reverse((s.keys[b as usize], b)));
                 }
             }
-            visit(live[k as usize], out);
+            s.local[taken] = k;
+            taken += 1;
         }
+        for k in 0..n {
+            s.local[k] = s.live[s.local[k] as usize];
+        }
+        s.live.clear();
+        s.live.extend_from_slice(&s.local[..n]);
     }
+}
+
+/// [`Orderer::arrange`]'s rule for a few children: each taken child is the least key among those
+/// whose predecessors are all taken (or among all left, on a cycle), found by scanning masks.
+fn small(s: &mut Scratch) {
+    let n = s.live.len();
+    s.before.clear();
+    s.before.resize(n, 0);
+    for &(a, b) in &s.edges {
+        s.before[b as usize] |= 1 << a;
+    }
+    let mut done = 0u64;
+    for taken in 0..n {
+        let (mut ready, mut any) = (None::<usize>, None::<usize>);
+        for k in (0..n).filter(|&k| done & (1 << k) == 0) {
+            let less = |best: Option<usize>| best.is_none_or(|b| s.keys[k] < s.keys[b]);
+            if less(any) {
+                any = Some(k);
+            }
+            if s.before[k] & !done == 0 && less(ready) {
+                ready = Some(k);
+            }
+        }
+        let k = ready.or(any).unwrap_or(0);
+        done |= 1 << k;
+        s.local[taken] = k as u32;
+    }
+    for k in 0..n {
+        s.local[k] = s.live[s.local[k] as usize];
+    }
+    s.live.clear();
+    s.live.extend_from_slice(&s.local[..n]);
 }
 
 #[cfg(test)]
@@ -206,7 +342,7 @@ mod tests {
         let planes = rd.read_planes().unwrap();
         assert!(!planes.entries.is_empty());
         let sk = rd.skeleton();
-        let mut orderer = Orderer::default();
+        let mut orderer = Orderer::new(sk, planes.clone());
         let mut out = Vec::new();
         let (mut decided, mut cyclic) = (0, 0);
         for k in 0..64 {
@@ -215,7 +351,7 @@ mod tests {
             let camera = Camera::framing(Vec3::ZERO, 1.0, eye, 1.0, 64, 64);
             for level in 0..sk.levels.len() as u32 {
                 let front: Vec<u32> = sk.level_nodes(level).collect();
-                orderer.order(sk, &planes, &front, &camera, &mut out);
+                orderer.order(sk, &front, &camera, &mut out);
                 let mut sorted = out.clone();
                 sorted.sort_unstable();
                 assert_eq!(sorted, front, "level {level}: every node once");

@@ -7,7 +7,7 @@ use super::{FrameReport, Streamer};
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::format::{ByteSource, NodeGeometry};
-use crate::render::{palette, Image, Part, Strips};
+use crate::render::{palette, DrawStats, Image, Part, Strips};
 use crate::texture::draw::node_parts;
 use std::time::Instant;
 
@@ -21,6 +21,14 @@ pub struct PlayOptions {
     pub pixels: bool,
     /// Also draw the front and the full-detail model in one plain color and measure the retention.
     pub compare_full: bool,
+    /// Draw the front in the streamer's front-to-back order (else in node order).
+    pub ordered: bool,
+    /// Skip nodes whose box lies behind what is already drawn ([`Strips::set_occlusion`]); the
+    /// pixels are the same either way.
+    pub occlusion: bool,
+    /// With `occlusion`, also keep the nodes found hidden from being refined in the next frame
+    /// ([`Streamer::hold_hidden`]): fewer reads, at the price of a frame's lag where they come into view.
+    pub hold_hidden: bool,
 }
 
 /// One played frame.
@@ -34,6 +42,10 @@ pub struct Frame<'a> {
     pub rgba: Option<&'a [u8]>,
     /// With [`PlayOptions::compare_full`].
     pub retained: Option<Retention>,
+    /// Faces drawn, overdraw and what occlusion culling skipped.
+    pub draw: DrawStats,
+    /// Nodes of the front the occlusion test skipped entirely.
+    pub nodes_hidden: usize,
 }
 
 /// Play `cameras` through `streamer`, calling `each` with every frame. The frame-time controller
@@ -51,6 +63,7 @@ pub fn play<S: ByteSource>(
     let (width, height) = (opts.width.max(1), opts.height.max(1));
     // Frames are drawn strip by strip; a whole one is kept only when asked for.
     let mut strips = Strips::new(width, height);
+    strips.set_occlusion(opts.occlusion);
     let row_bytes = 4 * width as usize;
     let mut rgba = if opts.pixels { vec![0u8; row_bytes * height as usize] } else { Vec::new() };
     let mut plain = opts.compare_full.then(|| (Image::new(width, height), Image::new(width, height)));
@@ -62,16 +75,21 @@ pub fn play<S: ByteSource>(
         let report = streamer.update(camera, last_ms)?;
         let start = Instant::now();
         let s = &*streamer;
-        let parts: Vec<Part> = report
-            .front
+        let nodes = if opts.ordered { &report.order } else { &report.front };
+        // Each part's node, for counting the nodes occlusion culling skipped.
+        let mut owner = Vec::new();
+        let parts: Vec<Part> = nodes
             .iter()
             .filter_map(|&i| s.geometry(i).map(|g| (i, g)))
             .flat_map(|(i, g)| {
-                if textured {
+                let (lo, hi) = s.reader().node_box(i);
+                let parts = if textured {
                     node_parts(g, s.reader().materials(), &|image| s.image(image))
                 } else {
                     vec![Part::new(&g.positions, &g.normals, &g.indices, palette(i))]
-                }
+                };
+                owner.extend(parts.iter().map(|_| i));
+                parts.into_iter().map(move |p| p.with_bounds(lo, hi))
             })
             .collect();
         strips.draw(camera, &parts, |row, line| {
@@ -80,6 +98,25 @@ pub fn play<S: ByteSource>(
             }
         });
         let draw_ms = start.elapsed().as_secs_f64() * 1e3;
+        let draw = strips.stats();
+        // A node is hidden when all its parts are.
+        let hidden: Vec<u32> = if opts.occlusion {
+            let mut shown: Vec<(u32, bool)> = owner.iter().enumerate().map(|(k, &i)| (i, !strips.part_hidden(k))).collect();
+            shown.sort_unstable();
+            shown.dedup_by(|b, a| {
+                a.0 == b.0 && {
+                    a.1 |= b.1;
+                    true
+                }
+            });
+            shown.iter().filter(|s| !s.1).map(|s| s.0).collect()
+        } else {
+            Vec::new()
+        };
+        let nodes_hidden = hidden.len();
+        if opts.hold_hidden {
+            streamer.hold_hidden(&hidden);
+        }
         last_ms = Some((report.stats.refine_ms + draw_ms) as f32);
         let since_open_ms = opened.elapsed().as_secs_f64() * 1e3;
         let retained = plain.as_mut().map(|(front, whole)| {
@@ -96,7 +133,7 @@ pub fn play<S: ByteSource>(
             }
             retention(front, whole)
         });
-        each(Frame { report, draw_ms, since_open_ms, rgba: opts.pixels.then_some(&rgba[..]), retained })?;
+        each(Frame { report, draw_ms, since_open_ms, rgba: opts.pixels.then_some(&rgba[..]), retained, draw, nodes_hidden })?;
     }
     Ok(())
 }

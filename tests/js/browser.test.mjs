@@ -10,7 +10,7 @@ import { existsSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { extname } from 'node:path';
 import { root, scratch, strataBin, converted, run } from './helpers.mjs';
-import { crc32, decodeSkeleton, IMAGE_MIME } from '../../viewer/format.js';
+import { crc32, decodeSkeleton, planesOffset, IMAGE_MIME } from '../../viewer/format.js';
 import { Camera } from '../../viewer/camera.js';
 
 const CHROMIUM = [process.env.CHROMIUM, '/usr/bin/chromium', '/usr/bin/chromium-browser', '/usr/bin/google-chrome'].find((p) => p && existsSync(p));
@@ -164,6 +164,8 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     }, [cam.toJSON()]);
     await within(p.evaluate(() => window.strata.idle()), 120000, 'full detail');
     const full = await p.evaluate(() => window.strata.state());
+    assert.match(full.planes, /^\d+ planes$/, 'the separating planes are read after the first frame');
+    assert.deepEqual([...full.drawOrder].sort((a, b) => a - b), full.drawn, 'the drawing order holds the drawn nodes');
     t.diagnostic(`sphere: to full detail (0 px): ${full.requests} requests, ${full.bytesRead} bytes of ${length}; peak resident ${full.peakResidentBytes} bytes (budget ${full.budget})`);
     const m = await compareWithRender(p, models.sphere, cam, t);
     t.diagnostic(`sphere vs strata render: silhouette IoU ${m.iou.toFixed(4)}, mean shade difference ${m.meanDiff.toFixed(2)}/255, pixels differing by more than 24: ${(m.farShare * 100).toFixed(2)} % of ${m.covered}`);
@@ -472,9 +474,10 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
     const original = readFileSync(models.sphere);
     const variants = {
       truncated: original.subarray(0, Math.floor(original.length * 0.6)),
+      // A byte of the last geometry chunk, before the separating planes.
       'corrupt-chunk': (() => {
         const b = Buffer.from(original);
-        b[b.length - 100] ^= 0xff;
+        b[planesOffset(decodeSkeleton(new Uint8Array(original), original.length)) - 100] ^= 0xff;
         return b;
       })(),
       'newer-major': (() => {
@@ -501,6 +504,21 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       assert.ok(message.length > 10, `${name}: no message on the page`);
       if (name === 'newer-major') assert.match(message, /3/);
       assert.ok(await p.isVisible('#message'));
+      await p.close();
+    }
+    // Damaged separating planes (the file's last chunk) cost only the order: a warning, the model drawn.
+    {
+      const b = Buffer.from(original);
+      b[b.length - 100] ^= 0xff;
+      writeFileSync(`${dir}/corrupt-planes.strata`, b);
+      const { p } = await page(viewer('corrupt-planes'));
+      await within(p.evaluate(() => window.strata.ready()), 60000, 'corrupt-planes: the first frame');
+      await p.waitForFunction(() => window.strata.state().warning.includes('planes'), null, { timeout: 60000 });
+      const st = await p.evaluate(() => window.strata.state());
+      t.diagnostic(`corrupt-planes: warning "${st.warning}"`);
+      assert.equal(st.message, '');
+      assert.equal(st.planes, 'failed');
+      assert.match(st.warning, /planes.*CRC/);
       await p.close();
     }
   });

@@ -5,7 +5,8 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync, existsSync } from 'node:fs';
-import { decodeSkeleton } from '../../viewer/format.js';
+import { decodeSkeleton, decodePlanes, planesOffset } from '../../viewer/format.js';
+import { Orderer } from '../../viewer/order.js';
 import { Camera } from '../../viewer/camera.js';
 import { Selector } from '../../viewer/select.js';
 import { root, strataBin, converted, run } from './helpers.mjs';
@@ -17,18 +18,28 @@ function skeletonOf(path) {
   return decodeSkeleton(bytes, bytes.length);
 }
 
+/** The drawing orderer of the file at `path` (its skeleton `s`), from its ORDR chunk. */
+function ordererOf(path, s) {
+  const bytes = new Uint8Array(readFileSync(path));
+  return new Orderer(s, decodePlanes(s, bytes.subarray(planesOffset(s))));
+}
+
 test('every golden front of fronts.json', () => {
   const fronts = JSON.parse(readFileSync(`${vectors}/fronts.json`, 'utf8'));
   assert.ok(fronts.length >= 10);
-  const skeletons = new Map();
+  const skeletons = new Map(), orderers = new Map();
   for (const [k, f] of fronts.entries()) {
-    if (!skeletons.has(f.file)) skeletons.set(f.file, skeletonOf(`${vectors}/${f.file}`));
+    if (!skeletons.has(f.file)) {
+      skeletons.set(f.file, skeletonOf(`${vectors}/${f.file}`));
+      orderers.set(f.file, ordererOf(`${vectors}/${f.file}`, skeletons.get(f.file)));
+    }
     const s = skeletons.get(f.file);
     const l = f.limits;
     const limits = { pixelError: l.pixel_error, maxFaces: l.max_faces ?? undefined, maxBytes: l.max_bytes ?? undefined, priority: l.priority };
     const cut = new Selector(s).select(new Camera(f.camera), limits, new Set(f.held));
     assert.deepEqual(cut.shown, f.front, `front ${k}`);
     assert.deepEqual(cut.culled, f.culled, `culled roots ${k}`);
+    assert.deepEqual(orderers.get(f.file).order(cut.shown, new Camera(f.camera)), f.order, `drawing order ${k}`);
   }
 });
 
@@ -38,15 +49,17 @@ function agreesWithStreamer(t, file, args, limits) {
   const frames = out.trim().split('\n').map((l) => JSON.parse(l));
   const s = skeletonOf(file);
   const selector = new Selector(s);
+  const orderer = ordererOf(file, s);
   let nodes = 0;
   for (const f of frames) {
     const cut = selector.select(new Camera(f.camera), limits);
     assert.deepEqual(cut.shown, f.front, `${file} frame ${f.frame}: front`);
+    assert.deepEqual(orderer.order(cut.shown, new Camera(f.camera)), f.order, `${file} frame ${f.frame}: drawing order`);
     assert.deepEqual(cut.culled, f.culled_roots, `${file} frame ${f.frame}: culled roots`);
     assert.equal(cut.faces, f.faces);
     nodes += cut.shown.length;
   }
-  t.diagnostic(`${frames.length} fronts equal (${nodes} displayed nodes in all), ${args.join(' ')}`);
+  t.diagnostic(`${frames.length} fronts and drawing orders equal (${nodes} displayed nodes in all), ${args.join(' ')}`);
   return frames;
 }
 

@@ -1,0 +1,245 @@
+//! Drawing order and occlusion culling (selection.md §5) against brute force: the planes' order
+//! of a front agrees with the nodes' depths on screen wherever a plane separates them, and
+//! occlusion culling changes no pixel of a streamed orbit.
+
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+use strata::camera::{Camera, Projection};
+use strata::format::planes::{grid_eye, Decision, Eye};
+use strata::format::Reader;
+use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::render::Image;
+use strata::stream::order::Orderer;
+use strata::stream::play::{play, PlayOptions};
+use strata::stream::{session, Budgets, Streamer};
+
+fn meshes() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut out: Vec<PathBuf> =
+        ["noisy_sphere.ply", "cad_part.obj", "textured_globe.glb"].iter().map(|m| root.join("fixtures").join(m)).collect();
+    let scan = root.join("../shared/meshes/scans/stanford_bun_zipper.ply");
+    if scan.exists() {
+        out.push(scan);
+    } else {
+        eprintln!("note: {} is absent; the order is checked on the fixtures only", scan.display());
+    }
+    out
+}
+
+/// `mesh` converted with `leaf_faces` into a temporary file named after `test` too.
+fn converted(test: &str, mesh: &Path, leaf_faces: u32) -> (PathBuf, Reader<std::fs::File>) {
+    let name = mesh.file_stem().unwrap().to_string_lossy().into_owned();
+    let out = std::env::temp_dir().join(format!("strata-order-{test}-{name}-{leaf_faces}-{}.strata", std::process::id()));
+    let mut opts = ConvertOptions::default();
+    opts.hierarchy.leaf_faces = leaf_faces;
+    convert(mesh, &Default::default(), &out, &opts, &mut Silent).expect("convert");
+    let rd = Reader::open_path(&out).expect("open");
+    (out, rd)
+}
+
+/// A camera looking at the model from a pseudo-random direction and distance.
+fn camera(center: Vec3, radius: f32, k: u32) -> Camera {
+    let h = |x: u32| ((x.wrapping_mul(2654435761) >> 8) as f32) / (1u32 << 24) as f32;
+    let (a, b, d) = (h(3 * k + 1) * std::f32::consts::TAU, h(3 * k + 2) * 2.0 - 1.0, 1.6 + 2.5 * h(3 * k + 3));
+    let dir = Vec3::new(a.cos() * (1.0 - b * b).sqrt(), b, a.sin() * (1.0 - b * b).sqrt());
+    Camera {
+        eye: center + dir * radius * d,
+        target: center,
+        up: if b.abs() > 0.95 { Vec3::X } else { Vec3::Y },
+        projection: Projection::Perspective { fov_y: 45f32.to_radians() },
+        width: 96,
+        height: 96,
+        near: radius * 0.01,
+        far: radius * 10.0,
+    }
+}
+
+/// `node` and its ancestors, from `node` up to its top-level ancestor.
+fn ancestors(rd: &Reader<std::fs::File>, node: u32) -> Vec<u32> {
+    let mut chain = vec![node];
+    while let Some(&p) = chain.last().and_then(|&n| rd.nodes().get(n as usize)).map(|n| &n.parent) {
+        if p as usize >= rd.nodes().len() {
+            break;
+        }
+        chain.push(p);
+    }
+    chain
+}
+
+#[test]
+fn the_planes_order_agrees_with_depth_where_a_plane_separates() {
+    let mut checked = 0u64;
+    for mesh in meshes() {
+        let (out, rd) = converted("depth", &mesh, 96);
+        let sk = rd.skeleton();
+        let planes = rd.read_planes().expect("planes");
+        assert!(!planes.is_empty(), "{}: no planes", mesh.display());
+        let mut orderer = Orderer::new(sk, planes.clone());
+        let (min, max) = (rd.header().min, rd.header().max);
+        let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+        for level in 0..rd.levels().len().min(3) as u32 {
+            let front: Vec<u32> = rd.level_nodes(level).collect();
+            let geometry: Vec<_> = front.iter().map(|&i| rd.read_node(i).expect("node")).collect();
+            for k in 0..8 {
+                let cam = camera(center, radius, k + 100 * level);
+                let depth: Vec<Vec<f32>> = geometry
+                    .iter()
+                    .map(|g| {
+                        let mut im = Image::new(cam.width, cam.height);
+                        im.draw(&cam, &g.positions, &[], &g.indices, [255; 4]);
+                        im.depth
+                    })
+                    .collect();
+                // Each node's covered pixels' bounds, to skip pairs that cannot overlap.
+                let w = cam.width as usize;
+                let rects: Vec<(usize, usize, usize, usize)> = depth
+                    .iter()
+                    .map(|d| {
+                        let mut r = (usize::MAX, 0, usize::MAX, 0);
+                        for (i, _) in d.iter().enumerate().filter(|(_, z)| z.is_finite()) {
+                            let (px, py) = (i % w, i / w);
+                            r = (r.0.min(px), r.1.max(px), r.2.min(py), r.3.max(py));
+                        }
+                        r
+                    })
+                    .collect();
+                let mut order = Vec::new();
+                orderer.order(sk, &front, &cam, &mut order);
+                let at: std::collections::HashMap<u32, usize> = order.iter().enumerate().map(|(k, &n)| (n, k)).collect();
+                let grid = Eye::At(grid_eye(&sk.header.grid, cam.eye));
+                for x in 0..front.len() {
+                    for y in x + 1..front.len() {
+                        // Where both cover a pixel, which is nearer.
+                        let (rx, ry) = (rects[x], rects[y]);
+                        let (x0, x1, y0, y1) = (rx.0.max(ry.0), rx.1.min(ry.1), rx.2.max(ry.2), rx.3.min(ry.3));
+                        if x0 > x1 || y0 > y1 {
+                            continue;
+                        }
+                        let (mut x_nearer, mut y_nearer) = (false, false);
+                        for row in y0..=y1 {
+                            let span = row * w + x0..=row * w + x1;
+                            for (&a, &b) in depth[x][span.clone()].iter().zip(&depth[y][span]) {
+                                if a.is_finite() && b.is_finite() {
+                                    x_nearer |= a < b - 1e-6;
+                                    y_nearer |= b < a - 1e-6;
+                                }
+                            }
+                        }
+                        if !x_nearer && !y_nearer {
+                            continue;
+                        }
+                        // The siblings holding them, under their lowest common parent.
+                        let (cx, cy) = (ancestors(&rd, front[x]), ancestors(&rd, front[y]));
+                        let common = cx.iter().find(|a| cy.contains(a)).copied();
+                        let below = |chain: &[u32]| match common {
+                            Some(c) => chain[chain.iter().position(|&a| a == c).unwrap() - 1],
+                            None => *chain.last().unwrap(),
+                        };
+                        let (sx, sy) = (below(&cx), below(&cy));
+                        let first = common.map_or(0, |c| rd.nodes()[c as usize].first_child);
+                        let (lx, ly) = (sx - first, sy - first);
+                        let Some(e) = planes.of(common).iter().find(|e| (e.first, e.second) == (lx, ly) || (e.first, e.second) == (ly, lx))
+                        else {
+                            continue;
+                        };
+                        if e.first_max >= e.second_min {
+                            continue; // the slab is not empty: no plane separates them
+                        }
+                        let x_first = match e.decide(grid) {
+                            Decision::FirstBeforeSecond => e.first == lx,
+                            Decision::SecondBeforeFirst => e.first == ly,
+                            Decision::Undecided => continue,
+                        };
+                        let (earlier, later_nearer) = if x_first { (x, y_nearer) } else { (y, x_nearer) };
+                        assert!(
+                            !later_nearer,
+                            "{}: level {level} camera {k}: node {} is nearer than {} somewhere though the plane puts it behind",
+                            mesh.display(),
+                            front[x + y - earlier],
+                            front[earlier]
+                        );
+                        let (px, py) = (at[&front[x]], at[&front[y]]);
+                        assert_eq!(
+                            px < py,
+                            x_first,
+                            "{}: level {level} camera {k}: nodes {} and {} out of the plane's order",
+                            mesh.display(),
+                            front[x],
+                            front[y]
+                        );
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        let _ = std::fs::remove_file(out);
+    }
+    eprintln!("{checked} overlapping pairs of nodes a plane separates, checked");
+    assert!(checked > 50, "{checked} overlapping, separated pairs checked");
+}
+
+#[test]
+fn occlusion_culling_changes_no_pixel_along_an_orbit() {
+    let mut meshes = meshes();
+    let ct = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/large/cthead_skin_native.ply");
+    if ct.exists() {
+        meshes.push(ct);
+    } else {
+        eprintln!("note: {} is absent; occlusion culling is checked on the fixtures only", ct.display());
+    }
+    let mut hidden = 0;
+    for mesh in meshes {
+        let (out, _) = converted("pixels", &mesh, 256);
+        let frames = |occlusion: bool| {
+            let rd = Reader::open_path(&out).expect("open");
+            let (min, max) = (rd.header().min, rd.header().max);
+            let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+            let cameras: Vec<Camera> = (0..12).map(|i| session::orbit(center, radius, i, 12, 160, 120)).collect();
+            let mut streamer = Streamer::new(rd, Budgets::default()).expect("streamer");
+            let opts =
+                PlayOptions { width: 160, height: 120, pixels: true, compare_full: false, ordered: true, occlusion, hold_hidden: false };
+            let mut images = Vec::new();
+            let mut skipped = 0;
+            play(&mut streamer, &cameras, opts, &[], std::time::Instant::now(), |f| {
+                images.push(f.rgba.unwrap().to_vec());
+                skipped += f.nodes_hidden;
+                Ok(())
+            })
+            .expect("play");
+            (images, skipped)
+        };
+        let ((plain, none), (culled, skipped)) = (frames(false), frames(true));
+        assert_eq!(none, 0);
+        for (k, (a, b)) in plain.iter().zip(&culled).enumerate() {
+            let changed = a.chunks_exact(4).zip(b.chunks_exact(4)).filter(|(p, q)| p != q).count();
+            assert_eq!(changed, 0, "{}: frame {k}: occlusion culling changed {changed} pixels", mesh.display());
+        }
+        hidden += skipped;
+        let _ = std::fs::remove_file(out);
+    }
+    eprintln!("{hidden} nodes skipped by occlusion culling, no pixel changed");
+    assert!(hidden > 0, "occlusion culling skipped no node on any mesh");
+}
+
+#[test]
+fn damaged_planes_cost_only_the_order_and_are_said() {
+    let (out, rd) = converted("damaged", &Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/noisy_sphere.ply"), 256);
+    let at = rd.planes_offset();
+    drop(rd);
+    let mut bytes = std::fs::read(&out).unwrap();
+    assert!(bytes.len() as u64 > at + 40, "the file ends with its planes");
+    let k = bytes.len() - 30;
+    bytes[k] ^= 0x5a;
+    let rd = Reader::open(std::io::Cursor::new(bytes)).expect("the skeleton is intact");
+    let err = rd.read_planes().expect_err("a damaged ORDR is refused").to_string();
+    assert!(err.contains("ORDR") && err.contains("CRC"), "{err}");
+    let mut streamer = Streamer::new(rd, Budgets::default()).expect("a session without the planes");
+    let warnings = streamer.take_warnings();
+    assert!(warnings.iter().any(|w| w.contains("ORDR") && w.contains("nearest box")), "{warnings:?}");
+    let (min, max) = (streamer.reader().header().min, streamer.reader().header().max);
+    let report = streamer.update(&session::orbit((min + max) * 0.5, (max - min).length() * 0.5, 0, 4, 64, 64), None).unwrap();
+    let mut sorted = report.order.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, report.front);
+    let _ = std::fs::remove_file(out);
+}
