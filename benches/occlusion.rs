@@ -14,7 +14,7 @@
 //! `cargo bench --bench occlusion [-- mesh ...]`; without arguments the noisy-sphere fixture and
 //! the bunny and CT head of ../shared/meshes when present.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use strata::camera::Camera;
@@ -85,7 +85,7 @@ struct Sums {
     visible: u64,
     node_removable: u64,
     cluster_removable: u64,
-    /// Candidates in the nodes the occlusion test skipped.
+    /// Candidates among the faces the occlusion test skipped.
     occlusion_removed: u64,
     unordered: DrawStats,
     ordered: DrawStats,
@@ -180,7 +180,17 @@ fn main() {
             let (ordered, ordered_ms) = draw(&mut strips, &camera, &by_planes, &mut plain);
             strips.set_occlusion(true);
             let (culled_stats, culled_ms) = draw(&mut strips, &camera, &by_planes, &mut culled);
-            let hidden: HashSet<u32> = report.order.iter().enumerate().filter(|&(k, _)| strips.part_hidden(k)).map(|(_, &i)| i).collect();
+            // Per node with any face the occlusion test skipped: which.
+            let hidden: HashMap<u32, Vec<bool>> = report
+                .order
+                .iter()
+                .enumerate()
+                .filter_map(|(k, &i)| {
+                    let faces = streamer.geometry(i)?.face_count();
+                    let skipped: Vec<bool> = (0..faces).map(|f| strips.face_hidden(k, f)).collect();
+                    skipped.contains(&true).then_some((i, skipped))
+                })
+                .collect();
             sums.changed_pixels += plain.chunks_exact(4).zip(culled.chunks_exact(4)).filter(|(a, b)| a != b).count() as u64;
             // The same frame from the session that holds what was hidden the frame before.
             let held_report = holding.update(&camera, None).expect("frame");
@@ -220,16 +230,18 @@ fn main() {
             for ((g, &f), node) in geometries.iter().zip(&first).zip(shown) {
                 let mut node_candidates = 0u64;
                 let mut node_visible = 0u64;
+                let skipped = hidden.get(&node);
                 let cluster = |range: std::ops::Range<usize>| {
-                    let (mut c, mut v) = (0u64, 0u64);
+                    let (mut c, mut v, mut h) = (0u64, 0u64, 0u64);
                     for k in range {
                         let t = &g.indices[3 * k..3 * k + 3];
                         if candidate(g, t, &camera, &planes, &vp) {
                             c += 1;
                             v += seen.contains(&(f + k as u32)) as u64;
+                            h += skipped.is_some_and(|s| s[k]) as u64;
                         }
                     }
-                    (c, v)
+                    (c, v, h)
                 };
                 let clusters: Vec<std::ops::Range<usize>> = if g.clusters.is_empty() {
                     std::iter::once(0..g.face_count()).collect()
@@ -237,7 +249,8 @@ fn main() {
                     g.clusters.iter().map(|c| c.first_face as usize..(c.first_face + c.face_count) as usize).collect()
                 };
                 for r in clusters {
-                    let (c, v) = cluster(r);
+                    let (c, v, h) = cluster(r);
+                    sums.occlusion_removed += h;
                     node_candidates += c;
                     node_visible += v;
                     if v == 0 {
@@ -246,9 +259,6 @@ fn main() {
                 }
                 if node_visible == 0 {
                     sums.node_removable += node_candidates;
-                }
-                if hidden.contains(&node) {
-                    sums.occlusion_removed += node_candidates;
                 }
                 sums.candidates += node_candidates;
                 sums.visible += node_visible;
@@ -315,7 +325,7 @@ fn main() {
     println!("covering a pixel center if drawn alone;");
     println!("visible: of those, reaching a pixel of the image (id buffer of the front); ideal: hidden share of front+frus;");
     println!("nodes / clusters of it: share of the ideal in nodes (clusters at level 0) none of whose faces is visible;");
-    println!("culled of it: share of the ideal in the nodes the renderer's occlusion test skipped (front to back, per 32-row strip).");
+    println!("culled of it: share of the ideal in the faces the renderer's occlusion test skipped (nodes' boxes and 32-face blocks, per 32-row strip).");
     println!("drawn: faces drawn per frame in the planes' order without and with occlusion culling (ratio: with / without);");
     println!("px shade: fragments shaded per covered pixel in node order, ordered: in the planes' order; draw ms: strip renderer,");
     println!("ordered, without and with culling (identical images, checked); order µs: ordering each frame's front, mean;");

@@ -21,7 +21,7 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 /// Color of pixels no face covers.
 pub const BACKGROUND: [u8; 4] = [28, 30, 36, 255];
@@ -300,8 +300,8 @@ fn encode(width: u32, height: u32, rgba: &[u8]) -> std::result::Result<Vec<u8>, 
 
 /// Rows per strip of [`Strips`].
 pub const STRIP_ROWS: u32 = 32;
-/// Faces per block of a part: the unit of the per-strip test.
-const BLOCK_FACES: usize = 32;
+/// Faces per block of a part: the unit of the per-strip tests.
+pub const BLOCK_FACES: usize = 32;
 /// Rows a face's pixels may reach beyond the rows of its corners' projections (rounding and
 /// clipping error), for the strip test.
 const ROW_MARGIN: i32 = 2;
@@ -313,6 +313,40 @@ const NO_ROW: i32 = i32::MIN + 1;
 /// Rows of a block no strip test can rule out.
 const ALL_ROWS: (i32, i32) = (i32::MIN, i32::MAX);
 
+/// Where the faces of a block of [`BLOCK_FACES`] may reach on screen, found once per frame from
+/// their corners: rows and columns (conservatively: a few pixels more each way) and the least
+/// depth of a corner; `z` is −∞ where a corner lies before the near plane or behind the eye (no
+/// occlusion test then).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Block {
+    rows: (i32, i32),
+    cols: (i32, i32),
+    z: f32,
+}
+
+/// A block no test can rule out.
+const ANYWHERE: Block = Block { rows: ALL_ROWS, cols: ALL_ROWS, z: f32::NEG_INFINITY };
+
+/// What occlusion culling found of a block or part this frame: not tested, hidden in some strip
+/// and drawn in none, or drawn.
+const UNTESTED: u8 = 0;
+const HIDDEN: u8 = 1;
+const DRAWN: u8 = 2;
+
+/// Whether every pixel of `rows` × `cols` (clamped to the strip `first..=last` and the image) holds
+/// a depth below `z`; None when no pixel of the strip is in the region.
+fn behind(rows: (i32, i32), cols: (i32, i32), z: f32, first: u32, last: u32, width: u32, depth: &[f32]) -> Option<bool> {
+    let (a, b) = (rows.0.max(first as i32), rows.1.min(last as i32));
+    let (x0, x1) = (cols.0.max(0), cols.1.min(width as i32 - 1));
+    if a > b || x0 > x1 {
+        return None;
+    }
+    Some((a..=b).all(|row| {
+        let line = (row as u32 - first) as usize * width as usize;
+        depth[line + x0 as usize..=line + x1 as usize].iter().all(|&d| d < z)
+    }))
+}
+
 /// Per-frame constants of a strip draw.
 struct StripFrame<'a> {
     parts: &'a [Part<'a>],
@@ -322,8 +356,9 @@ struct StripFrame<'a> {
     height: u32,
     /// Per part, with occlusion culling on: where its box projects ([`Hull`]).
     hulls: &'a [Hull],
-    /// Per part: drawn in some strip this frame.
-    drawn: &'a [AtomicBool],
+    /// Per part, then per block (parts one after the other): [`UNTESTED`], [`HIDDEN`] or [`DRAWN`].
+    drawn: &'a [AtomicU8],
+    block_state: &'a [AtomicU8],
 }
 
 /// A part's box on screen, for the occlusion test: pixels `x0..=x1` × `y0..=y1` (a pixel wider
@@ -383,11 +418,7 @@ impl Hull {
             Hull::Unknown => false,
             Hull::Outside => true,
             Hull::Rect { x0, x1, y0, y1, z } => {
-                let (a, b) = (y0.max(first), y1.min(last));
-                (a..=b).all(|row| {
-                    let line = (row - first) as usize * width as usize;
-                    depth[line + x0 as usize..=line + x1 as usize].iter().all(|&d| d < z)
-                })
+                behind((y0 as i32, y1 as i32), (x0 as i32, x1 as i32), z, first, last, width, depth) != Some(false)
             }
         }
     }
@@ -439,29 +470,40 @@ impl StripFrame<'_> {
         *slot
     }
 
-    /// Rows the faces of each block of `part` may cover, conservatively (`(first, last)`, empty
-    /// when first > last), into `out` (one per [`BLOCK_FACES`] faces).
-    fn block_rows(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [(i32, i32)]) {
+    /// Where the faces of each block of `part` may reach ([`Block`]; rows empty when
+    /// first > last), into `out` (one per [`BLOCK_FACES`] faces).
+    fn block_bounds(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [Block]) {
         cache.next_generation();
         let n = part.positions.len();
-        for (block, range) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
-            let (mut lo, mut hi) = (i32::MAX, i32::MIN);
+        let edge = self.width as f32 + 16.0;
+        for (block, bounds) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
+            let mut b = Block { rows: (i32::MAX, i32::MIN), cols: (i32::MAX, i32::MIN), z: f32::INFINITY };
             for tri in block.chunks_exact(3) {
                 if tri.iter().any(|&i| i as usize >= n) {
                     continue;
                 }
-                let r = [0, 1, 2].map(|k| self.corner(part, tri[k], false, cache).row);
+                let c = [0, 1, 2].map(|k| self.corner(part, tri[k], false, cache));
+                let r = c.map(|c| c.row);
                 if r.contains(&BAD_ROW) {
                     continue;
                 }
                 if r.contains(&NO_ROW) {
-                    (lo, hi) = ALL_ROWS;
+                    b = ANYWHERE;
                     break;
                 }
-                lo = lo.min(r[0].min(r[1]).min(r[2]) - ROW_MARGIN);
-                hi = hi.max(r[0].max(r[1]).max(r[2]) + ROW_MARGIN);
+                b.rows = (b.rows.0.min(r[0].min(r[1]).min(r[2]) - ROW_MARGIN), b.rows.1.max(r[0].max(r[1]).max(r[2]) + ROW_MARGIN));
+                for p in c.map(|c| c.clip.p) {
+                    // w > 0 here (the row is usable); a corner before the near plane has a depth
+                    // below -1 that clipping replaces: no depth bound then.
+                    let x = ((p.x / p.w + 1.0) * 0.5 * self.width as f32).clamp(-16.0, edge).floor() as i32;
+                    b.cols = (b.cols.0.min(x - ROW_MARGIN), b.cols.1.max(x + ROW_MARGIN));
+                    b.z = if p.z < -p.w { f32::NEG_INFINITY } else { b.z.min(p.z / p.w) };
+                }
             }
-            *range = (lo, hi);
+            if !b.z.is_finite() {
+                b.z = f32::NEG_INFINITY;
+            }
+            *bounds = b;
         }
     }
 
@@ -469,7 +511,7 @@ impl StripFrame<'_> {
     /// input order, as [`Image::draw_parts`] draws them into the whole image. `blocks` are the
     /// parts' block rows, one after the other. Counts the faces whose topmost pixel row lies in
     /// this strip, so that each drawn face counts once.
-    fn draw_strip(&self, strip: u32, blocks: &[(i32, i32)], rgba: &mut [u8], depth: &mut [f32], s: &mut StripScratch) -> DrawStats {
+    fn draw_strip(&self, strip: u32, blocks: &[Block], rgba: &mut [u8], depth: &mut [f32], s: &mut StripScratch) -> DrawStats {
         let (width, height) = (self.width, self.height);
         let first = strip * STRIP_ROWS;
         let last = (first + STRIP_ROWS).min(height) - 1;
@@ -479,23 +521,45 @@ impl StripFrame<'_> {
         for (part_index, part) in self.parts.iter().enumerate() {
             let tex = part.texture.map(|chain| FaceTexture { part: part_index as u32, chain });
             let count = (part.indices.len() / 3).div_ceil(BLOCK_FACES);
+            let first_block = block;
             let ranges = &blocks[block..block + count];
             block += count;
-            if ranges.iter().all(|&(a, b)| b < lo || a > hi) {
+            if ranges.iter().all(|b| b.rows.1 < lo || b.rows.0 > hi) {
                 continue;
             }
+            let occlusion = !self.hulls.is_empty();
             if let Some(h) = self.hulls.get(part_index) {
-                if !h.reaches(first, last) || h.hidden(first, last, width, depth) {
+                if !h.reaches(first, last) {
                     continue;
                 }
-                self.drawn[part_index].store(true, Ordering::Relaxed);
+                if h.hidden(first, last, width, depth) {
+                    self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
+                    continue;
+                }
             }
             let n = part.positions.len();
             let smooth = part.normals.len() == n;
             s.cache.next_generation();
-            for (b, &(a, z)) in ranges.iter().enumerate() {
-                if z < lo || a > hi {
+            for (b, bounds) in ranges.iter().enumerate() {
+                if bounds.rows.1 < lo || bounds.rows.0 > hi {
                     continue;
+                }
+                if occlusion {
+                    let state = &self.block_state[first_block + b];
+                    if bounds.z > f32::NEG_INFINITY {
+                        match behind(bounds.rows, bounds.cols, bounds.z - HULL_DEPTH_MARGIN, first, last, width, depth) {
+                            // Outside the image: its faces have no pixel here.
+                            None => continue,
+                            Some(true) => {
+                                state.fetch_max(HIDDEN, Ordering::Relaxed);
+                                self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
+                                continue;
+                            }
+                            Some(false) => {}
+                        }
+                    }
+                    state.store(DRAWN, Ordering::Relaxed);
+                    self.drawn[part_index].store(DRAWN, Ordering::Relaxed);
                 }
                 let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
                 for tri in part.indices[3 * b * BLOCK_FACES..end].chunks_exact(3) {
@@ -604,11 +668,14 @@ pub struct Strips {
     width: u32,
     height: u32,
     slots: Vec<Slot>,
-    /// Rows of each block of [`BLOCK_FACES`] faces, parts one after the other (this frame).
-    blocks: Vec<(i32, i32)>,
+    /// Where each block of [`BLOCK_FACES`] faces reaches, parts one after the other (this frame).
+    blocks: Vec<Block>,
+    /// Each part's first block, and one past the last part's.
+    block_start: Vec<usize>,
     occlusion: bool,
     hulls: Vec<Hull>,
-    drawn: Vec<AtomicBool>,
+    drawn: Vec<AtomicU8>,
+    block_state: Vec<AtomicU8>,
     stats: DrawStats,
 }
 
@@ -667,16 +734,20 @@ impl Strips {
             height,
             slots,
             blocks: Vec::new(),
+            block_start: Vec::new(),
             occlusion: false,
             hulls: Vec::new(),
             drawn: Vec::new(),
+            block_state: Vec::new(),
             stats: DrawStats::default(),
         }
     }
 
     /// Occlusion culling: parts with [`Part::bounds`] are skipped in a strip where their box lies
-    /// behind what the parts before them drew there. Drawn front to back, this skips much of what
-    /// is hidden; the image is the same pixel for pixel either way (the test is conservative).
+    /// behind what the parts before them drew there, and so are blocks of [`BLOCK_FACES`] faces
+    /// whose corners' screen rectangle does (at the corners' least depth). Drawn front to back,
+    /// this skips much of what is hidden; the image is the same pixel for pixel either way (the
+    /// tests are conservative).
     pub fn set_occlusion(&mut self, on: bool) {
         self.occlusion = on;
     }
@@ -686,10 +757,20 @@ impl Strips {
         self.stats
     }
 
-    /// Whether the last [`Strips::draw`] skipped part `k` in every strip its box reaches (only with
-    /// occlusion culling on, and a box on screen).
+    /// Whether the last [`Strips::draw`] found part `k` hidden (its box or its blocks behind what
+    /// was drawn) and drew nothing of it (only with occlusion culling on).
     pub fn part_hidden(&self, k: usize) -> bool {
-        matches!(self.hulls.get(k), Some(Hull::Rect { .. })) && self.drawn.get(k).is_some_and(|d| !d.load(Ordering::Relaxed))
+        self.drawn.get(k).is_some_and(|d| d.load(Ordering::Relaxed) == HIDDEN)
+    }
+
+    /// Whether the last [`Strips::draw`] skipped face `f` of part `k` by occlusion: the part, or
+    /// the face's block of [`BLOCK_FACES`] in every strip it reaches.
+    pub fn face_hidden(&self, k: usize, f: usize) -> bool {
+        self.part_hidden(k)
+            || self.block_start.get(k).is_some_and(|&b| {
+                self.block_state.get(b + f / BLOCK_FACES).is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN)
+                    && b + f / BLOCK_FACES < self.block_start[k + 1]
+            })
     }
 
     /// Draw `parts` seen by `camera` over the background, as [`Image::draw_parts`] would on a
@@ -698,14 +779,31 @@ impl Strips {
     pub fn draw(&mut self, camera: &Camera, parts: &[Part<'_>], mut put_rows: impl FnMut(u32, &[u8])) -> usize {
         let (width, height) = (self.width, self.height);
         let view_projection = camera.view_projection();
+        let counts = parts.iter().map(|p| (p.indices.len() / 3).div_ceil(BLOCK_FACES));
+        self.block_start.clear();
+        self.block_start.push(0);
+        for c in counts.clone() {
+            self.block_start.push(self.block_start.last().unwrap_or(&0) + c);
+        }
+        let total = *self.block_start.last().unwrap_or(&0);
         self.hulls.clear();
         self.drawn.clear();
+        self.block_state.clear();
         if self.occlusion {
             self.hulls.extend(parts.iter().map(|p| Hull::of(p, &view_projection, width, height)));
-            self.drawn.extend(parts.iter().map(|_| AtomicBool::new(false)));
+            self.drawn.extend(parts.iter().map(|_| AtomicU8::new(UNTESTED)));
+            self.block_state.extend((0..total).map(|_| AtomicU8::new(UNTESTED)));
         }
-        let (hulls, drawn_parts) = (&self.hulls[..], &self.drawn[..]);
-        let frame = StripFrame { parts, view_projection, light: -camera.forward(), width, height, hulls, drawn: drawn_parts };
+        let frame = StripFrame {
+            parts,
+            view_projection,
+            light: -camera.forward(),
+            width,
+            height,
+            hulls: &self.hulls,
+            drawn: &self.drawn,
+            block_state: &self.block_state,
+        };
         // Scratch is sized here, so that the workers do not allocate (their arenas would keep
         // the memory).
         for slot in &mut self.slots {
@@ -717,11 +815,10 @@ impl Strips {
             s.clip.d.reserve(16);
             s.clip.screen.reserve(16);
         }
-        let counts = parts.iter().map(|p| (p.indices.len() / 3).div_ceil(BLOCK_FACES));
         self.blocks.clear();
-        self.blocks.resize(counts.clone().sum(), ALL_ROWS);
-        // Each slot finds the block rows of every slots.len()-th part.
-        let mut per_part: Vec<&mut [(i32, i32)]> = Vec::with_capacity(parts.len());
+        self.blocks.resize(total, ANYWHERE);
+        // Each slot finds the block bounds of every slots.len()-th part.
+        let mut per_part: Vec<&mut [Block]> = Vec::with_capacity(parts.len());
         let mut rest = &mut self.blocks[..];
         for c in counts {
             let (head, tail) = rest.split_at_mut(c);
@@ -729,14 +826,14 @@ impl Strips {
             rest = tail;
         }
         let stride = self.slots.len();
-        type Lane<'p, 'b> = Vec<(&'p Part<'p>, &'b mut [(i32, i32)])>;
+        type Lane<'p, 'b> = Vec<(&'p Part<'p>, &'b mut [Block])>;
         let mut lanes: Vec<Lane> = (0..stride).map(|_| Vec::new()).collect();
         for (k, (part, out)) in parts.iter().zip(per_part).enumerate() {
             lanes[k % stride].push((part, out));
         }
         self.slots.par_iter_mut().zip(lanes).for_each(|(slot, lane)| {
             for (part, out) in lane {
-                frame.block_rows(part, &mut slot.scratch.cache, out);
+                frame.block_bounds(part, &mut slot.scratch.cache, out);
             }
         });
         let strips = height.div_ceil(STRIP_ROWS);
@@ -766,9 +863,16 @@ impl Strips {
         }
         self.stats = stats;
         for (k, part) in parts.iter().enumerate() {
+            let faces = part.indices.len() / 3;
             if self.part_hidden(k) {
                 self.stats.parts_hidden += 1;
-                self.stats.faces_hidden += (part.indices.len() / 3) as u64;
+                self.stats.faces_hidden += faces as u64;
+            } else if self.occlusion {
+                for (b, state) in self.block_state[self.block_start[k]..self.block_start[k + 1]].iter().enumerate() {
+                    if state.load(Ordering::Relaxed) == HIDDEN {
+                        self.stats.faces_hidden += (faces - b * BLOCK_FACES).min(BLOCK_FACES) as u64;
+                    }
+                }
             }
         }
         self.stats.faces
@@ -1216,6 +1320,11 @@ mod tests {
             assert!(stats.parts_hidden >= 4, "from {}: {stats:?}", camera.eye);
             assert!(stats.faces < faces);
             assert!(stats.faces_hidden > 0);
+            // Without boxes, the blocks of 32 faces are still tested.
+            let unboxed: Vec<Part> = parts.iter().map(|p| Part { bounds: None, ..*p }).collect();
+            let (unboxed_image, unboxed_stats) = draw_occluded(&camera, &unboxed, width, height);
+            assert!(unboxed_image == plain);
+            assert!(unboxed_stats.faces_hidden > 0 && unboxed_stats.faces < faces, "{unboxed_stats:?}");
             // Drawn back to front, nothing is behind what is drawn before it.
             let reversed: Vec<Part> = parts.iter().rev().copied().collect();
             let (back_first, stats) = draw_occluded(&camera, &reversed, width, height);

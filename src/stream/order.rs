@@ -21,6 +21,8 @@ pub struct Orderer {
     planes: Planes,
     normals: Vec<DVec3>,
     boxes: Vec<(DVec3, DVec3)>,
+    /// Per node: parent, first child, child count (the skeleton's, packed for the walk).
+    links: Vec<[u32; 3]>,
     state: Vec<u8>,
     touched: Vec<u32>,
     /// One per depth of the walk.
@@ -82,9 +84,14 @@ impl Ord for Key {
     }
 }
 
-/// What one ordering walk reads: the file, and the eye for the planes and for the keys.
+/// What one ordering walk reads: the orderer's tables, which nodes are shown or above, and the
+/// eye for the planes and for the keys.
 struct View<'a> {
-    sk: &'a Skeleton,
+    planes: &'a Planes,
+    normals: &'a [DVec3],
+    boxes: &'a [(DVec3, DVec3)],
+    links: &'a [[u32; 3]],
+    state: &'a [u8],
     eye: Eye,
     key_eye: Eye,
 }
@@ -100,7 +107,8 @@ impl Orderer {
                 (lo.as_dvec3(), hi.as_dvec3())
             })
             .collect();
-        Orderer { planes, normals, boxes, ..Orderer::default() }
+        let links = sk.nodes.iter().map(|n| [n.parent, n.first_child, n.child_count]).collect();
+        Orderer { planes, normals, boxes, links, ..Orderer::default() }
     }
 
     pub fn planes(&self) -> &Planes {
@@ -140,48 +148,60 @@ impl Orderer {
             }
         }
         let top = sk.level_nodes(sk.top());
-        self.walk(&View { sk, eye, key_eye }, None, top, 0, out);
+        // The walk goes one scratch deeper per parent with two or more live children: at most
+        // one per level below the virtual root.
+        if self.scratch.len() < sk.levels.len() + 1 {
+            self.scratch.resize_with(sk.levels.len() + 1, Scratch::default);
+        }
+        let view =
+            View { planes: &self.planes, normals: &self.normals, boxes: &self.boxes, links: &self.links, state: &self.state, eye, key_eye };
+        view.walk(None, top, &mut self.scratch, out);
         for &n in &self.touched {
             self.state[n as usize] = OFF;
         }
         self.touched.clear();
     }
+}
 
-    fn walk(&mut self, v: &View, mut parent: Option<u32>, mut kids: std::ops::Range<u32>, depth: usize, out: &mut Vec<u32>) {
-        let sk = v.sk;
+impl View<'_> {
+    fn children(&self, c: u32) -> std::ops::Range<u32> {
+        let [_, first, count] = self.links[c as usize];
+        first..first + count
+    }
+
+    fn walk(&self, mut parent: Option<u32>, mut kids: std::ops::Range<u32>, scratch: &mut [Scratch], out: &mut Vec<u32>) {
+        let state = self.state;
         // A chain of single children is followed without scratch space.
         loop {
-            let mut live = kids.clone().filter(|&c| self.state[c as usize] != OFF);
+            let mut live = kids.clone().filter(|&c| state[c as usize] != OFF);
             match (live.next(), live.next()) {
                 (None, _) => return,
-                (Some(c), None) if self.state[c as usize] == SHOWN => return out.push(c),
-                (Some(c), None) => (parent, kids) = (Some(c), sk.children(c)),
+                (Some(c), None) if state[c as usize] == SHOWN => return out.push(c),
+                (Some(c), None) => (parent, kids) = (Some(c), self.children(c)),
                 _ => break,
             }
         }
-        if self.scratch.len() <= depth {
-            self.scratch.resize_with(depth + 1, Scratch::default);
-        }
-        let mut s = std::mem::take(&mut self.scratch[depth]);
+        // Deeper than the levels (a skeleton's children are always one level down): fresh scratch.
+        let mut spare = Scratch::default();
+        let (s, deeper) = match scratch.split_first_mut() {
+            Some(x) => x,
+            None => (&mut spare, &mut [][..]),
+        };
         s.live.clear();
-        s.live.extend(kids.clone().filter(|&c| self.state[c as usize] != OFF));
-        let n = s.live.len();
-        if n > 1 {
-            self.arrange(v, parent, kids, &mut s);
-        }
-        for k in 0..n {
+        s.live.extend(kids.clone().filter(|&c| state[c as usize] != OFF));
+        self.arrange(parent, kids, s);
+        for k in 0..s.live.len() {
             let c = s.live[k];
-            if self.state[c as usize] == SHOWN {
+            if state[c as usize] == SHOWN {
                 out.push(c);
             } else {
-                self.walk(v, Some(c), sk.children(c), depth + 1, out);
+                self.walk(Some(c), self.children(c), deeper, out);
             }
         }
-        self.scratch[depth] = s;
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
-    fn arrange(&self, v: &View, parent: Option<u32>, kids: std::ops::Range<u32>, s: &mut Scratch) {
+    fn arrange(&self, parent: Option<u32>, kids: std::ops::Range<u32>, s: &mut Scratch) {
         let n = s.live.len();
         // Local index of each live child, edges "a before b" from the planes that decide.
         s.local.clear();
@@ -202,7 +222,7 @@ impl Orderer {
             if a == u32::MAX || b == u32::MAX {
                 continue;
             }
-            let edge = match e.decide_with(normal, v.eye) {
+            let edge = match e.decide_with(normal, self.eye) {
                 Decision::FirstBeforeSecond => (a, b),
                 Decision::SecondBeforeFirst => (b, a),
                 Decision::Undecided => continue,
@@ -211,7 +231,7 @@ impl Orderer {
             s.edges.push(edge);
         }
         s.keys.clear();
-        s.keys.extend(s.live.iter().map(|&c| Key(key(self.boxes[c as usize], v.key_eye), c)));
+        s.keys.extend(s.live.iter().map(|&c| Key(key(self.boxes[c as usize], self.key_eye), c)));
         if n <= SMALL {
             return small(s);
         }
