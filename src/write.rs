@@ -359,7 +359,7 @@ fn uv_bits(mesh: &Mesh, order: &[u32], bits: u32) -> u32 {
 }
 
 /// The geometry of `faces` of `mesh`, as the format stores it. Faces are ordered by culling cluster
-/// (level 0), then material; vertices are deduplicated corners (grid point and attributes) in
+/// (level 0), then material, then along a Morton curve; vertices are deduplicated corners (grid point and attributes) in
 /// order of first use. Cluster records start from the hierarchy's cones and spheres
 /// ([`bounds::cluster`]).
 fn node_geometry(
@@ -372,8 +372,15 @@ fn node_geometry(
     lattice: Lattice,
 ) -> std::result::Result<GeometryCodes, String> {
     let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
+    // Within a cluster and material, faces go along a Morton curve of their centroids, so that
+    // consecutive faces are near each other (compact blocks for a renderer's occlusion test).
+    let morton = |f: u32| {
+        let t = mesh.triangles[f as usize].map(|v| q.points[v as usize]);
+        let c = [0, 1, 2].map(|k| ((t[0][k] as u64 + t[1][k] as u64 + t[2][k] as u64) / 3) as u32);
+        (0..21).fold(0u64, |m, bit| m | (0..3).fold(0u64, |b, k| b | (((c[k] >> bit) & 1) as u64) << (3 * bit + k)))
+    };
     let mut order: Vec<u32> = faces.to_vec();
-    order.sort_by_key(|&f| (cluster_of(f), material_of(mesh, f as usize), f));
+    order.sort_by_cached_key(|&f| (cluster_of(f), material_of(mesh, f as usize), morton(f), f));
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
     let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());

@@ -1,6 +1,6 @@
 //! The chunk files strata writes do not change by accident: every shipped fixture, and every mesh of
 //! ../shared/meshes when present, converts with the default options to exactly the bytes recorded in
-//! `tests/output_hashes.txt` (CRC-32 and length). A change to the writer's output is deliberate:
+//! `tests/output_hashes.txt` (the first 8 bytes of SHA-256, and the length). A change to the writer's output is deliberate:
 //! rerun with `STRATA_BLESS=1` to record the new files, and say in the commit why they changed.
 
 use std::collections::BTreeMap;
@@ -55,7 +55,11 @@ fn converted_files_are_byte_identical_to_the_recorded_ones() {
         let hash = match convert(&path, &ImportOptions::default(), &out, &ConvertOptions::default(), &mut Silent) {
             Ok(_) => {
                 let bytes = std::fs::read(&out).unwrap();
-                format!("{:08x}:{}", crc32fast::hash(&bytes), bytes.len())
+                // Not CRC-32: the chunks carry their own CRC-32s, and a payload replaced by another
+                // of the same length with its CRC leaves the whole file's CRC-32 unchanged.
+                use sha2::Digest;
+                let digest = sha2::Sha256::digest(&bytes);
+                format!("{}:{}", digest[..8].iter().map(|b| format!("{b:02x}")).collect::<String>(), bytes.len())
             }
             Err(_) => "refused".to_string(),
         };
@@ -63,7 +67,7 @@ fn converted_files_are_byte_identical_to_the_recorded_ones() {
     }
     std::fs::remove_dir_all(&dir).ok();
     if std::env::var_os("STRATA_BLESS").is_some() {
-        let mut text = String::from("# crc32:length of `strata convert <input>` with default options; see tests/output_stable.rs\n");
+        let mut text = String::from("# sha256[..8]:length of `strata convert <input>` with default options; see tests/output_stable.rs\n");
         let merged: BTreeMap<&String, &String> = recorded.iter().chain(now.iter()).collect();
         for (name, hash) in merged {
             text.push_str(&format!("{hash} {name}\n"));
