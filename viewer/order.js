@@ -9,12 +9,43 @@ import { octaDecode } from './format.js';
 const fr = Math.fround;
 const OFF = 0, SHOWN = 1, ABOVE = 2;
 
-/** f64 order with -0 before +0, as Rust's total_cmp on finite numbers. */
-function compareKeys(a, b) {
-  if (a < b) return -1;
-  if (a > b) return 1;
-  if (a === 0 && b === 0) return Object.is(a, -0) === Object.is(b, -0) ? 0 : Object.is(a, -0) ? -1 : 1;
-  return 0;
+/** Children ordered by a plain scan rather than a heap, up to this many (as in Rust; the order is the same). */
+const SMALL = 32;
+
+/** A binary min-heap of child indices under `less`. */
+class Heap {
+  constructor(less) {
+    this.less = less;
+    this.items = [];
+  }
+  push(x) {
+    const a = this.items;
+    a.push(x);
+    for (let i = a.length - 1; i > 0; ) {
+      const p = (i - 1) >> 1;
+      if (!this.less(a[i], a[p])) break;
+      [a[i], a[p]] = [a[p], a[i]];
+      i = p;
+    }
+  }
+  pop() {
+    const a = this.items;
+    if (a.length === 0) return undefined;
+    const top = a[0], last = a.pop();
+    if (a.length > 0) {
+      a[0] = last;
+      for (let i = 0; ; ) {
+        const l = 2 * i + 1, r = l + 1;
+        let m = i;
+        if (l < a.length && this.less(a[l], a[m])) m = l;
+        if (r < a.length && this.less(a[r], a[m])) m = r;
+        if (m === i) break;
+        [a[i], a[m]] = [a[m], a[i]];
+        i = m;
+      }
+    }
+    return top;
+  }
 }
 
 /** The view direction of `camera` in f32 (glam's try_normalize of target − eye), or null. */
@@ -61,20 +92,41 @@ export class Orderer {
       dir: ortho ? forwardF32(camera) : null,
     };
     const out = [];
-    this.walk(view, -1, s.levelNodes(s.top()), out);
+    // An explicit stack (a file may have any number of levels): per parent with two or more live
+    // children on the way down, its children in order and the next one to take.
+    const stack = [];
+    const enter = (parent, [k0, k1]) => {
+      for (;;) {
+        const live = [];
+        for (let c = k0; c < k1 && live.length < 2; c++) if (state[c] !== OFF) live.push(c);
+        if (live.length === 0) return;
+        if (live.length === 1) {
+          const c = live[0];
+          if (state[c] === SHOWN) return void out.push(c);
+          parent = c;
+          [k0, k1] = s.children(c);
+          continue;
+        }
+        const all = [];
+        for (let c = k0; c < k1; c++) if (state[c] !== OFF) all.push(c);
+        this.arrange(view, parent, k0, all);
+        stack.push({ live: all, next: 0 });
+        return;
+      }
+    };
+    enter(-1, s.levelNodes(s.top()));
+    while (stack.length > 0) {
+      const f = stack[stack.length - 1];
+      if (f.next === f.live.length) {
+        stack.pop();
+        continue;
+      }
+      const c = f.live[f.next++];
+      if (state[c] === SHOWN) out.push(c);
+      else enter(c, s.children(c));
+    }
     for (const n of touched) state[n] = OFF;
     return out;
-  }
-
-  walk(view, parent, [k0, k1], out) {
-    const s = this.skeleton, state = this.state;
-    const live = [];
-    for (let c = k0; c < k1; c++) if (state[c] !== OFF) live.push(c);
-    if (live.length > 1) this.arrange(view, parent, k0, live);
-    for (const c of live) {
-      if (state[c] === SHOWN) out.push(c);
-      else this.walk(view, c, s.children(c), out);
-    }
   }
 
   key(view, c) {
@@ -82,10 +134,11 @@ export class Orderer {
     if (view.ortho) {
       const f = view.dir;
       const m = (k) => Math.min(f[k] * lo[3 * c + k], f[k] * hi[3 * c + k]);
-      return m(0) + m(1) + m(2);
+      // + 0 makes a −0 key +0, as in Rust, so that ties do not hang on zeros' signs.
+      return m(0) + m(1) + m(2) + 0;
     }
     const d = [0, 1, 2].map((k) => Math.max(Math.max(lo[3 * c + k] - view.eye[k], 0), view.eye[k] - hi[3 * c + k]));
-    return d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    return d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + 0;
   }
 
   /** Put `live` (two or more children of `parent`, -1 the virtual root, first child `k0`) in drawing order. */
@@ -117,12 +170,32 @@ export class Orderer {
       predecessors[edge[1]]++;
     }
     const keys = live.map((c) => this.key(view, c));
-    const less = (x, y) => {
-      const c = compareKeys(keys[x], keys[y]);
-      return c < 0 || (c === 0 && live[x] < live[y]);
-    };
+    const less = (x, y) => keys[x] < keys[y] || (keys[x] === keys[y] && live[x] < live[y]);
     const done = new Uint8Array(n);
     const order = [];
+    if (n > SMALL) {
+      // Kahn's rule with heaps: the ready child with the least key; on a cycle, the least key left.
+      const ready = new Heap(less), any = new Heap(less);
+      for (let k = 0; k < n; k++) {
+        any.push(k);
+        if (predecessors[k] === 0) ready.push(k);
+      }
+      while (order.length < n) {
+        let k = ready.pop();
+        while (k !== undefined && done[k]) k = ready.pop();
+        if (k === undefined) {
+          do k = any.pop();
+          while (done[k]);
+        }
+        done[k] = 1;
+        for (const b of successors[k]) {
+          if (predecessors[b] > 0 && --predecessors[b] === 0 && !done[b]) ready.push(b);
+        }
+        order.push(live[k]);
+      }
+      for (let k = 0; k < n; k++) live[k] = order[k];
+      return;
+    }
     for (let taken = 0; taken < n; taken++) {
       let ready = -1, any = -1;
       for (let k = 0; k < n; k++) {

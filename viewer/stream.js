@@ -192,14 +192,23 @@ export class Streamer {
   /** Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only leaves the order without them (planesError says why). */
   async readPlanes() {
     const at = planesOffset(this.skeleton), end = this.source.length;
-    if (!(end > at)) {
+    if (!(end >= at + 16) || this.skeleton.minor < 3) {
       this.planes = 'none';
       return;
     }
     this.planes = 'reading';
     this.inFlight++;
     try {
-      const bytes = await this.source.read(at, end);
+      // The frame, then the chunk alone; anything but ORDR there means no planes.
+      const frame = await this.source.read(at, at + 16);
+      const dv = new DataView(frame.buffer, frame.byteOffset, frame.byteLength);
+      if (String.fromCharCode(...frame.subarray(0, 4)) !== 'ORDR') {
+        this.planes = 'none';
+        return;
+      }
+      const span = 16 + Number(dv.getBigUint64(8, true)) + 4;
+      if (!(at + span <= end)) throw new FormatError(`${this.source.name}: byte offset ${at + 8}: chunk ORDR at offset ${at}: size runs past the end of the file`);
+      const bytes = await this.source.read(at, at + span);
       const planes = decodePlanes(this.skeleton, bytes);
       if (this.closed) return;
       this.orderer = new Orderer(this.skeleton, planes);

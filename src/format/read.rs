@@ -232,19 +232,23 @@ impl<S: ByteSource> Reader<S> {
         if at >= self.len {
             return Ok(Planes::default());
         }
-        // One read from the chunk to the end of the file (chunks of a newer minor may follow it).
-        let bytes = self.read_at(at, self.len - at)?;
+        if self.header().minor < 3 {
+            return Ok(Planes::default());
+        }
+        // The frame, then the chunk alone (chunks of a newer minor may follow it). Anything but
+        // ORDR there means no planes: `verify` reports it, a viewer only loses the order.
         let here = |msg: String| Error::at_byte(&self.path, at, format!("{}: {msg}", chunk::name(&id::ORDR, at)));
+        let frame = self.read_at(at, HEADER_BYTES.min(self.len - at))?;
         let mut head = [0u8; 16];
         head.copy_from_slice(
-            bytes.get(..16).ok_or_else(|| here(format!("{} bytes after the geometry, too few for a chunk", bytes.len())))?,
+            frame.get(..16).ok_or_else(|| here(format!("{} bytes after the geometry, too few for a chunk", frame.len())))?,
         );
         let f = Frame::parse(&head);
         if f.id != id::ORDR {
-            return Err(here(format!("{} follows the geometry and images; only ORDR may", chunk::id_str(&f.id))));
+            return Ok(Planes::default());
         }
-        let end =
-            f.span().filter(|&s| s <= bytes.len() as u64).ok_or_else(|| here(format!("size {} runs past the end of the file", f.size)))?;
+        let end = f.span().filter(|&s| s <= self.len - at).ok_or_else(|| here(format!("size {} runs past the end of the file", f.size)))?;
+        let bytes = self.read_at(at, end)?;
         let payload = &bytes[HEADER_BYTES as usize..(HEADER_BYTES + f.size) as usize];
         let stored = LE::read_u32(&bytes[(HEADER_BYTES + f.size) as usize..end as usize]);
         let actual = chunk::crc32(payload);

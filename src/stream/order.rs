@@ -55,7 +55,8 @@ const SMALL: usize = 32;
 /// The key a child is ordered by where no plane decides: the squared distance from the eye to its
 /// box (0 inside), or for an orthographic camera the least depth of its box along the view.
 fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
-    match eye {
+    // + 0.0 makes a −0 key +0, so that ties do not hang on zeros' signs.
+    0.0 + match eye {
         Eye::At(e) => {
             let d = (lo - e).max(DVec3::ZERO).max(e - hi);
             d.dot(d)
@@ -148,11 +149,6 @@ impl Orderer {
             }
         }
         let top = sk.level_nodes(sk.top());
-        // The walk goes one scratch deeper per parent with two or more live children: at most
-        // one per level below the virtual root.
-        if self.scratch.len() < sk.levels.len() + 1 {
-            self.scratch.resize_with(sk.levels.len() + 1, Scratch::default);
-        }
         let view =
             View { planes: &self.planes, normals: &self.normals, boxes: &self.boxes, links: &self.links, state: &self.state, eye, key_eye };
         view.walk(None, top, &mut self.scratch, out);
@@ -169,9 +165,37 @@ impl View<'_> {
         first..first + count
     }
 
-    fn walk(&self, mut parent: Option<u32>, mut kids: std::ops::Range<u32>, scratch: &mut [Scratch], out: &mut Vec<u32>) {
+    /// The walk, with an explicit stack (a file may have any number of levels): one scratch per
+    /// parent on the way down with two or more live children, each with the next child to take.
+    fn walk(&self, parent: Option<u32>, kids: std::ops::Range<u32>, scratch: &mut Vec<Scratch>, out: &mut Vec<u32>) {
+        let mut next: Vec<usize> = Vec::new();
+        self.enter(parent, kids, scratch, &mut next, out);
+        while let Some(&k) = next.last() {
+            let depth = next.len() - 1;
+            let Some(&c) = scratch[depth].live.get(k) else {
+                next.pop();
+                continue;
+            };
+            next[depth] += 1;
+            if self.state[c as usize] == SHOWN {
+                out.push(c);
+            } else {
+                self.enter(Some(c), self.children(c), scratch, &mut next, out);
+            }
+        }
+    }
+
+    /// Start on `parent`'s children: a chain of single live children is followed at once; two or
+    /// more are arranged into the next scratch and pushed.
+    fn enter(
+        &self,
+        mut parent: Option<u32>,
+        mut kids: std::ops::Range<u32>,
+        scratch: &mut Vec<Scratch>,
+        next: &mut Vec<usize>,
+        out: &mut Vec<u32>,
+    ) {
         let state = self.state;
-        // A chain of single children is followed without scratch space.
         loop {
             let mut live = kids.clone().filter(|&c| state[c as usize] != OFF);
             match (live.next(), live.next()) {
@@ -181,23 +205,14 @@ impl View<'_> {
                 _ => break,
             }
         }
-        // Deeper than the levels (a skeleton's children are always one level down): fresh scratch.
-        let mut spare = Scratch::default();
-        let (s, deeper) = match scratch.split_first_mut() {
-            Some(x) => x,
-            None => (&mut spare, &mut [][..]),
-        };
+        if scratch.len() <= next.len() {
+            scratch.push(Scratch::default());
+        }
+        let s = &mut scratch[next.len()];
         s.live.clear();
         s.live.extend(kids.clone().filter(|&c| state[c as usize] != OFF));
         self.arrange(parent, kids, s);
-        for k in 0..s.live.len() {
-            let c = s.live[k];
-            if state[c as usize] == SHOWN {
-                out.push(c);
-            } else {
-                self.walk(Some(c), self.children(c), deeper, out);
-            }
-        }
+        next.push(0);
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
