@@ -57,9 +57,11 @@ impl Identity {
         }
     }
 
+    /// Whether `other` is this file: the same path, or the same inode while this file's path still
+    /// names it (an inode freed by a deleted input may be reused by an unrelated file).
     fn same_file(&self, other: &Identity) -> bool {
         #[cfg(unix)]
-        if self.inode == other.inode {
+        if self.inode == other.inode && Identity::of(&self.path).is_some_and(|now| now.inode == self.inode) {
             return true;
         }
         self.path == other.path
