@@ -56,10 +56,15 @@ impl Planes {
 
     /// The entries between children of `parent` (`None` for the virtual root).
     pub fn of(&self, parent: Option<u32>) -> &[PlaneEntry] {
+        &self.entries[self.range(parent)]
+    }
+
+    /// Where [`Planes::of`]'s entries lie in `entries` (empty for a parent without any).
+    pub fn range(&self, parent: Option<u32>) -> std::ops::Range<usize> {
         let p = parent.map_or(0, |i| i as usize + 1);
         match (self.starts.get(p), self.starts.get(p + 1)) {
-            (Some(&a), Some(&b)) => &self.entries[a as usize..b as usize],
-            _ => &[],
+            (Some(&a), Some(&b)) => a as usize..b as usize,
+            _ => 0..0,
         }
     }
 }

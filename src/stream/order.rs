@@ -227,11 +227,7 @@ impl View<'_> {
         s.indegree.clear();
         s.indegree.resize(n, 0);
         s.edges.clear();
-        let p = parent.map_or(0, |i| i as usize + 1);
-        let range = match (self.planes.starts.get(p), self.planes.starts.get(p + 1)) {
-            (Some(&a), Some(&b)) => a as usize..b as usize,
-            _ => 0..0,
-        };
+        let range = self.planes.range(parent);
         for (e, &normal) in self.planes.entries[range.clone()].iter().zip(&self.normals[range]) {
             let (Some(&a), Some(&b)) = (s.local.get(e.first as usize), s.local.get(e.second as usize)) else { continue };
             if a == u32::MAX || b == u32::MAX {
