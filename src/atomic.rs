@@ -96,11 +96,53 @@ pub fn check_output(dest: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Remove every temporary file still in progress. The CLI calls it from its signal handler.
+/// Remove every temporary file and folder still in progress. The CLI calls it from its signal
+/// handler.
 pub fn remove_pending() {
     if let Ok(pending) = PENDING.lock() {
         for p in pending.iter() {
             let _ = std::fs::remove_file(p);
+        }
+    }
+    if let Ok(dirs) = PENDING_DIRS.lock() {
+        for d in dirs.iter() {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+}
+
+/// Temporary folders in use, removed by the interrupt handler.
+static PENDING_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// A temporary folder for work files, removed with everything in it when dropped (success, error
+/// or panic) or when the CLI is interrupted.
+pub struct TempDir {
+    dir: Option<tempfile::TempDir>,
+}
+
+impl TempDir {
+    /// A new folder inside `parent`, or the system's temporary folder.
+    pub fn create(parent: Option<&Path>) -> Result<TempDir> {
+        let b = tempfile::Builder::new().prefix(".strata-work-").tempdir_in(parent.map_or_else(std::env::temp_dir, Path::to_path_buf));
+        let dir = b.map_err(|e| Error::io(parent.unwrap_or(Path::new("temporary folder")), e))?;
+        if let Ok(mut l) = PENDING_DIRS.lock() {
+            l.push(dir.path().to_path_buf());
+        }
+        Ok(TempDir { dir: Some(dir) })
+    }
+
+    pub fn path(&self) -> &Path {
+        self.dir.as_ref().map_or(Path::new(""), |d| d.path())
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if let Some(d) = self.dir.take() {
+            if let Ok(mut l) = PENDING_DIRS.lock() {
+                l.retain(|p| p != d.path());
+            }
+            let _ = d.close();
         }
     }
 }

@@ -27,10 +27,28 @@ pub struct NodeBounds {
 }
 
 /// The bounds of every group of every level, `[level][group]`. `faces[l]` lists each group's
-/// faces of level mesh `l`; `quant[l]` its quantized positions.
-pub fn nodes(h: &Hierarchy, lv: &LevelMeshes, faces: &[Lists], grid: &Grid, quant: &[Quantized]) -> Result<Vec<Vec<NodeBounds>>, String> {
+/// faces of level mesh `l`; `quant[l]` its quantized positions. `base`, when given, is level 0's
+/// bounds, already known (the partitioned build's cell tops).
+pub fn nodes(
+    h: &Hierarchy,
+    lv: &LevelMeshes,
+    faces: &[Lists],
+    grid: &Grid,
+    quant: &[Quantized],
+    base: Option<Vec<NodeBounds>>,
+) -> Result<Vec<Vec<NodeBounds>>, String> {
     let mut out: Vec<Vec<NodeBounds>> = Vec::with_capacity(h.levels.len());
-    for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate() {
+    let skip = match base {
+        Some(b) if b.len() != h.levels.first().map_or(0, |l| l.groups.len()) => {
+            return Err(format!("{} level-0 bounds for {} groups", b.len(), h.levels[0].groups.len()))
+        }
+        Some(b) => {
+            out.push(b);
+            1
+        }
+        None => 0,
+    };
+    for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate().skip(skip) {
         let mesh = &lv.levels[l].mesh;
         let children = (l > 0).then(|| Lists::from_labels(&h.levels[l - 1].parent, hl.groups.len()));
         let mut level = Vec::with_capacity(hl.groups.len());

@@ -163,51 +163,89 @@ impl Hierarchy {
 
 /// Build the hierarchy of `mesh` (whose edge adjacency is `adj`).
 pub fn build(mesh: &Mesh, adj: &Adjacency, p: &HierarchyParams) -> Hierarchy {
+    build_levels(mesh, adj, p, None)
+}
+
+/// [`build`] with exactly `levels` node levels when given: grouping stops there, and a grouping
+/// that ends lower is topped up with [`Hierarchy::repeat_top`]. The partitioned build gives every
+/// cell the same number of levels this way, so that cells meet level by level.
+pub fn build_levels(mesh: &Mesh, adj: &Adjacency, p: &HierarchyParams, levels: Option<usize>) -> Hierarchy {
     let nf = mesh.face_count();
     let total = nf.max(1) as u32;
-    let round = |max_angle: f32, max_faces: u32| RoundParams { max_angle, max_faces, kc: p.kc, ks: p.ks, kn: p.kn };
+    let round = RoundParams { max_angle: p.cluster_angle, max_faces: p.cluster_faces.min(total), kc: p.kc, ks: p.ks, kn: p.kn };
 
     // Clusters, from faces.
     let face_units: Vec<Unit> = (0..nf).into_par_iter().map(|f| face_unit(mesh, f)).collect();
-    let face_pairs: Vec<[u32; 2]> = adj
-        .face_neighbors
+    let face_pairs = face_pairs(adj);
+    let cluster_labels = cluster_round(&face_units, &face_pairs, &round);
+    let mut clusters = make_level(mesh, cluster_labels, None, &[], p.cluster_angle, p.cluster_faces);
+    let pairs = group_pairs(&face_pairs, &clusters.face_group);
+    clusters.neighbors = Lists::from_pairs(&pairs, clusters.groups.len());
+    let mut h = Hierarchy { clusters, levels: Vec::new() };
+    grow(mesh, &mut h, pairs, p, (p.leaf_angle, p.leaf_faces), levels.unwrap_or(usize::MAX));
+    while levels.is_some_and(|n| h.levels.len() < n) {
+        h.repeat_top();
+    }
+    h
+}
+
+/// Levels above `base`, a partition of `mesh`'s faces whose groups' summaries are given (the top
+/// groups of cells built apart, for the partitioned build): grouping rounds go on from `base`'s
+/// threshold and cap. The result's level 0 is `base` (with its neighbours from `adj`); it has no
+/// clusters. With `levels`, it has exactly that many (as [`build_levels`]).
+pub fn extend(mesh: &Mesh, adj: &Adjacency, mut base: Level, p: &HierarchyParams, levels: Option<usize>) -> Hierarchy {
+    let pairs = group_pairs(&face_pairs(adj), &base.face_group);
+    base.neighbors = Lists::from_pairs(&pairs, base.groups.len());
+    let next = ((base.max_angle + p.angle_step).min(std::f32::consts::PI), base.max_faces.saturating_mul(p.growth.max(2)));
+    let mut h = Hierarchy { clusters: Level::default(), levels: vec![base] };
+    grow(mesh, &mut h, pairs, p, next, levels.unwrap_or(usize::MAX));
+    while levels.is_some_and(|n| h.levels.len() < n) {
+        h.repeat_top();
+    }
+    h
+}
+
+/// Each pair of edge-adjacent faces once.
+fn face_pairs(adj: &Adjacency) -> Vec<[u32; 2]> {
+    adj.face_neighbors
         .iter()
         .enumerate()
         .flat_map(|(f, n)| n.iter().filter(move |&&g| g != NO_FACE && (f as u32) < g).map(move |&g| [f as u32, g]))
-        .collect();
-    let cluster_labels = cluster_round(&face_units, &face_pairs, &round(p.cluster_angle, p.cluster_faces.min(total)));
-    let mut clusters = make_level(mesh, cluster_labels, None, &[], p.cluster_angle, p.cluster_faces);
-    let mut pairs = group_pairs(&face_pairs, &clusters.face_group);
-    clusters.neighbors = Lists::from_pairs(&pairs, clusters.groups.len());
+        .collect()
+}
 
-    let mut levels: Vec<Level> = Vec::new();
-    let (mut angle, mut cap) = (p.leaf_angle, p.leaf_faces);
-    loop {
-        let below = levels.last().unwrap_or(&clusters);
+/// Grouping rounds on the top of `h` (its clusters while it has no level), whose groups are joined
+/// by `pairs`, from threshold and cap `start`, until the top has at most `p.top_groups` groups, no
+/// round merges any more, or `h` has `max_levels` levels.
+fn grow(mesh: &Mesh, h: &mut Hierarchy, mut pairs: Vec<[u32; 2]>, p: &HierarchyParams, start: (f32, u32), max_levels: usize) {
+    let total = mesh.face_count().max(1) as u32;
+    let round = |max_angle: f32, max_faces: u32| RoundParams { max_angle, max_faces, kc: p.kc, ks: p.ks, kn: p.kn };
+    let (mut angle, mut cap) = start;
+    while h.levels.len() < max_levels {
+        let below = h.levels.last().unwrap_or(&h.clusters);
         let units: Vec<Unit> = below.groups.iter().map(group_unit).collect();
         let labels = group_round(&units, &pairs, &round(angle, cap.min(total)));
         let count = labels.iter().max().map_or(0, |&m| m as usize + 1);
         let progressed = count < below.groups.len();
         let saturated = angle >= std::f32::consts::PI && cap >= total;
-        if progressed || levels.is_empty() {
+        if progressed || h.levels.is_empty() {
             let face_group: Vec<u32> = below.face_group.iter().map(|&g| labels[g as usize]).collect();
             let mut level = make_level(mesh, face_group, Some(&labels), &below.groups, angle, cap);
             pairs = group_pairs(&pairs, &labels);
             level.neighbors = Lists::from_pairs(&pairs, level.groups.len());
-            levels.last_mut().unwrap_or(&mut clusters).parent = labels;
-            levels.push(level);
+            h.levels.last_mut().unwrap_or(&mut h.clusters).parent = labels;
+            h.levels.push(level);
         }
-        let done = levels.last().map_or(0, |l| l.groups.len()) <= p.top_groups;
+        let done = h.levels.last().map_or(0, |l| l.groups.len()) <= p.top_groups;
         if done || (saturated && !progressed) {
             break;
         }
         angle = (angle + p.angle_step).min(std::f32::consts::PI);
         cap = cap.saturating_mul(p.growth.max(2));
     }
-    if let Some(top) = levels.last_mut() {
+    if let Some(top) = h.levels.last_mut() {
         top.parent = vec![NO_PARENT; top.groups.len()];
     }
-    Hierarchy { clusters, levels }
 }
 
 /// Faces per independent piece of the cluster round.

@@ -56,12 +56,26 @@ const MIN_ADDED_NODE_FACES: usize = 32;
 /// `mesh` becomes level 0 (taken, not copied: it is the largest of them). `on_level` is called
 /// after each level with its index, for progress reports.
 pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
-    let ratio = p.ratio.clamp(0.0, 1.0);
     let first = LevelMesh { mesh, face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()] };
+    build_from(first, h, p, false, on_level)
+}
+
+/// [`build`] from a given first level (`h`'s level 0, with its errors: the partitioned build's
+/// merged cell tops). With `lock_borders`, open-border vertices never move
+/// ([`SimplifyOptions::lock_borders`]): a cell's levels then meet its neighbours' exactly.
+pub fn build_from(
+    first: LevelMesh,
+    h: &mut Hierarchy,
+    p: &LevelParams,
+    lock_borders: bool,
+    on_level: &mut dyn FnMut(usize),
+) -> LevelMeshes {
+    let ratio = p.ratio.clamp(0.0, 1.0);
+    let coarsen = |below: &LevelMesh, h: &Hierarchy, l: usize| coarsen(below, h, l, ratio, lock_borders);
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {
-        levels.push(coarsen(&levels[l - 1], h, l, ratio));
+        levels.push(coarsen(&levels[l - 1], h, l));
         on_level(l);
     }
     // An added level costs a node per top group in the skeleton every reader loads (a record,
@@ -78,7 +92,7 @@ pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn 
             break;
         }
         h.repeat_top();
-        let next = coarsen(&levels[levels.len() - 1], h, levels.len(), ratio);
+        let next = coarsen(&levels[levels.len() - 1], h, levels.len());
         if next.mesh.face_count() as f64 > below as f64 * worthwhile || next.mesh.face_count() < MIN_ADDED_NODE_FACES * nodes {
             h.pop_top();
             break;
@@ -104,11 +118,11 @@ pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
 }
 
 /// Level `l` made from the level mesh `below` of level `l − 1`.
-fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32) -> LevelMesh {
+fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, lock_borders: bool) -> LevelMesh {
     let parent = &h.levels[l - 1].parent;
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
     let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
-    let opts = SimplifyOptions { target_faces: target, ..SimplifyOptions::default() };
+    let opts = SimplifyOptions { target_faces: target, lock_borders, ..SimplifyOptions::default() };
     let s = simplify(&below.mesh, Some(&labels), &opts);
     let groups = &h.levels[l];
     let group_error = (0..groups.groups.len())

@@ -34,6 +34,7 @@ pub mod import;
 pub mod levels;
 pub mod mesh;
 pub mod normals;
+pub mod partition;
 pub mod pipeline;
 pub mod quantize;
 pub mod render;

@@ -14,13 +14,32 @@ use std::path::Path;
 use std::time::Instant;
 
 /// What a conversion is built with.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ConvertOptions {
     pub hierarchy: HierarchyParams,
     pub levels: LevelParams,
     pub normals: Normals,
     /// How node geometry is stored (format 2 or 3).
     pub encoding: Encoding,
+    /// In memory, or partitioned into cells on disk ([`crate::partition`]).
+    pub build: Build,
+    /// Bytes of memory the partitioned build stays within; 0: half the machine's
+    /// ([`crate::partition::default_memory`]).
+    pub memory: u64,
+    /// Folder for the partitioned build's cell files (the system's temporary folder if none).
+    pub temp: Option<std::path::PathBuf>,
+}
+
+/// Which build makes the levels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Build {
+    /// Partitioned when the input is a binary PLY that an in-core build would not fit in `memory`
+    /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in memory.
+    Auto,
+    /// Always in memory.
+    InCore,
+    /// Always partitioned (binary PLY input, format 2).
+    Partitioned,
 }
 
 impl Default for ConvertOptions {
@@ -30,6 +49,9 @@ impl Default for ConvertOptions {
             levels: LevelParams::default(),
             normals: Normals::Auto { crease_angle: 60f32.to_radians() },
             encoding: Encoding::V2,
+            build: Build::Auto,
+            memory: 0,
+            temp: None,
         }
     }
 }
@@ -80,6 +102,33 @@ pub struct Converted {
     pub warnings: Vec<String>,
 }
 
+/// The partitioned build's budget when it is the one to run, or `None` for the in-core build.
+fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions) -> Result<Option<crate::partition::Budget>> {
+    let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
+    let budget = || {
+        let mut b = crate::partition::Budget::new(memory);
+        b.temp = opts.temp.clone();
+        b
+    };
+    let faces = crate::partition::streamable(input);
+    match opts.build {
+        Build::InCore => Ok(None),
+        Build::Auto => {
+            let plain = import.format.is_none() && opts.encoding == Encoding::V2;
+            Ok(faces.filter(|&f| plain && f.saturating_mul(crate::partition::IN_CORE_BYTES_PER_FACE) > memory).map(|_| budget()))
+        }
+        Build::Partitioned if opts.encoding != Encoding::V2 => {
+            Err(crate::error::Error::invalid(input, None, "the partitioned build writes format 2 only"))
+        }
+        Build::Partitioned if faces.is_none() || import.format.is_some() => Err(crate::error::Error::invalid(
+            input,
+            None,
+            "the partitioned build reads binary PLY files; convert this one in memory (without --partitioned)",
+        )),
+        Build::Partitioned => Ok(Some(budget())),
+    }
+}
+
 /// Convert the mesh file `input`, read with `import`, into the chunk file `output`, which appears
 /// only when complete. An output that is a directory or the input itself is refused before any work.
 pub fn convert(
@@ -96,6 +145,9 @@ pub fn convert(
         clock = Instant::now();
     };
 
+    if let Some(budget) = partitioned(input, import, opts)? {
+        return crate::partition::convert(input, output, opts, &budget, progress);
+    }
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
     progress.stage("import", 0);

@@ -134,18 +134,7 @@ fn write_named<W: Write>(
         Some(p) => p.grid_bits,
     };
     let grid = model_grid(lv, bits);
-    let mut quant = Vec::with_capacity(lv.levels.len());
-    quant.push(Quantized::distinct(&grid, &lv.levels[0].mesh).map_err(bad)?);
-    quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(&grid, &l.mesh)));
-    let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
-    if let Some(p) = precision {
-        for l in 1..lv.levels.len() {
-            shifts[l] = lv.levels[l].group_error.iter().map(|&e| lattice_shift(e, p.lattice, &grid)).collect();
-            quant[l].snap_inner(&grid, &lv.levels[l].mesh, &lv.levels[l].face_group, &shifts[l]);
-        }
-    }
-    let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
-    let bounds = bounds::nodes(h, lv, &faces, &grid, &quant).map_err(bad)?;
+    let piece = Piece::new(h, lv, &grid, precision, None).map_err(bad)?;
     let writer_opts = WriterOptions {
         metres_per_unit: opts.metres_per_unit,
         params: opts.params,
@@ -161,31 +150,105 @@ fn write_named<W: Write>(
         images: opts.images.clone(),
     };
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
-    let top = h.levels.len() - 1;
-    for (l, hl) in h.levels.iter().enumerate() {
-        let mesh = &lv.levels[l].mesh;
-        for (g, b) in bounds[l].iter().enumerate() {
-            let clusters = (l == 0).then_some(&h.clusters);
-            let lattice = precision.map_or(Lattice::default(), |p| Lattice {
-                shift: shifts[l][g],
-                normal_bits: if attributes.normals { p.normal_bits } else { 0 },
-                uv_bits: if attributes.uvs { p.uv_bits } else { 0 },
-            });
-            let geometry = node_geometry(mesh, &quant[l], &grid, faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
-            let uv_density = if opts.images.is_empty() { 0.0 } else { uv_density(mesh, faces[l].get(g)) };
-            writer.add(NodeIn {
-                level: l as u32,
-                key: g as u32,
-                parent: if l == top { NO_PARENT } else { hl.parent[g] },
-                neighbors: hl.neighbors.get(g).to_vec(),
-                codes: b.codes,
-                error: b.error,
-                uv_density,
-                geometry,
-            })?;
-        }
-    }
+    let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g };
+    let textured = !opts.images.is_empty();
+    piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, attributes, precision, textured, &place)?;
     writer.finish()
+}
+
+/// Where a piece's nodes go in the file: piece level `l` is file level `l + offset`; the levels in
+/// `levels` are written, group `g` of piece level `l` under key `key(l, g)` (its parent's key
+/// likewise, one level up). The in-core build is one piece; the partitioned build writes each
+/// cell and the merge of their tops as pieces of one file.
+pub(crate) struct Place<'a> {
+    pub offset: usize,
+    pub levels: std::ops::Range<usize>,
+    pub file_levels: usize,
+    pub key: &'a (dyn Fn(usize, u32) -> u32 + Sync),
+}
+
+/// A hierarchy and its level meshes made ready to write: positions on the file's grid, node
+/// faces and bounds.
+pub(crate) struct Piece {
+    pub quant: Vec<Quantized>,
+    pub shifts: Vec<Vec<u32>>,
+    pub faces: Vec<Lists>,
+    pub bounds: Vec<Vec<bounds::NodeBounds>>,
+}
+
+impl Piece {
+    /// `base`: the bounds of level 0 when they are known already (the partitioned build's merge,
+    /// whose level 0 is the cells' tops); level 0 is then not the input and its positions are
+    /// rounded to the grid like any coarser level's.
+    pub fn new(
+        h: &Hierarchy,
+        lv: &LevelMeshes,
+        grid: &Grid,
+        precision: Option<Precision>,
+        base: Option<Vec<bounds::NodeBounds>>,
+    ) -> std::result::Result<Piece, String> {
+        let mut quant = Vec::with_capacity(lv.levels.len());
+        quant.push(match base {
+            None => Quantized::distinct(grid, &lv.levels[0].mesh)?,
+            Some(_) => Quantized::new(grid, &lv.levels[0].mesh),
+        });
+        quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(grid, &l.mesh)));
+        let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
+        if let Some(p) = precision {
+            for l in 1..lv.levels.len() {
+                shifts[l] = lv.levels[l].group_error.iter().map(|&e| lattice_shift(e, p.lattice, grid)).collect();
+                quant[l].snap_inner(grid, &lv.levels[l].mesh, &lv.levels[l].face_group, &shifts[l]);
+            }
+        }
+        let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
+        let bounds = bounds::nodes(h, lv, &faces, grid, &quant, base)?;
+        Ok(Piece { quant, shifts, faces, bounds })
+    }
+
+    /// Hand the nodes of `place.levels` to `add` (a [`Writer::add`]), each with its geometry;
+    /// geometry that cannot be stored is an error made by `bad`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn add(
+        &self,
+        add: &mut dyn FnMut(NodeIn) -> Result<()>,
+        bad: &dyn Fn(String) -> Error,
+        h: &Hierarchy,
+        lv: &LevelMeshes,
+        grid: &Grid,
+        attributes: Attributes,
+        precision: Option<Precision>,
+        textured: bool,
+        place: &Place,
+    ) -> Result<()> {
+        for l in place.levels.clone() {
+            let hl = &h.levels[l];
+            let mesh = &lv.levels[l].mesh;
+            let file_level = l + place.offset;
+            for (g, b) in self.bounds[l].iter().enumerate() {
+                let clusters = (file_level == 0).then_some(&h.clusters);
+                let lattice = precision.map_or(Lattice::default(), |p| Lattice {
+                    shift: self.shifts[l][g],
+                    normal_bits: if attributes.normals { p.normal_bits } else { 0 },
+                    uv_bits: if attributes.uvs { p.uv_bits } else { 0 },
+                });
+                let geometry =
+                    node_geometry(mesh, &self.quant[l], grid, self.faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
+                let uv_density = if textured { uv_density(mesh, self.faces[l].get(g)) } else { 0.0 };
+                let top = file_level + 1 == place.file_levels;
+                add(NodeIn {
+                    level: file_level as u32,
+                    key: (place.key)(l, g as u32),
+                    parent: if top { NO_PARENT } else { (place.key)(l + 1, hl.parent[g]) },
+                    neighbors: hl.neighbors.get(g).iter().map(|&n| (place.key)(l, n)).collect(),
+                    codes: b.codes,
+                    error: b.error,
+                    uv_density,
+                    geometry,
+                })?;
+            }
+        }
+        Ok(())
+    }
 }
 
 fn check_precision(p: Precision) -> std::result::Result<Precision, String> {

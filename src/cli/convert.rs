@@ -5,7 +5,26 @@ use super::{GroupingArgs, LevelArgs, MeshInput};
 use anyhow::Result;
 use clap::ValueEnum;
 use std::path::PathBuf;
-use strata::pipeline::Normals;
+use strata::pipeline::{Build, Normals};
+
+/// A size in bytes: a number with an optional K, M, G or T (powers of 1024, an optional trailing
+/// `B` or `iB`).
+fn parse_size(s: &str) -> std::result::Result<u64, String> {
+    let t = s.trim();
+    let t = t.strip_suffix("iB").or_else(|| t.strip_suffix('B')).unwrap_or(t);
+    let (digits, shift) = match t.chars().last().map(|c| c.to_ascii_uppercase()) {
+        Some('K') => (&t[..t.len() - 1], 10),
+        Some('M') => (&t[..t.len() - 1], 20),
+        Some('G') => (&t[..t.len() - 1], 30),
+        Some('T') => (&t[..t.len() - 1], 40),
+        _ => (t, 0),
+    };
+    let n: f64 = digits.trim().parse().map_err(|_| format!("'{s}' is not a size (like 512M or 2G)"))?;
+    if !(n.is_finite() && n > 0.0) {
+        return Err(format!("'{s}' is not a positive size"));
+    }
+    Ok((n * (1u64 << shift) as f64) as u64)
+}
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -24,6 +43,19 @@ pub struct Args {
     /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
     #[arg(long, default_value_t = 60.0)]
     pub crease_angle: f32,
+    /// Memory to stay within (bytes, or with K, M, G: 512M, 1G): a binary PLY whose in-core build
+    /// would need more is built partitioned, in cells on disk. Default: half of this machine's.
+    #[arg(long, value_parser = parse_size)]
+    pub memory: Option<u64>,
+    /// Folder for the partitioned build's cell files (default: the system's temporary folder).
+    #[arg(long)]
+    pub temp: Option<PathBuf>,
+    /// Build partitioned (binary PLY input) whatever its size.
+    #[arg(long, conflicts_with = "in_core")]
+    pub partitioned: bool,
+    /// Build in memory whatever the input's size.
+    #[arg(long)]
+    pub in_core: bool,
     /// No progress bars.
     #[arg(long, short)]
     pub quiet: bool,
@@ -48,6 +80,15 @@ pub fn run(a: Args) -> Result<()> {
             NormalsArg::Input => Normals::Input,
             NormalsArg::None => Normals::None,
         },
+        build: if a.partitioned {
+            Build::Partitioned
+        } else if a.in_core {
+            Build::InCore
+        } else {
+            Build::Auto
+        },
+        memory: a.memory.unwrap_or(0),
+        temp: a.temp.clone(),
         ..Default::default()
     };
     let mut bars = Bars::new(a.quiet || a.json);

@@ -174,6 +174,9 @@ pub struct Writer<W> {
     clusters: u64,
     buf: Vec<u8>,
     geometry_bits: Option<[u64; 8]>,
+    /// Neighbour pairs `(level, key, key)` added after their nodes ([`Writer::link`]).
+    links: Vec<(u32, u32, u32)>,
+    spill_dir: Option<PathBuf>,
 }
 
 impl<W: Write> Writer<W> {
@@ -203,7 +206,18 @@ impl<W: Write> Writer<W> {
             });
         }
         let levels = (0..opts.levels).map(|_| Vec::new()).collect();
-        Ok(Writer { out, path: path.to_path_buf(), opts, spills, levels, clusters: 0, buf: Vec::new(), geometry_bits: None })
+        Ok(Writer {
+            out,
+            path: path.to_path_buf(),
+            opts,
+            spills,
+            levels,
+            clusters: 0,
+            buf: Vec::new(),
+            geometry_bits: None,
+            links: Vec::new(),
+            spill_dir: spill_dir.map(Path::to_path_buf),
+        })
     }
 
     /// Encode a finished node and keep it for [`finish`](Self::finish).
@@ -268,6 +282,34 @@ impl<W: Write> Writer<W> {
         Ok(())
     }
 
+    /// Set the input's vertex count the summary reports (the partitioned build knows it last).
+    pub fn set_input_vertices(&mut self, n: u64) {
+        self.opts.input_vertices = n;
+    }
+
+    /// Let the file have `levels` levels (not fewer than it has): the partitioned build knows how
+    /// many only once it has merged its cells.
+    pub fn set_levels(&mut self, levels: u32) -> Result<()> {
+        if (levels as usize) < self.levels.len() || levels == u32::MAX {
+            return Err(Error::invalid(&self.path, None, format!("{levels} levels for a file begun with {}", self.levels.len())));
+        }
+        while self.levels.len() < levels as usize {
+            self.spills.push(match &self.spill_dir {
+                Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
+                None => Spill::Memory(Vec::new()),
+            });
+            self.levels.push(Vec::new());
+        }
+        self.opts.levels = levels;
+        Ok(())
+    }
+
+    /// Make nodes `a` and `b` of `level` neighbours, whether or not they have been added yet (the
+    /// partitioned build learns of neighbours across cells only when it merges them).
+    pub fn link(&mut self, level: u32, a: u32, b: u32) {
+        self.links.push((level, a, b));
+    }
+
     /// Number the nodes, write the whole file and return what it holds.
     pub fn finish(mut self) -> Result<WriteSummary> {
         let bad = |msg: String| Error::invalid(&self.path, None, msg);
@@ -275,6 +317,26 @@ impl<W: Write> Writer<W> {
         let nl = self.levels.len();
         if self.levels[0].is_empty() {
             return Err(bad("nothing to write: level 0 has no nodes".into()));
+        }
+        if !self.links.is_empty() {
+            let mut links = std::mem::take(&mut self.links);
+            links.sort_unstable();
+            links.dedup();
+            for l in 0..nl {
+                let at: FxHashMap<u32, usize> = self.levels[l].iter().enumerate().map(|(i, p)| (p.key, i)).collect();
+                for &(_, a, b) in links.iter().filter(|x| x.0 as usize == l) {
+                    match (at.get(&a), at.get(&b)) {
+                        (Some(&ia), Some(&ib)) => {
+                            self.levels[l][ia].neighbors.push(b);
+                            self.levels[l][ib].neighbors.push(a);
+                        }
+                        _ => return Err(bad(format!("level {l}: neighbours {a} and {b} are not both nodes"))),
+                    }
+                }
+            }
+            if let Some(&(l, a, _)) = links.iter().find(|x| x.0 as usize >= nl) {
+                return Err(bad(format!("neighbours at level {l} (node {a}): the file has {nl} levels")));
+            }
         }
 
         // Breadth-first numbering (spec §6): the top level by key, then each level by parent, then key.

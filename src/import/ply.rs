@@ -57,6 +57,187 @@ fn parse(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Mesh> 
     Ok(reader.finish(&plan, &header.texture_files, warnings))
 }
 
+/// A PLY file's vertex arrays, per vertex (empty when absent), as [`stream`] holds them.
+pub struct Vertices<'a> {
+    pub positions: &'a [Vec3],
+    pub normals: &'a [Vec3],
+    pub colors: &'a [[u8; 4]],
+}
+
+/// What a PLY header declares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Declared {
+    pub vertices: u64,
+    /// Face-like records (polygons or strips), not triangles.
+    pub faces: u64,
+    pub binary: bool,
+}
+
+/// Longest header [`stream`] and [`declared`] read.
+const MAX_HEADER: usize = 16 << 20;
+
+/// Read the header of `path` alone.
+pub fn declared(path: &Path) -> Result<Declared> {
+    let (header, _) = read_header(path, &mut Vec::new())?;
+    let count = |names: &[&str]| header.elements.iter().filter(|e| names.contains(&e.name.as_str())).map(|e| e.count).sum();
+    Ok(Declared { vertices: count(&["vertex"]), faces: count(&["face", "tristrips"]), binary: header.encoding != Encoding::Ascii })
+}
+
+fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)> {
+    use std::io::Read as _;
+    let (file, len) = super::open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_HEADER as u64).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    let end = bytes.windows(10).position(|w| w == b"end_header").map(|i| i + 10);
+    if let Some(end) = end {
+        let line_end = bytes[end..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |n| end + n + 1);
+        bytes.truncate(line_end);
+    }
+    Ok((parse_header(path, &bytes, warnings)?, len))
+}
+
+/// Read a binary PLY file as a stream: its vertex arrays are held (positions, normals, colors), and
+/// its triangles go to `faces` in batches as they are read, indices checked. For the partitioned
+/// build, so it refuses what that build does not carry (texture files, texture coordinates) and
+/// vertices after faces; ascii files are read whole with [`read`].
+pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<()> {
+    let (header, len) = read_header(path, warnings)?;
+    if header.encoding == Encoding::Ascii {
+        return Err(Error::invalid(path, None, "ascii PLY is not read as a stream: it is read whole"));
+    }
+    check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
+    let plan = Plan::new(path, &header)?;
+    let refuse = |what: &str| {
+        Err(Error::invalid(
+            path,
+            None,
+            format!("{what}: the partitioned build does not carry them yet; convert without --memory, in memory"),
+        ))
+    };
+    if !header.texture_files.is_empty() {
+        return refuse("the file names texture images");
+    }
+    if plan.has(U, 2) || plan.faces.iter().flatten().any(|f| f.texcoord.is_some()) {
+        return refuse("the file has texture coordinates");
+    }
+    if plan.faces.iter().position(Option::is_some).is_some_and(|f| f < plan.vertex) {
+        return Err(Error::invalid(path, None, "faces come before vertices: a stream cannot index vertices it has not read"));
+    }
+    let mut reader = Reader::new(path, &plan);
+    reader.sink = Some(faces);
+    let (file, _) = super::open_regular(path)?;
+    let mut file = std::io::BufReader::with_capacity(1 << 20, file);
+    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(header.body_start as u64)).map_err(|e| Error::io(path, e))?;
+    match header.encoding {
+        Encoding::Little => reader.run(&header, &plan, &mut Stream::<_, LittleEndian>::new(file, header.body_start as u64, len))?,
+        _ => reader.run(&header, &plan, &mut Stream::<_, BigEndian>::new(file, header.body_start as u64, len))?,
+    }
+    if reader.short_faces > 0 {
+        warnings.push(format!("skipped {} faces with fewer than 3 vertices", reader.short_faces));
+    }
+    Ok(())
+}
+
+/// A binary body read from a file in pieces.
+struct Stream<R, B> {
+    src: R,
+    buf: Vec<u8>,
+    pos: usize,
+    /// File offset of `buf[0]`.
+    base: u64,
+    len: u64,
+    mark: u64,
+    failed: Option<std::io::Error>,
+    order: PhantomData<B>,
+}
+
+impl<R: std::io::Read, B: ByteOrder> Stream<R, B> {
+    fn new(src: R, base: u64, len: u64) -> Self {
+        Stream { src, buf: Vec::with_capacity(1 << 16), pos: 0, base, len, mark: base, failed: None, order: PhantomData }
+    }
+
+    /// Make `n` bytes available at `pos`, if the file has them.
+    fn fill(&mut self, n: usize) -> bool {
+        if self.buf.len() - self.pos >= n {
+            return true;
+        }
+        self.buf.drain(..self.pos);
+        self.base += self.pos as u64;
+        self.pos = 0;
+        let want = n.max(1 << 16);
+        while self.buf.len() < want {
+            let at = self.buf.len();
+            self.buf.resize(want, 0);
+            match self.src.read(&mut self.buf[at..]) {
+                Ok(0) => {
+                    self.buf.truncate(at);
+                    break;
+                }
+                Ok(k) => self.buf.truncate(at + k),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => self.buf.truncate(at),
+                Err(e) => {
+                    self.buf.truncate(at);
+                    self.failed = Some(e);
+                    break;
+                }
+            }
+        }
+        self.buf.len() >= n
+    }
+
+    fn take(&mut self, n: usize) -> Read<&[u8]> {
+        self.mark = self.base + self.pos as u64;
+        if !self.fill(n) {
+            return Err(Fault { at: self.at(), kind: FaultKind::Eof });
+        }
+        self.pos += n;
+        Ok(&self.buf[self.pos - n..self.pos])
+    }
+}
+
+impl<R: std::io::Read, B: ByteOrder> Source for Stream<R, B> {
+    fn value(&mut self, t: Scalar) -> Read<f64> {
+        let b = self.take(t.size())?;
+        Ok(decode_value::<B>(t, b))
+    }
+
+    fn int(&mut self, t: Scalar) -> Read<i64> {
+        let b = self.take(t.size())?;
+        Ok(decode_int::<B>(t, b))
+    }
+
+    fn skip(&mut self, t: Scalar, n: usize) -> Read<()> {
+        let mut left = t.size().saturating_mul(n);
+        while left > 0 {
+            let k = left.min(1 << 16);
+            self.take(k)?;
+            left -= k;
+        }
+        Ok(())
+    }
+
+    fn room(&self, n: u64, t: Scalar) -> bool {
+        n as u128 * t.size() as u128 <= self.len.saturating_sub(self.base + self.pos as u64) as u128
+    }
+
+    fn at(&self) -> Location {
+        Location::Byte(self.mark)
+    }
+
+    fn triangle(&mut self, count: Scalar, item: Scalar) -> Option<[i64; 3]> {
+        let (cs, s) = (count.size(), item.size());
+        if !self.fill(cs + 3 * s) {
+            return None;
+        }
+        let rest = &self.buf[self.pos..self.pos + cs + 3 * s];
+        if decode_int::<B>(count, rest) != 3 {
+            return None;
+        }
+        self.pos += cs + 3 * s;
+        Some([0, 1, 2].map(|k| decode_int::<B>(item, &rest[cs + k * s..])))
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Encoding {
     Ascii,
@@ -524,6 +705,15 @@ impl<'a, B: ByteOrder> Binary<'a, B> {
     }
 }
 
+/// Decode a value as f64; `b` holds at least `t.size()` bytes.
+fn decode_value<B: ByteOrder>(t: Scalar, b: &[u8]) -> f64 {
+    match t {
+        Scalar::F32 => B::read_f32(b) as f64,
+        Scalar::F64 => B::read_f64(b),
+        _ => decode_int::<B>(t, b) as f64,
+    }
+}
+
 /// Decode an integer-typed value; `b` holds at least `t.size()` bytes.
 fn decode_int<B: ByteOrder>(t: Scalar, b: &[u8]) -> i64 {
     match t {
@@ -541,11 +731,7 @@ fn decode_int<B: ByteOrder>(t: Scalar, b: &[u8]) -> i64 {
 impl<B: ByteOrder> Source for Binary<'_, B> {
     fn value(&mut self, t: Scalar) -> Read<f64> {
         let b = self.take(t.size())?;
-        Ok(match t {
-            Scalar::F32 => B::read_f32(b) as f64,
-            Scalar::F64 => B::read_f64(b),
-            _ => decode_int::<B>(t, b) as f64,
-        })
+        Ok(decode_value::<B>(t, b))
     }
 
     fn int(&mut self, t: Scalar) -> Read<i64> {
@@ -740,7 +926,15 @@ struct Reader<'p> {
     /// Per triangle, its face's `texnumber`, when faces have one.
     texnumbers: Vec<i64>,
     short_faces: usize,
+    /// Streaming ([`stream`]): triangles go here in batches instead of accumulating.
+    sink: Option<&'p mut FaceSink<'p>>,
 }
+
+/// Where [`stream`] hands triangles, with the vertex arrays they index.
+pub type FaceSink<'a> = dyn FnMut(&Vertices, &[[u32; 3]]) -> Result<()> + 'a;
+
+/// Triangles per batch handed to a [`FaceSink`].
+const BATCH: usize = 1 << 16;
 
 impl<'p> Reader<'p> {
     fn new(path: &'p Path, plan: &Plan) -> Self {
@@ -755,7 +949,18 @@ impl<'p> Reader<'p> {
             corner_uvs: Vec::new(),
             texnumbers: Vec::new(),
             short_faces: 0,
+            sink: None,
         }
+    }
+
+    /// Hand the triangles read so far to the sink, if streaming.
+    fn flush(&mut self) -> Result<()> {
+        if let Some(sink) = self.sink.as_mut() {
+            let v = Vertices { positions: &self.positions, normals: &self.normals, colors: &self.colors };
+            sink(&v, &self.triangles)?;
+            self.triangles.clear();
+        }
+        Ok(())
     }
 
     fn run<S: Source>(&mut self, header: &Header, plan: &Plan, src: &mut S) -> Result<()> {
@@ -824,7 +1029,7 @@ impl<'p> Reader<'p> {
 
     fn faces<S: Source>(&mut self, src: &mut S, e: &Element, face: FaceProps) -> Result<()> {
         let fast = e.props.len() == 1 && !face.strips;
-        self.triangles.reserve(e.count as usize);
+        self.triangles.reserve(if self.sink.is_some() { BATCH } else { e.count as usize });
         let mut indices: Vec<i64> = Vec::new();
         let mut texcoords: Vec<f64> = Vec::new();
         let mut texnumber = 0i64;
@@ -834,6 +1039,9 @@ impl<'p> Reader<'p> {
                 if let Some(t) = src.triangle(face.count_type, face.index_type) {
                     src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
                     self.polygon(&t, &[], e, r)?;
+                    if self.sink.is_some() && self.triangles.len() >= BATCH {
+                        self.flush()?;
+                    }
                     continue;
                 }
             }
@@ -859,8 +1067,11 @@ impl<'p> Reader<'p> {
                 self.texnumbers.resize(before, 0);
                 self.texnumbers.resize(self.triangles.len(), texnumber);
             }
+            if self.sink.is_some() && self.triangles.len() >= BATCH {
+                self.flush()?;
+            }
         }
-        Ok(())
+        self.flush()
     }
 
     fn check_index(&self, v: i64, e: &Element, record: u64) -> Result<()> {

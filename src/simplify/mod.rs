@@ -111,6 +111,10 @@ pub struct SimplifyOptions {
     /// stops at a few faces per handle and component. Ignored with groups (a cap would join or
     /// split groups). Default false.
     pub topology: bool,
+    /// Vertices on open borders never move or go (collapses may still end on them), so every
+    /// open-border edge is kept as it is: a piece of a larger mesh simplified alone then still
+    /// meets its neighbours exactly. Default false.
+    pub lock_borders: bool,
 }
 
 impl Default for SimplifyOptions {
@@ -123,6 +127,7 @@ impl Default for SimplifyOptions {
             border_weight: 10.0,
             seam_weight: 1.0,
             topology: false,
+            lock_borders: false,
         }
     }
 }

@@ -81,6 +81,10 @@ pub(super) struct State {
     pub(super) scratch_k: Vec<u32>,
     /// Topology changes are made (see [`SimplifyOptions::topology`]); never with groups.
     pub(super) topology: bool,
+    /// Open-border vertices never move ([`SimplifyOptions::lock_borders`]).
+    pub(super) lock_borders: bool,
+    /// With `lock_borders`: whether each vertex is on an open edge (a set no collapse changes).
+    pub(super) on_border: Vec<bool>,
     pub(super) grouped: bool,
     /// Faces of the input; faces past them are caps.
     pub(super) input_faces: usize,
@@ -123,6 +127,8 @@ impl State {
             scratch_r: Vec::new(),
             scratch_k: Vec::new(),
             topology: false,
+            lock_borders: false,
+            on_border: Vec::new(),
             grouped: groups.is_some(),
             input_faces: nf,
             cap_source: Vec::new(),
@@ -174,6 +180,23 @@ impl State {
     pub(super) fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
         self.topology = topology && !self.grouped;
+        self.lock_borders = opts.lock_borders;
+        if self.lock_borders {
+            let mut count: rustc_hash::FxHashMap<u64, u32> = rustc_hash::FxHashMap::default();
+            for f in &self.faces {
+                for k in 0..3 {
+                    let (a, b) = (f.v[k].min(f.v[(k + 1) % 3]), f.v[k].max(f.v[(k + 1) % 3]));
+                    *count.entry((a as u64) << 32 | b as u64).or_insert(0) += 1;
+                }
+            }
+            self.on_border = vec![false; self.verts.len()];
+            for (e, n) in count {
+                if n == 1 {
+                    self.on_border[(e >> 32) as usize] = true;
+                    self.on_border[e as u32 as usize] = true;
+                }
+            }
+        }
         self.min_quality = f64::from(opts.min_face_quality);
         // A corner's wedge is the first corner of its vertex (in face list order) with the same
         // attributes, as `same_attributes` is an equivalence.
@@ -291,11 +314,13 @@ impl State {
         let mut fans = deg;
         let mut features = 0;
         let mut locked = false;
+        let mut open = false;
         for run in around.chunk_by(|a, b| a >> 32 == b >> 32) {
             let other = (run[0] >> 32) as u32;
             match *run {
                 [e] => {
                     features += 1;
+                    open = true;
                     if other > v {
                         let (_, c, _) = self.around_corners(v, e);
                         events.push((v, other, (c / 3) as u32, opts.border_weight));
@@ -328,6 +353,7 @@ impl State {
             }
         }
         let kind = match features {
+            _ if self.lock_borders && open => Kind::Corner,
             0 => Kind::Free,
             2 => Kind::Line,
             _ => Kind::Corner,
@@ -414,9 +440,13 @@ impl State {
         self.edges_around(v, edges);
         let mut features = 0;
         let mut manifold = true;
+        let mut open = false;
         for run in edges.chunk_by(|a, b| a >> 32 == b >> 32) {
             match *run {
-                [_] => features += 1,
+                [_] => {
+                    features += 1;
+                    open = true;
+                }
                 [e0, e1] => {
                     let ((_, c0, d0), (_, c1, d1)) = (self.around_corners(v, e0), self.around_corners(v, e1));
                     if !self.same_corner(c0, c1) || !self.same_corner(d0, d1) {
@@ -427,6 +457,7 @@ impl State {
             }
         }
         match features {
+            _ if self.lock_borders && open => Kind::Corner,
             0 if manifold => Kind::Free,
             2 if manifold => Kind::Line,
             _ => Kind::Corner,

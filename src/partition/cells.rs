@@ -1,0 +1,227 @@
+//! Cells of a partitioned build: a kd-tree over the input's vertices cut into cells of about the
+//! same number of faces, faces written to one temporary file per cell (by their centroid's cell),
+//! and a cell read back as a mesh.
+//!
+//! A face is stored as its three corners, each the input vertex id, the position and, when the
+//! input has them, the normal and color: a cell file is the whole of its faces, so cells are
+//! built without the input.
+
+use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh};
+use glam::Vec3;
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// The cut of space into cells: a kd-tree whose leaves are cells.
+#[derive(Clone, Debug, Default)]
+pub struct Cells {
+    /// Inner nodes: split axis, split value, children (a child `>= nodes.len()` is leaf
+    /// `child − nodes.len()`).
+    nodes: Vec<(u8, f32, [u32; 2])>,
+    pub count: usize,
+}
+
+/// Vertices sampled to place the splits, at most.
+const SAMPLES: usize = 1 << 20;
+
+impl Cells {
+    /// Cells of about `cell_faces` faces each for `faces` faces on the vertices `positions`
+    /// (splits of a sample along the longest side of each box, at the quantile that gives each
+    /// side its share of the cells).
+    pub fn split(positions: &[Vec3], faces: u64, cell_faces: u64) -> Cells {
+        let stride = (positions.len() / SAMPLES).max(1);
+        let mut sample: Vec<Vec3> = positions.iter().step_by(stride).copied().collect();
+        let mut cells = Cells::default();
+        let leaves = faces.div_ceil(cell_faces.max(1)).max(1);
+        if leaves <= 1 || sample.len() < 2 {
+            cells.count = 1;
+            return cells;
+        }
+        let n = sample.len();
+        cells.build(&mut sample[..n], leaves.min(n as u64) as usize);
+        // Leaves were numbered as they were made; inner links were offset by a provisional count.
+        let inner = cells.nodes.len() as u32;
+        for node in &mut cells.nodes {
+            for c in &mut node.2 {
+                if *c & LEAF != 0 {
+                    *c = inner + (*c & !LEAF);
+                }
+            }
+        }
+        cells
+    }
+
+    /// Split `pts` into `leaves` cells: at the quantile that gives each side its share of them.
+    fn build(&mut self, pts: &mut [Vec3], leaves: usize) -> u32 {
+        if leaves <= 1 || pts.len() < 2 {
+            let leaf = self.count as u32;
+            self.count += 1;
+            return LEAF | leaf;
+        }
+        let (lo, hi) = pts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
+        let e = hi - lo;
+        let axis = if e.x >= e.y && e.x >= e.z {
+            0
+        } else if e.y >= e.z {
+            1
+        } else {
+            2
+        };
+        let left = leaves / 2;
+        let mid = (pts.len() * left / leaves).clamp(1, pts.len() - 1);
+        pts.select_nth_unstable_by(mid, |a, b| a[axis].total_cmp(&b[axis]));
+        let value = pts[mid][axis];
+        let me = self.nodes.len();
+        self.nodes.push((axis as u8, value, [0, 0]));
+        let (left_pts, right_pts) = pts.split_at_mut(mid);
+        let a = self.build(left_pts, left);
+        let b = self.build(right_pts, leaves - left);
+        self.nodes[me].2 = [a, b];
+        me as u32
+    }
+
+    /// The cell of point `p`.
+    pub fn of(&self, p: Vec3) -> usize {
+        if self.nodes.is_empty() {
+            return 0;
+        }
+        let inner = self.nodes.len() as u32;
+        let mut at = 0u32;
+        loop {
+            let (axis, value, children) = self.nodes[at as usize];
+            at = children[(p[axis as usize] >= value) as usize];
+            if at >= inner {
+                return (at - inner) as usize;
+            }
+        }
+    }
+}
+
+const LEAF: u32 = 1 << 31;
+
+/// Which corner attributes cell files carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub normals: bool,
+    pub colors: bool,
+}
+
+impl Layout {
+    fn corner_bytes(self) -> usize {
+        16 + if self.normals { 12 } else { 0 } + if self.colors { 4 } else { 0 }
+    }
+}
+
+/// One temporary file per cell, faces appended.
+pub struct Spool {
+    files: Vec<(PathBuf, BufWriter<File>, u64)>,
+    layout: Layout,
+    buf: Vec<u8>,
+}
+
+impl Spool {
+    pub fn create(dir: &Path, count: usize, layout: Layout) -> Result<Spool> {
+        let mut files = Vec::with_capacity(count);
+        for c in 0..count {
+            let path = dir.join(format!("cell-{c}.faces"));
+            let f = File::create(&path).map_err(|e| Error::io(&path, e))?;
+            files.push((path, BufWriter::with_capacity(1 << 16, f), 0));
+        }
+        Ok(Spool { files, layout, buf: Vec::with_capacity(128) })
+    }
+
+    /// Append a face to cell `cell`: its corners' vertex ids, positions, normals and colors.
+    pub fn push(&mut self, cell: usize, ids: [u32; 3], pos: [Vec3; 3], normals: [Vec3; 3], colors: [[u8; 4]; 3]) -> Result<()> {
+        self.buf.clear();
+        for k in 0..3 {
+            self.buf.extend_from_slice(&ids[k].to_le_bytes());
+            for x in pos[k].to_array() {
+                self.buf.extend_from_slice(&x.to_le_bytes());
+            }
+            if self.layout.normals {
+                for x in normals[k].to_array() {
+                    self.buf.extend_from_slice(&x.to_le_bytes());
+                }
+            }
+            if self.layout.colors {
+                self.buf.extend_from_slice(&colors[k]);
+            }
+        }
+        let (path, w, n) = &mut self.files[cell];
+        w.write_all(&self.buf).map_err(|e| Error::io(path, e))?;
+        *n += 1;
+        Ok(())
+    }
+
+    /// Close every file; each cell's path and face count.
+    pub fn finish(self) -> Result<Vec<(PathBuf, u64)>> {
+        let mut out = Vec::with_capacity(self.files.len());
+        for (path, w, n) in self.files {
+            w.into_inner().map_err(|e| Error::io(&path, e.into_error()))?.sync_data().ok();
+            out.push((path, n));
+        }
+        Ok(out)
+    }
+}
+
+/// A cell's faces as an uncleaned mesh (every corner its own vertex, welded by
+/// [`Mesh::clean`]), with the input vertex id of each vertex.
+pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u32>)> {
+    let corner = layout.corner_bytes();
+    let expect = faces * 3 * corner as u64;
+    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+    if len != expect {
+        return Err(Error::invalid(path, None, format!("cell file of {len} bytes, {expect} expected for {faces} faces")));
+    }
+    let mut r = BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
+    let n = faces as usize * 3;
+    let mut mesh = Mesh {
+        positions: Vec::with_capacity(n),
+        triangles: (0..faces as u32).map(|f| [3 * f, 3 * f + 1, 3 * f + 2]).collect(),
+        face_materials: vec![0; faces as usize],
+        materials: vec![Material::default()],
+        ..Mesh::default()
+    };
+    let mut ids = Vec::with_capacity(n);
+    let mut rec = vec![0u8; corner];
+    let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
+    for _ in 0..n {
+        r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
+        ids.push(u32::from_le_bytes(rec[0..4].try_into().unwrap()));
+        mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
+        let mut at = 16;
+        if layout.normals {
+            mesh.normals.push(Vec3::new(f32_at(&rec, at), f32_at(&rec, at + 4), f32_at(&rec, at + 8)));
+            at += 12;
+        }
+        if layout.colors {
+            mesh.colors.push(rec[at..at + 4].try_into().unwrap());
+        }
+    }
+    Ok((mesh, ids))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_split_points_evenly_and_locate_them() {
+        let pts: Vec<Vec3> = (0..4096).map(|i| Vec3::new((i % 64) as f32, (i / 64) as f32, ((i * 7) % 13) as f32)).collect();
+        let cells = Cells::split(&pts, 8192, 1024);
+        assert_eq!(cells.count, 8);
+        let six = Cells::split(&pts, 6 * 1024, 1024);
+        assert_eq!(six.count, 6);
+        let mut n6 = vec![0; 6];
+        for &p in &pts {
+            n6[six.of(p)] += 1;
+        }
+        assert!(n6.iter().all(|&c| (560..=810).contains(&c)), "{n6:?}");
+        let mut count = vec![0; cells.count];
+        for &p in &pts {
+            count[cells.of(p)] += 1;
+        }
+        assert!(count.iter().all(|&c| (400..=620).contains(&c)), "{count:?}");
+    }
+}

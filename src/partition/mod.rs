@@ -1,0 +1,240 @@
+//! The partitioned build, for meshes larger than memory, top-down: stream the input into spatial
+//! cells on disk → build each cell's finest levels alone, several at once, with the cell's border
+//! locked → merge the cells' tops into one mesh, where the old cell borders are interior, and build
+//! the coarse levels there → write. The file is the same format as the in-core build's; only how
+//! its levels were made differs (notes/partition.md says what that costs).
+//!
+//! Memory is bounded by the cells in flight (each cell is an in-core build of
+//! [`cell_faces`] faces), the vertex arrays while streaming (positions, and colors and normals when
+//! the input has them), and the merged tops. Cells meet exactly: their shared border vertices are
+//! locked at every level a cell builds, so the border edges of level ℓ nodes of two cells are the
+//! same edges, and the merge, which welds the tops by position, links such nodes as neighbours.
+
+mod cells;
+mod work;
+
+use crate::error::{Error, Result};
+use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
+use crate::import::ply;
+use crate::pipeline::{ConvertOptions, Converted, Normals, Progress, StageTimes};
+use cells::{Cells, Layout, Spool};
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Bytes the in-core build holds per input face at its peak (measured: 406–420 on 0.5–5M-face
+/// meshes, notes/levels.md), with room for the allocator.
+pub const IN_CORE_BYTES_PER_FACE: u64 = 450;
+
+/// Fewest and most faces per cell.
+const MIN_CELL_FACES: u64 = 4096;
+const MAX_CELL_FACES: u64 = 2_000_000;
+
+/// What the partitioned build may use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Budget {
+    /// Bytes of memory to stay within.
+    pub memory: u64,
+    /// Folder for the cell files (the system's temporary folder if none).
+    pub temp: Option<PathBuf>,
+    /// Cells built at once.
+    pub threads: usize,
+    /// Faces per cell; 0 derives it from `memory` and `threads` ([`cell_faces`]).
+    pub cell_faces: u64,
+}
+
+impl Budget {
+    /// A budget of `memory` bytes on every core.
+    pub fn new(memory: u64) -> Budget {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        Budget { memory, temp: None, threads, cell_faces: 0 }
+    }
+}
+
+/// A sensible default memory budget: half of the machine's memory, at least 256 MiB.
+pub fn default_memory() -> u64 {
+    let total = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()))
+        .map_or(8 << 30, |kib| kib * 1024);
+    (total / 2).max(256 << 20)
+}
+
+/// Bytes held per input face while cells are built, besides the cells themselves: the tops
+/// waiting for the merge, the writer's node records and the computed vertex normals (measured:
+/// 80 MB at 5M faces, 200 MB at 20M, after the cells of a 1 GB build; more than their slope of
+/// 8 B per face, for the allocator's share).
+pub const HELD_BYTES_PER_FACE: u64 = 16;
+
+/// Faces per cell for a budget and an input of `faces` faces: the cells in flight at once take
+/// 60 % of what the held state ([`HELD_BYTES_PER_FACE`]) leaves, the rest is for the merge and
+/// the allocator. So the peak stays near the budget whatever the input's size.
+pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
+    if b.cell_faces > 0 {
+        return b.cell_faces;
+    }
+    let free = b.memory.saturating_sub(faces.saturating_mul(HELD_BYTES_PER_FACE));
+    (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
+}
+
+/// Whether `input` is a file the partitioned build streams (binary PLY), and its declared faces.
+pub fn streamable(input: &Path) -> Option<u64> {
+    let is_ply = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    let d = is_ply.then(|| ply::declared(input).ok()).flatten()?;
+    d.binary.then_some(d.faces)
+}
+
+/// Node levels each cell builds for cells of `faces` faces: until a cell's locked border would be
+/// a large part of its faces (its border grows as the square root of its faces).
+pub fn cell_levels(faces: u64) -> usize {
+    (((faces as f64).sqrt() / 24.0).log2().floor() as i64).clamp(1, 12) as usize
+}
+
+/// Convert the binary PLY `input` into `output` by the partitioned build.
+pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budget, progress: &mut dyn Progress) -> Result<Converted> {
+    let mut times = StageTimes::default();
+    let mut clock = Instant::now();
+    let mut lap = |slot: &mut f64| {
+        *slot = clock.elapsed().as_secs_f64() * 1e3;
+        clock = Instant::now();
+    };
+    crate::atomic::protect(input);
+    crate::atomic::check_output(output)?;
+    let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
+    let mut warnings = Vec::new();
+    let declared = ply::declared(input)?;
+    let cell_faces = cell_faces(budget, declared.faces);
+
+    // Distribute: faces to cells by centroid; computed normals need every face of a vertex, so
+    // their sums are kept per input vertex and each cell looks its vertices up later.
+    progress.stage("distribute", 0);
+    let mut state: Option<Distribute> = None;
+    ply::stream(
+        input,
+        &mut |v, tris| {
+            let d = match &mut state {
+                Some(d) => d,
+                None => state.insert(Distribute::new(v, declared.faces, cell_faces, opts.normals, temp.path())?),
+            };
+            d.push(v, tris)
+        },
+        &mut warnings,
+    )?;
+    let Some(d) = state else {
+        return Err(Error::invalid(input, None, "nothing to convert: no faces"));
+    };
+    let (grid, layout, vertex_normals, spooled) = d.finish()?;
+    lap(&mut times.import_ms);
+
+    let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: false, colors: layout.colors };
+    let crease = match opts.normals {
+        Normals::Auto { crease_angle } => crease_angle,
+        _ => 0.0,
+    };
+    let k = cell_levels(cell_faces);
+    let writer_opts = WriterOptions {
+        metres_per_unit: 0.0,
+        params: opts.hierarchy,
+        level_ratio: opts.levels.ratio,
+        tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
+        grid,
+        attributes,
+        materials: vec![crate::mesh::Material::default()],
+        input_vertices: 0,
+        levels: k as u32 + 1,
+        georef: None,
+        major: 2,
+        images: Default::default(),
+    };
+    let mut file = crate::atomic::AtomicFile::create(output)?;
+    let dir = output.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let writer = Writer::new(file.writer(), output, writer_opts, Some(dir))?;
+    let job = work::Job {
+        hierarchy: opts.hierarchy,
+        levels: opts.levels,
+        grid,
+        attributes,
+        cell_levels: k,
+        cell_faces,
+        layout,
+        vertex_normals: vertex_normals.as_deref(),
+        crease,
+    };
+    let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
+    warnings.extend(cell_warnings);
+    drop(temp);
+    lap(&mut times.simplify_ms);
+    file.commit()?;
+    lap(&mut times.write_ms);
+    Ok(Converted { summary, times, warnings })
+}
+
+/// What the distribution pass leaves: the file's grid, the cell files' layout, computed vertex
+/// normals (octahedral, per input vertex) and each cell's file and face count.
+type Distributed = (Grid, Layout, Option<Vec<[i16; 2]>>, Vec<(PathBuf, u64)>);
+
+/// The distribution pass's state, made when the vertices are known.
+struct Distribute {
+    cells: Cells,
+    spool: Spool,
+    layout: Layout,
+    /// Per input vertex, the sum of its faces' area-weighted normals (when normals are computed).
+    sums: Option<Vec<Vec3>>,
+    lo: Vec3,
+    hi: Vec3,
+}
+
+impl Distribute {
+    fn new(v: &ply::Vertices, faces: u64, cell_faces: u64, normals: Normals, temp: &Path) -> Result<Distribute> {
+        let cells = Cells::split(v.positions, faces, cell_faces);
+        let has_normals = !v.normals.is_empty() && normals != Normals::None;
+        let layout = Layout { normals: has_normals, colors: !v.colors.is_empty() };
+        let compute = v.normals.is_empty() && matches!(normals, Normals::Auto { .. });
+        let spool = Spool::create(temp, cells.count, layout)?;
+        let sums = compute.then(|| vec![Vec3::ZERO; v.positions.len()]);
+        Ok(Distribute { cells, spool, layout, sums, lo: Vec3::splat(f32::MAX), hi: Vec3::splat(f32::MIN) })
+    }
+
+    fn push(&mut self, v: &ply::Vertices, tris: &[[u32; 3]]) -> Result<()> {
+        for t in tris {
+            let p = t.map(|i| v.positions[i as usize]);
+            for q in p {
+                self.lo = self.lo.min(q);
+                self.hi = self.hi.max(q);
+            }
+            let cell = self.cells.of((p[0] + p[1] + p[2]) / 3.0);
+            let n = if self.layout.normals { t.map(|i| v.normals[i as usize]) } else { [Vec3::ZERO; 3] };
+            let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
+            if let Some(sums) = &mut self.sums {
+                let cross = crate::mesh::triangle_cross(v.positions, t).as_vec3();
+                if cross.is_finite() {
+                    for &i in t {
+                        sums[i as usize] += cross;
+                    }
+                }
+            }
+            self.spool.push(cell, *t, p, n, c)?;
+        }
+        Ok(())
+    }
+
+    /// The file's grid (the input's bounds with a margin for simplified vertices that stray
+    /// outside), the cell files' layout, computed vertex normals as octahedral codes, and each
+    /// cell's file and face count.
+    fn finish(self) -> Result<Distributed> {
+        let margin = (self.hi - self.lo).max_element() / 1024.0;
+        let grid = Grid::fit(self.lo - margin, self.hi + margin, GRID_BITS);
+        let normals = self.sums.map(|s| s.into_iter().map(|n| octa::encode(n.normalize_or(Vec3::Z))).collect());
+        Ok((grid, self.layout, normals, self.spool.finish()?))
+    }
+}
+
+/// Give freed heap memory back to the system (glibc keeps it otherwise, and the next cell or the
+/// merge would then count against the budget twice).
+pub(crate) fn release_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free pages of the allocator's own heap to the system.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}

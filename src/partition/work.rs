@@ -1,0 +1,436 @@
+//! The work of the partitioned build, in three kinds of piece, each an in-core build of a part of
+//! the mesh of at most a cell's size:
+//! - a **cell**: its faces from its file, its finest levels built with its border locked;
+//! - a **part**: the tops of neighbouring cells (or parts) welded into one mesh, a few more
+//!   levels built on it with the part's outer border locked — the old borders inside it are now
+//!   free to simplify — while the tops together are larger than a cell;
+//! - the **merge**: all the tops, the coarsest levels, borders free.
+//!
+//! Pieces of one round run on `threads` workers at once (each piece's own steps in parallel
+//! inside it) and add their nodes to the one [`Writer`]. Neighbours across pieces are found from
+//! their open edges (locked, so the same at every level a piece builds) and linked at the end.
+
+use super::cells::{read_cell, Layout};
+use crate::bounds::NodeBounds;
+use crate::error::{Error, Result};
+use crate::format::{octa, Attributes, Grid, HierarchyParams, NodeIn, WriteSummary, Writer};
+use crate::hierarchy::{self, GroupInfo, Hierarchy, Level};
+use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
+use crate::mesh::{Adjacency, Mesh};
+use crate::pipeline::Progress;
+use crate::write::{Piece, Place};
+use glam::Vec3;
+use rustc_hash::FxHashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// A node key of levels a cell or part builds: the piece in the high bits, its group in the low
+/// ones, so that pieces name their nodes without asking each other.
+const GROUP_BITS: u32 = 20;
+const MAX_PIECES: usize = 1 << (32 - GROUP_BITS);
+
+fn piece_key(piece: usize, group: u32) -> u32 {
+    (piece as u32) << GROUP_BITS | group
+}
+
+/// What every piece of work shares.
+pub struct Job<'a> {
+    pub hierarchy: HierarchyParams,
+    pub levels: LevelParams,
+    pub grid: Grid,
+    pub attributes: Attributes,
+    /// Node levels a cell builds below its top.
+    pub cell_levels: usize,
+    /// Faces a piece may hold.
+    pub cell_faces: u64,
+    pub layout: Layout,
+    /// Per input vertex, its computed normal, when normals are computed.
+    pub vertex_normals: Option<&'a [[i16; 2]]>,
+    /// Corners whose face turns more than this from their vertex's normal keep the face's normal.
+    pub crease: f32,
+}
+
+/// A piece's top level, for the next round.
+pub struct Top {
+    level: LevelMesh,
+    groups: Vec<GroupInfo>,
+    bounds: Vec<NodeBounds>,
+    /// Node key of each group.
+    keys: Vec<u32>,
+    max_angle: f32,
+    max_faces: u32,
+}
+
+/// A piece's open edges, by their ends' positions (lower first), with the node key on their side
+/// at each of the levels `first..first + keys.len()`.
+struct Border {
+    first: u32,
+    edges: Vec<([u32; 6], Vec<u32>)>,
+}
+
+/// What the rounds gather besides the tops.
+#[derive(Default)]
+struct Gathered {
+    borders: Vec<Border>,
+    warnings: Vec<String>,
+    /// Level-0 vertices of the cells, and vertices welded away since (shared by two pieces).
+    vertices: usize,
+    welded: usize,
+}
+
+/// Build the file from the cell files `spooled` (file, faces): the cells, parts while the tops
+/// are larger than a cell, then the merge, then the links; returns what was written and the
+/// warnings of the cells.
+pub fn build<W: Write + Send>(
+    job: &Job,
+    spooled: &[(PathBuf, u64)],
+    writer: Writer<W>,
+    threads: usize,
+    progress: &mut dyn Progress,
+) -> Result<(WriteSummary, Vec<String>)> {
+    if spooled.len() >= MAX_PIECES {
+        return Err(Error::invalid(&spooled[0].0, None, format!("{} cells: at most {MAX_PIECES}", spooled.len() - 1)));
+    }
+    let writer = Mutex::new(writer);
+    let gathered = Mutex::new(Gathered::default());
+    progress.stage("cells", spooled.len() as u64);
+    let mut tops: Vec<Top> = run(spooled.len(), threads, progress, |c| cell(job, c, &spooled[c].0, spooled[c].1, &writer, &gathered))?
+        .into_iter()
+        .flatten()
+        .collect();
+    let mut first = job.cell_levels;
+    let mut round = 0;
+    loop {
+        let faces: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+        let parts = faces.div_ceil(job.cell_faces.max(1) as usize);
+        if parts <= 1 || tops.len() < 2 || round == MAX_ROUNDS {
+            break;
+        }
+        // Consecutive tops are neighbouring cells (the kd-tree's leaf order): runs of them of
+        // about a cell's faces make the parts.
+        let runs = runs(&tops, parts);
+        let levels = part_levels(faces / parts);
+        writer.lock().map_err(|_| poisoned())?.set_levels((first + levels + 1) as u32)?;
+        progress.stage(&format!("parts, round {}", round + 1), runs.len() as u64);
+        let mut groups: Vec<Option<Vec<Top>>> = Vec::with_capacity(runs.len());
+        let mut rest = tops.into_iter();
+        for r in &runs {
+            groups.push(Some(rest.by_ref().take(r.len()).collect()));
+        }
+        let groups = Mutex::new(groups);
+        let next = run(runs.len(), threads, progress, |p| {
+            let part = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
+            merge(job, part, first, Some((p, levels)), &writer, &gathered).map(|t| t.into_iter().next())
+        })?;
+        tops = next.into_iter().flatten().collect();
+        let after: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+        first += levels;
+        round += 1;
+        if after * 4 > faces * 3 {
+            break;
+        }
+    }
+    progress.stage("merge", 0);
+    merge(job, tops, first, None, &writer, &gathered)?;
+    let mut writer = writer.into_inner().map_err(|_| poisoned())?;
+    let g = gathered.into_inner().map_err(|_| poisoned())?;
+    link(&mut writer, &g.borders);
+    writer.set_input_vertices((g.vertices - g.welded) as u64);
+    Ok((writer.finish()?, g.warnings))
+}
+
+/// Rounds of parts at most: each makes the tops smaller by a few levels.
+const MAX_ROUNDS: usize = 16;
+
+fn poisoned() -> Error {
+    Error::invalid(Path::new("<partitioned build>"), None, "a worker failed")
+}
+
+/// Run `work(i)` for `i in 0..n` on `threads` workers, results in order; the first error stops
+/// the rest. Progress steps on this thread as pieces finish.
+fn run<T: Send>(n: usize, threads: usize, progress: &mut dyn Progress, work: impl Fn(usize) -> Result<T> + Sync) -> Result<Vec<T>> {
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, Result<T>)>();
+    let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
+    let mut failure = None;
+    std::thread::scope(|s| {
+        for _ in 0..threads.max(1).min(n.max(1)) {
+            let tx = tx.clone();
+            let (next, stop, work) = (&next, &stop, &work);
+            s.spawn(move || loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n || stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                let r = work(i);
+                super::release_memory();
+                if r.is_err() {
+                    stop.store(true, Ordering::Relaxed);
+                }
+                let _ = tx.send((i, r));
+            });
+        }
+        drop(tx);
+        for (i, r) in rx {
+            progress.step();
+            match r {
+                Ok(t) => out[i] = Some(t),
+                Err(e) => {
+                    failure.get_or_insert(e);
+                }
+            }
+        }
+    });
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(out.into_iter().map(|t| t.expect("every piece ran")).collect()),
+    }
+}
+
+/// Split `tops` into `parts` runs of consecutive tops with about equal faces.
+fn runs(tops: &[Top], parts: usize) -> Vec<std::ops::Range<usize>> {
+    let total: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+    let mut out = Vec::with_capacity(parts);
+    let (mut start, mut sum) = (0, 0);
+    for (i, t) in tops.iter().enumerate() {
+        sum += t.level.mesh.face_count();
+        if sum * parts >= total * (out.len() + 1) && i + 1 > start {
+            out.push(start..i + 1);
+            start = i + 1;
+        }
+    }
+    if start < tops.len() {
+        out.push(start..tops.len());
+    }
+    out
+}
+
+/// Levels a part of `faces` faces builds: as for a cell, but its border is already long (it is
+/// made of the borders of the pieces it holds), so fewer.
+fn part_levels(faces: usize) -> usize {
+    (super::cell_levels(faces as u64) / 2).max(1)
+}
+
+/// Build cell `c` from its file; `None` when it holds no faces.
+fn cell<W: Write>(
+    job: &Job,
+    c: usize,
+    path: &Path,
+    faces: u64,
+    writer: &Mutex<Writer<W>>,
+    gathered: &Mutex<Gathered>,
+) -> Result<Option<Top>> {
+    if faces == 0 {
+        return Ok(None);
+    }
+    let (mut mesh, ids) = read_cell(path, faces, job.layout)?;
+    let _ = std::fs::remove_file(path);
+    if let Some(vn) = job.vertex_normals {
+        mesh.compute_face_geometry();
+        let cos = job.crease.cos();
+        mesh.normals = (0..ids.len())
+            .map(|i| {
+                let n = octa::decode(vn[ids[i] as usize]);
+                let f = mesh.face_normals[i / 3];
+                if f == Vec3::ZERO || n.dot(f) >= cos {
+                    n
+                } else {
+                    f
+                }
+            })
+            .collect();
+    }
+    drop(ids);
+    let (mesh, report) = mesh.clean().map_err(|v| Error::invalid(path, None, format!("vertex {} is not finite", v.index)))?;
+    if report.degenerate_faces + report.duplicate_faces > 0 {
+        let w = format!("cell {c}: removed {} degenerate and {} duplicate faces", report.degenerate_faces, report.duplicate_faces);
+        gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
+    }
+    if mesh.face_count() == 0 {
+        return Ok(None);
+    }
+    let vertices = mesh.vertex_count();
+    let adjacency = Adjacency::build(&mesh);
+    let k = job.cell_levels;
+    let mut h = hierarchy::build_levels(&mesh, &adjacency, &job.hierarchy, Some(k + 1));
+    drop(adjacency);
+    let p = LevelParams { top_faces: usize::MAX, ..job.levels };
+    let first = LevelMesh { face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()], mesh };
+    let lv = levels::build_from(first, &mut h, &p, true, &mut |_| {});
+    let bad = |m: String| Error::invalid(path, None, format!("cell {c}: {m}"));
+    let keys = |_: usize, g: u32| piece_key(c, g);
+    let top = finish_piece(job, h, lv, None, 0, k, &keys, writer, gathered, &bad)?;
+    gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
+    Ok(top)
+}
+
+/// Weld `tops` (whose level is file level `first`) into one mesh and build on it: with
+/// `part: Some((p, levels))`, `levels` more levels with the outer border locked, returning the
+/// new top; without, the coarsest levels of the file.
+fn merge<W: Write>(
+    job: &Job,
+    tops: Vec<Top>,
+    first: usize,
+    part: Option<(usize, usize)>,
+    writer: &Mutex<Writer<W>>,
+    gathered: &Mutex<Gathered>,
+) -> Result<Option<Top>> {
+    let mut mesh = Mesh { materials: vec![crate::mesh::Material::default()], ..Mesh::default() };
+    let (mut face_group, mut group_error, mut groups, mut bounds, mut keys) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut at: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    let (mut max_angle, mut max_faces, mut before) = (0f32, 0u32, 0usize);
+    for t in tops {
+        let base = groups.len() as u32;
+        let m = &t.level.mesh;
+        let remap: Vec<u32> = m
+            .positions
+            .iter()
+            .map(|&p| {
+                let next = mesh.positions.len() as u32;
+                *at.entry(position_key(p)).or_insert_with(|| {
+                    mesh.positions.push(p);
+                    next
+                })
+            })
+            .collect();
+        mesh.triangles.extend(m.triangles.iter().map(|t| t.map(|v| remap[v as usize])));
+        mesh.normals.extend_from_slice(&m.normals);
+        mesh.colors.extend_from_slice(&m.colors);
+        mesh.face_materials.extend(std::iter::repeat_n(0, m.face_count()));
+        face_group.extend(t.level.face_group.iter().map(|&g| base + g));
+        group_error.extend_from_slice(&t.level.group_error);
+        keys.extend_from_slice(&t.keys);
+        groups.extend(t.groups);
+        bounds.extend(t.bounds);
+        (max_angle, max_faces) = (max_angle.max(t.max_angle), max_faces.max(t.max_faces));
+        before += m.vertex_count();
+    }
+    drop(at);
+    if mesh.face_count() == 0 {
+        return Ok(None);
+    }
+    gathered.lock().map_err(|_| poisoned())?.welded += before - mesh.vertex_count();
+    mesh.compute_face_geometry();
+    let base = Level {
+        face_group: face_group.clone(),
+        groups,
+        parent: Vec::new(),
+        children: Default::default(),
+        neighbors: Default::default(),
+        max_angle,
+        max_faces,
+    };
+    let adjacency = Adjacency::build(&mesh);
+    let mut h = hierarchy::extend(&mesh, &adjacency, base, &job.hierarchy, part.map(|(_, n)| n + 1));
+    drop(adjacency);
+    let first_level = LevelMesh { mesh, face_group, group_error };
+    let bad = |m: String| Error::invalid(Path::new("<merge>"), None, m);
+    match part {
+        Some((p, n)) => {
+            let lp = LevelParams { top_faces: usize::MAX, ..job.levels };
+            let lv = levels::build_from(first_level, &mut h, &lp, true, &mut |_| {});
+            let key = |l: usize, g: u32| if l == 0 { keys[g as usize] } else { piece_key(p, g) };
+            finish_piece(job, h, lv, Some(bounds), first, n, &key, writer, gathered, &bad)
+        }
+        None => {
+            let lv = levels::build_from(first_level, &mut h, &job.levels, false, &mut |_| {});
+            let piece = Piece::new(&h, &lv, &job.grid, None, Some(bounds)).map_err(bad)?;
+            let file_levels = first + h.levels.len();
+            let mut w = writer.lock().map_err(|_| poisoned())?;
+            w.set_levels(file_levels as u32)?;
+            let place =
+                Place { offset: first, levels: 0..h.levels.len(), file_levels, key: &|l, g| if l == 0 { keys[g as usize] } else { g } };
+            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, None, false, &place)?;
+            Ok(None)
+        }
+    }
+}
+
+/// Write the levels `0..n` of a cell or part (piece level `l` is file level `first + l`, keys
+/// from `key`), record its open edges, and return its top (level `n`).
+#[allow(clippy::too_many_arguments)]
+fn finish_piece<W: Write>(
+    job: &Job,
+    mut h: Hierarchy,
+    lv: LevelMeshes,
+    base: Option<Vec<NodeBounds>>,
+    first: usize,
+    n: usize,
+    key: &(dyn Fn(usize, u32) -> u32 + Sync),
+    writer: &Mutex<Writer<W>>,
+    gathered: &Mutex<Gathered>,
+    bad: &dyn Fn(String) -> Error,
+) -> Result<Option<Top>> {
+    if let Some(g) = h.levels.iter().map(|l| l.groups.len()).find(|&g| g >= 1 << GROUP_BITS) {
+        return Err(bad(format!("{g} groups in one level, at most {}", 1 << GROUP_BITS)));
+    }
+    let piece = Piece::new(&h, &lv, &job.grid, None, base).map_err(bad)?;
+    let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
+    let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
+    let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
+    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, None, false, &place)?;
+    gathered.lock().map_err(|_| poisoned())?.borders.push(border);
+    let mut levels = lv.levels;
+    let level = levels.swap_remove(n);
+    let top = h.levels.swap_remove(n);
+    let bounds = piece.bounds.into_iter().nth(n).unwrap_or_default();
+    let keys = (0..top.groups.len() as u32).map(|g| key(n, g)).collect();
+    Ok(Some(Top { level, groups: top.groups, bounds, keys, max_angle: top.max_angle, max_faces: top.max_faces }))
+}
+
+fn position_key(p: Vec3) -> [u32; 3] {
+    (p + Vec3::ZERO).to_array().map(f32::to_bits)
+}
+
+/// The open edges of `levels[0]`, by their ends' positions, with the key of the node on their
+/// side at every level of `levels`. Borders are locked, so every level has the same open edges;
+/// an edge some level lacks (it cannot, but a file is not built on hope) is dropped.
+fn border_edges(levels: &[LevelMesh], key: &dyn Fn(usize, u32) -> u32) -> Vec<([u32; 6], Vec<u32>)> {
+    let open = |m: &Mesh, face_group: &[u32]| -> FxHashMap<[u32; 6], u32> {
+        let mut count: FxHashMap<u64, (u32, u32)> = FxHashMap::default();
+        for (f, t) in m.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                let e = count.entry((a as u64) << 32 | b as u64).or_insert((0, f as u32));
+                e.0 += 1;
+            }
+        }
+        count
+            .into_iter()
+            .filter(|(_, (n, _))| *n == 1)
+            .map(|(e, (_, f))| {
+                let (a, b) = (position_key(m.positions[(e >> 32) as usize]), position_key(m.positions[e as u32 as usize]));
+                let (a, b) = if a <= b { (a, b) } else { (b, a) };
+                ([a[0], a[1], a[2], b[0], b[1], b[2]], face_group[f as usize])
+            })
+            .collect()
+    };
+    let per_level: Vec<FxHashMap<[u32; 6], u32>> = levels.iter().map(|l| open(&l.mesh, &l.face_group)).collect();
+    let Some(first) = per_level.first() else { return Vec::new() };
+    let mut out: Vec<([u32; 6], Vec<u32>)> = first
+        .keys()
+        .filter_map(|e| {
+            let groups: Option<Vec<u32>> = per_level.iter().enumerate().map(|(l, m)| m.get(e).map(|&g| key(l, g))).collect();
+            groups.map(|g| (*e, g))
+        })
+        .collect();
+    out.sort_unstable_by_key(|a| a.0);
+    out
+}
+
+/// Link the nodes on the two sides of every open edge two pieces of the same round share.
+fn link<W: Write>(writer: &mut Writer<W>, borders: &[Border]) {
+    let mut seen: FxHashMap<(u32, [u32; 6]), &[u32]> = FxHashMap::default();
+    for b in borders {
+        for (e, keys) in &b.edges {
+            if let Some(other) = seen.insert((b.first, *e), keys) {
+                for (l, (&x, &y)) in other.iter().zip(keys).enumerate() {
+                    writer.link(b.first + l as u32, x, y);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,144 @@
+//! The partitioned build (`strata convert --partitioned`, `--memory`): cells built apart meet
+//! exactly, the file verifies and streams, neighbours are linked across cells, and bad input ends
+//! in a clear error that leaves no output and no work files.
+
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use strata::format::Reader;
+use strata::pipeline::{convert, Build, ConvertOptions, Silent};
+use strata::stream::{session, Budgets, Streamer};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+}
+
+fn temp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("strata-partition-{}-{name}", std::process::id()))
+}
+
+/// Options that make the noisy sphere (99k faces) about ten cells.
+fn partitioned(work: &Path) -> ConvertOptions {
+    ConvertOptions { build: Build::Partitioned, memory: 16 << 20, temp: Some(work.to_path_buf()), ..ConvertOptions::default() }
+}
+
+type Edge = ([u32; 3], [u32; 3]);
+
+fn edge(a: glam::Vec3, b: glam::Vec3) -> Edge {
+    let (a, b) = (a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+    if a <= b {
+        (a, b)
+    } else {
+        (b, a)
+    }
+}
+
+/// Per level: how many faces use each edge (by decoded positions), and which nodes do.
+fn level_edges(rd: &Reader<std::fs::File>, level: u32) -> HashMap<Edge, Vec<u32>> {
+    let mut out: HashMap<Edge, Vec<u32>> = HashMap::new();
+    for n in rd.level_nodes(level) {
+        let g = rd.read_node(n).expect("node");
+        for t in g.indices.chunks_exact(3) {
+            for k in 0..3 {
+                out.entry(edge(g.positions[t[k] as usize], g.positions[t[(k + 1) % 3] as usize])).or_default().push(n);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn cells_meet_exactly_and_are_linked_as_neighbours() {
+    let work = temp("work");
+    std::fs::create_dir_all(&work).unwrap();
+    let input = fixture("noisy_sphere.ply");
+    let out = temp("sphere.strata");
+    let incore = temp("sphere-incore.strata");
+    convert(&input, &Default::default(), &out, &partitioned(&work), &mut Silent).expect("partitioned convert");
+    convert(&input, &Default::default(), &incore, &ConvertOptions { build: Build::InCore, ..ConvertOptions::default() }, &mut Silent)
+        .expect("in-core convert");
+    assert!(strata::format::verify_path(&out).is_sound(), "the partitioned file does not verify");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+
+    let rd = Reader::open_path(&out).unwrap();
+    let core = Reader::open_path(&incore).unwrap();
+    assert_eq!(rd.levels()[0].faces, core.levels()[0].faces, "level 0 must hold every input face");
+    assert_eq!(rd.header().input_vertices, core.header().input_vertices, "vertices welded across cells");
+    // The sphere is closed: in every level of both files, every edge has two faces. Across cells
+    // that holds only if their borders were kept exactly.
+    let mut linked_across = 0;
+    for (name, file) in [("in-core", &core), ("partitioned", &rd)] {
+        for l in 0..file.levels().len() as u32 {
+            let edges = level_edges(file, l);
+            let open = edges.values().filter(|n| n.len() != 2).count();
+            for (e, n) in edges.iter().filter(|(_, n)| n.len() != 2) {
+                eprintln!("{name} level {l}: edge {:?} {:?} faces in nodes {n:?}", e.0.map(f32::from_bits), e.1.map(f32::from_bits));
+            }
+            assert_eq!(open, 0, "{name} level {l}: {open} edges without exactly two faces (a crack)");
+            // Nodes that share an edge are neighbours in the skeleton.
+            let mut pairs = HashSet::new();
+            for n in edges.values() {
+                if n[0] != n[1] {
+                    pairs.insert((n[0].min(n[1]), n[0].max(n[1])));
+                }
+            }
+            for &(a, b) in &pairs {
+                assert!(file.neighbors(a).contains(&b), "{name} level {l}: nodes {a} and {b} share an edge but are not neighbours");
+            }
+            linked_across += pairs.len();
+        }
+    }
+    assert!(linked_across > 0);
+    assert!(rd.levels().len() >= 4, "{} levels", rd.levels().len());
+
+    // It streams: the top level at once, then refinement along an orbit.
+    let (min, max) = (rd.header().min, rd.header().max);
+    let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+    let top = rd.levels().len() as u32 - 1;
+    let mut s = Streamer::new(rd, Budgets::default()).unwrap();
+    let first = s.update(&session::orbit(center, radius, 0, 8, 160, 120), None).unwrap();
+    assert!(first.front.iter().all(|&n| s.reader().nodes()[n as usize].level <= top));
+    let mut finest = u32::MAX;
+    for i in 0..8 {
+        let f = s.update(&session::orbit(center, radius, i, 8, 160, 120), None).unwrap();
+        finest = finest.min(f.front.iter().map(|&n| s.reader().nodes()[n as usize].level).min().unwrap_or(u32::MAX));
+    }
+    assert!(finest < top, "refinement never went below the top level");
+    for p in [out, incore] {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(&work);
+}
+
+#[test]
+fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
+    let work = temp("bad-work");
+    std::fs::create_dir_all(&work).unwrap();
+    let out = temp("bad.strata");
+
+    // Not a binary PLY.
+    let e = convert(&fixture("cube.obj"), &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("binary PLY"), "{e}");
+
+    // A binary PLY cut inside its faces.
+    let bytes = std::fs::read(fixture("noisy_sphere.ply")).unwrap();
+    let cut = temp("cut.ply");
+    std::fs::write(&cut, &bytes[..bytes.len() - 1000]).unwrap();
+    let e = convert(&cut, &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("cut.ply") && e.contains("byte"), "{e}");
+
+    // An index past the vertices, in the last face.
+    let mut bad = bytes.clone();
+    let n = bad.len();
+    bad[n - 4..].copy_from_slice(&u32::MAX.to_le_bytes());
+    let wild = temp("wild.ply");
+    std::fs::write(&wild, &bad).unwrap();
+    let e = convert(&wild, &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("out of range"), "{e}");
+
+    assert!(!out.exists(), "an output was left");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+    for p in [cut, wild] {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(&work);
+}
