@@ -33,12 +33,12 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a binary PLY that an in-core build would not fit in `memory`
+    /// Partitioned when the input is a PLY file that an in-core build would not fit in `memory`
     /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in memory.
     Auto,
     /// Always in memory.
     InCore,
-    /// Always partitioned (binary PLY input, format 2).
+    /// Always partitioned (PLY input, format 2).
     Partitioned,
 }
 
@@ -123,7 +123,7 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions) -> R
         Build::Partitioned if faces.is_none() || import.format.is_some() => Err(crate::error::Error::invalid(
             input,
             None,
-            "the partitioned build reads binary PLY files; convert this one in memory (without --partitioned)",
+            "the partitioned build reads PLY files; convert this one in memory (without --partitioned)",
         )),
         Build::Partitioned => Ok(Some(budget())),
     }

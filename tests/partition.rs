@@ -115,9 +115,9 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
     std::fs::create_dir_all(&work).unwrap();
     let out = temp("bad.strata");
 
-    // Not a binary PLY.
+    // Not a PLY file.
     let e = convert(&fixture("cube.obj"), &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
-    assert!(e.contains("binary PLY"), "{e}");
+    assert!(e.contains("reads PLY"), "{e}");
 
     // A binary PLY cut inside its faces.
     let bytes = std::fs::read(fixture("noisy_sphere.ply")).unwrap();

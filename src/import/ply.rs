@@ -96,15 +96,12 @@ fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)>
     Ok((parse_header(path, &bytes, warnings)?, len))
 }
 
-/// Read a binary PLY file as a stream: its vertex arrays are held (positions, normals, colors), and
-/// its triangles go to `faces` in batches as they are read, indices checked. For the partitioned
-/// build, so it refuses what that build does not carry (texture files, texture coordinates) and
-/// vertices after faces; ascii files are read whole with [`read`].
+/// Read a PLY file (ascii or binary) as a stream: its vertex arrays are held (positions, normals,
+/// colors), and its triangles go to `faces` in batches as they are read, indices checked, with
+/// the errors [`read`] gives. For the partitioned build, so it refuses what that build does not
+/// carry (texture files, texture coordinates) and vertices after faces.
 pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<()> {
     let (header, len) = read_header(path, warnings)?;
-    if header.encoding == Encoding::Ascii {
-        return Err(Error::invalid(path, None, "ascii PLY is not read as a stream: it is read whole"));
-    }
     check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
     let plan = Plan::new(path, &header)?;
     let refuse = |what: &str| {
@@ -128,9 +125,28 @@ pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> 
     let (file, _) = super::open_regular(path)?;
     let mut file = std::io::BufReader::with_capacity(1 << 20, file);
     std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(header.body_start as u64)).map_err(|e| Error::io(path, e))?;
-    match header.encoding {
-        Encoding::Little => reader.run(&header, &plan, &mut Stream::<_, LittleEndian>::new(file, header.body_start as u64, len))?,
-        _ => reader.run(&header, &plan, &mut Stream::<_, BigEndian>::new(file, header.body_start as u64, len))?,
+    let body = (header.body_start as u64, len);
+    let failed = match header.encoding {
+        Encoding::Little => {
+            let mut src = Stream::<_, LittleEndian>::new(file, body.0, body.1);
+            let r = reader.run(&header, &plan, &mut src);
+            (src.failed.take(), r)
+        }
+        Encoding::Big => {
+            let mut src = Stream::<_, BigEndian>::new(file, body.0, body.1);
+            let r = reader.run(&header, &plan, &mut src);
+            (src.failed.take(), r)
+        }
+        Encoding::Ascii => {
+            let mut src = AsciiStream::new(file, header.body_line, body.1 - body.0);
+            let r = reader.run(&header, &plan, &mut src);
+            (src.failed.take(), r)
+        }
+    };
+    // A read that failed is the error, not the end of data it looked like.
+    match failed {
+        (Some(e), _) => return Err(Error::io(path, e)),
+        (None, r) => r?,
     }
     if reader.short_faces > 0 {
         warnings.push(format!("skipped {} faces with fewer than 3 vertices", reader.short_faces));
@@ -235,6 +251,165 @@ impl<R: std::io::Read, B: ByteOrder> Source for Stream<R, B> {
         }
         self.pos += cs + 3 * s;
         Some([0, 1, 2].map(|k| decode_int::<B>(item, &rest[cs + k * s..])))
+    }
+}
+
+/// An ascii body read from a file in pieces: the current line is always whole in `buf`.
+struct AsciiStream<R> {
+    src: R,
+    buf: Vec<u8>,
+    pos: usize,
+    /// Where the line `pos` is on starts in `buf`.
+    line_start: usize,
+    eof: bool,
+    /// Body bytes not yet read into `buf`.
+    unread: u64,
+    line: usize,
+    record_line: usize,
+    failed: Option<std::io::Error>,
+}
+
+impl<R: std::io::Read> AsciiStream<R> {
+    fn new(src: R, first_line: usize, body: u64) -> Self {
+        AsciiStream {
+            src,
+            buf: Vec::with_capacity(1 << 16),
+            pos: 0,
+            line_start: 0,
+            eof: false,
+            unread: body,
+            line: first_line,
+            record_line: first_line,
+            failed: None,
+        }
+    }
+
+    /// Read until a line end follows `pos` or the file ends.
+    fn fill_line(&mut self) {
+        while !self.eof && !self.buf[self.pos..].contains(&b'\n') {
+            let keep = self.line_start;
+            self.buf.drain(..keep);
+            self.pos -= keep;
+            self.line_start = 0;
+            let at = self.buf.len();
+            self.buf.resize(at + (1 << 16), 0);
+            match self.src.read(&mut self.buf[at..]) {
+                Ok(0) => {
+                    self.buf.truncate(at);
+                    self.eof = true;
+                }
+                Ok(k) => {
+                    self.buf.truncate(at + k);
+                    self.unread = self.unread.saturating_sub(k as u64);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => self.buf.truncate(at),
+                Err(e) => {
+                    self.buf.truncate(at);
+                    self.failed = Some(e);
+                    self.eof = true;
+                }
+            }
+        }
+    }
+
+    fn skip_blanks(&mut self) {
+        while self.pos < self.buf.len() && is_blank(self.buf[self.pos]) {
+            self.pos += 1;
+        }
+    }
+
+    fn token(&mut self) -> Read<Vec<u8>> {
+        self.fill_line();
+        self.skip_blanks();
+        match self.buf.get(self.pos) {
+            None => return Err(self.end_of_data()),
+            Some(b'\n') => return Err(Fault { at: self.at(), kind: FaultKind::LineEnd }),
+            Some(_) => {}
+        }
+        let start = self.pos;
+        while self.pos < self.buf.len() && !self.buf[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        Ok(self.buf[start..self.pos].to_vec())
+    }
+
+    /// At the end of the file: a cut value if the file ends inside one, else a missing one.
+    fn end_of_data(&self) -> Fault {
+        let tail = self.buf.iter().rev().take_while(|b| !b.is_ascii_whitespace()).count();
+        let kind = match &self.buf[self.buf.len() - tail..] {
+            [] => FaultKind::Eof,
+            cut => FaultKind::Cut(String::from_utf8_lossy(cut).into_owned()),
+        };
+        Fault { at: self.at(), kind }
+    }
+
+    fn values_on_line(&self) -> usize {
+        let end = self.buf[self.pos..].iter().position(|&b| b == b'\n').map_or(self.buf.len(), |n| self.pos + n);
+        self.buf[self.line_start..end].split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()).count()
+    }
+}
+
+impl<R: std::io::Read> Source for AsciiStream<R> {
+    fn value(&mut self, t: Scalar) -> Read<f64> {
+        let token = self.token()?;
+        let parsed = match t {
+            Scalar::F32 => std::str::from_utf8(&token).ok().and_then(|s| s.parse::<f32>().ok()).map(f64::from),
+            Scalar::F64 => std::str::from_utf8(&token).ok().and_then(|s| s.parse::<f64>().ok()),
+            _ => parse_int(&token).map(|n| n as f64),
+        };
+        parsed.ok_or_else(|| Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(&token).into_owned(), t) })
+    }
+
+    fn int(&mut self, t: Scalar) -> Read<i64> {
+        let token = self.token()?;
+        parse_int(&token).ok_or_else(|| Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(&token).into_owned(), t) })
+    }
+
+    fn skip(&mut self, t: Scalar, n: usize) -> Read<()> {
+        for _ in 0..n {
+            self.value(t)?;
+        }
+        Ok(())
+    }
+
+    fn room(&self, n: u64, _t: Scalar) -> bool {
+        n as u128 * 2 <= ((self.buf.len() - self.pos) as u64 + self.unread) as u128 + 1
+    }
+
+    fn at(&self) -> Location {
+        Location::Line(self.record_line)
+    }
+
+    fn begin_record(&mut self) {
+        loop {
+            self.fill_line();
+            while self.pos < self.buf.len() && self.buf[self.pos].is_ascii_whitespace() {
+                if self.buf[self.pos] == b'\n' {
+                    self.line += 1;
+                    self.line_start = self.pos + 1;
+                }
+                self.pos += 1;
+            }
+            if self.pos < self.buf.len() || self.eof {
+                break;
+            }
+        }
+        if self.pos < self.buf.len() {
+            self.record_line = self.line;
+        }
+    }
+
+    fn end_record(&mut self) -> Read<()> {
+        self.fill_line();
+        self.skip_blanks();
+        match self.buf.get(self.pos) {
+            Some(b'\n') => Ok(()),
+            None => match self.end_of_data() {
+                Fault { kind: FaultKind::Eof, .. } => Ok(()),
+                cut => Err(cut),
+            },
+            Some(_) => Err(Fault { at: self.at(), kind: FaultKind::Extra(self.values_on_line()) }),
+        }
     }
 }
 
@@ -1681,6 +1856,54 @@ mod tests {
             let e = err(good.replacen(from, to, 1).as_bytes());
             assert_eq!(at_line(&e), line, "{e}");
             assert!(e.to_string().contains(what), "{e}");
+        }
+    }
+
+    /// `bytes` read by [`stream`] from a file: its triangles, or its error.
+    fn streamed(bytes: &[u8]) -> Result<Vec<[u32; 3]>> {
+        let path = std::env::temp_dir().join(format!("strata-ply-stream-{}-{:x}.ply", std::process::id(), crc32fast::hash(bytes)));
+        std::fs::write(&path, bytes).unwrap();
+        let mut tris = Vec::new();
+        let r = stream(
+            &path,
+            &mut |_, t| {
+                tris.extend_from_slice(t);
+                Ok(())
+            },
+            &mut Vec::new(),
+        );
+        let _ = std::fs::remove_file(&path);
+        r.map(|_| tris)
+    }
+
+    #[test]
+    fn streaming_reads_what_a_whole_read_reads_and_fails_where_it_fails() {
+        let good = String::from_utf8(triangle_file(Encoding::Ascii)).unwrap();
+        let mut inputs: Vec<Vec<u8>> = vec![triangle_file(Encoding::Little), triangle_file(Encoding::Big), good.clone().into_bytes()];
+        for text in [good.replacen("\n1 1 0\n", "\n\n 1 1 0 \t\n\n", 1), good.replace("\n3", "\r\n3"), format!("{good} ")] {
+            inputs.push(text.into_bytes());
+        }
+        for cut in 1..4 {
+            inputs.push(good.as_bytes()[..good.len() - cut].to_vec());
+        }
+        for (from, to) in
+            [("\n1 1 0\n", "\n1 1 0 5\n"), ("\n3 2 1 0\n", "\n3 2 1 0 2\n"), ("\n1 1 0\n", "\n1 1\n0\n"), ("\n3 0 1 2\n", "\n3 0 1 9\n")]
+        {
+            inputs.push(good.replacen(from, to, 1).into_bytes());
+        }
+        let binary = triangle_file(Encoding::Little);
+        inputs.push(binary[..binary.len() - 3].to_vec());
+        for bytes in inputs {
+            let whole = parse(path(), &bytes, &mut Vec::new());
+            match (whole, streamed(&bytes)) {
+                (Ok(m), Ok(t)) => assert_eq!(m.triangles, t),
+                (Err(a), Err(b)) => {
+                    assert_eq!(a.location(), b.location(), "{a} / {b}");
+                    let tail = |e: &Error| e.to_string().split_once(": ").map(|x| x.1.to_string()).unwrap_or_default();
+                    assert_eq!(tail(&a), tail(&b));
+                }
+                (a, b) => panic!("whole read {:?}, stream {:?}", a.map(|m| m.face_count()), b.map(|t| t.len())),
+            }
         }
     }
 

@@ -77,11 +77,10 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
     (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
 }
 
-/// Whether `input` is a file the partitioned build streams (binary PLY), and its declared faces.
+/// Whether `input` is a file the partitioned build streams (PLY), and its declared faces.
 pub fn streamable(input: &Path) -> Option<u64> {
     let is_ply = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    let d = is_ply.then(|| ply::declared(input).ok()).flatten()?;
-    d.binary.then_some(d.faces)
+    is_ply.then(|| ply::declared(input).ok().map(|d| d.faces)).flatten()
 }
 
 /// Node levels each cell builds for cells of `faces` faces: until a cell's locked border would be
@@ -90,7 +89,7 @@ pub fn cell_levels(faces: u64) -> usize {
     (((faces as f64).sqrt() / 24.0).log2().floor() as i64).clamp(1, 12) as usize
 }
 
-/// Convert the binary PLY `input` into `output` by the partitioned build.
+/// Convert the PLY file `input` into `output` by the partitioned build.
 pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budget, progress: &mut dyn Progress) -> Result<Converted> {
     let mut times = StageTimes::default();
     let mut clock = Instant::now();
@@ -218,12 +217,17 @@ impl Distribute {
         Ok(())
     }
 
-    /// The file's grid (the input's bounds with a margin for simplified vertices that stray
-    /// outside), the cell files' layout, computed vertex normals as octahedral codes, and each
-    /// cell's file and face count.
+    /// The file's grid: the step the input's bounds need (as the in-core build's), the origin
+    /// lowered on each axis to centre the bounds in the grid's span, so that a simplified vertex
+    /// straying outside the input's bounds (cells do not know the coarse levels' bounds beforehand)
+    /// stays on the grid where it can.
     fn finish(self) -> Result<Distributed> {
-        let margin = (self.hi - self.lo).max_element() / 1024.0;
-        let grid = Grid::fit(self.lo - margin, self.hi + margin, GRID_BITS);
+        let mut grid = Grid::fit(self.lo, self.hi, GRID_BITS);
+        let span = grid.step * grid.last() as f64;
+        for k in 0..3 {
+            let extent = (self.hi[k] as f64 - self.lo[k] as f64).max(0.0);
+            grid.origin[k] -= ((span - extent) / 2.0 / grid.step).floor() * grid.step;
+        }
         let normals = self.sums.map(|s| s.into_iter().map(|n| octa::encode(n.normalize_or(Vec3::Z))).collect());
         Ok((grid, self.layout, normals, self.spool.finish()?))
     }

@@ -1,0 +1,188 @@
+//! The partitioned build against the in-core build, side by side in one run (issue 14): wall time
+//! and peak memory of `strata convert` (a child process under `/usr/bin/time`), throughput, each
+//! level's sampled distance to the input, the culling cost measured on the file, node sizes
+//! (largest node of any level over level 0's median) and the top level's faces.
+//!
+//! `cargo bench --bench partition [-- --large FACES ...] [-- --memory 1G]`; without arguments the
+//! CT head of ../shared/meshes (partitioned at a budget that makes it several cells) and the
+//! shipped noisy sphere. `--large N` also generates an N-face binary PLY (fixtures'
+//! `write_bumpy_sphere_ply`) and converts it partitioned within `--memory` (in-core too when it
+//! would fit this machine; quality is compared there only, the input being imported whole).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use strata::cone::{facing_orthographic, Facing};
+use strata::format::Reader;
+
+struct Run {
+    seconds: f64,
+    peak_kb: Option<u64>,
+}
+
+fn convert(input: &Path, output: &Path, args: &[&str]) -> Run {
+    let exe = env!("CARGO_BIN_EXE_strata");
+    let timed = Path::new("/usr/bin/time").exists();
+    let mut cmd = if timed {
+        let mut c = Command::new("/usr/bin/time");
+        c.args(["-f", "%e %M", exe]);
+        c
+    } else {
+        Command::new(exe)
+    };
+    cmd.args(["convert", "-q"]).arg(input).arg(output).args(args);
+    let start = std::time::Instant::now();
+    let out = cmd.output().expect("run strata convert");
+    let seconds = start.elapsed().as_secs_f64();
+    assert!(out.status.success(), "strata convert {}: {}", input.display(), String::from_utf8_lossy(&out.stderr));
+    let peak_kb = timed
+        .then(|| String::from_utf8_lossy(&out.stderr).lines().last().and_then(|l| l.split_whitespace().nth(1)?.parse().ok()))
+        .flatten();
+    Run { seconds, peak_kb }
+}
+
+/// The paper's culling cost on the file, over `views` orthographic directions: cone tests made
+/// walking the nodes from the top (and level 0's clusters) plus faces not culled, per face.
+fn culling_cost(rd: &Reader<std::fs::File>, views: usize) -> f64 {
+    let nodes = rd.nodes();
+    let clusters: Vec<Vec<(strata::format::Cone, u32)>> = (0..nodes.len() as u32)
+        .map(|n| {
+            if nodes[n as usize].level == 0 {
+                rd.read_node(n).expect("node").clusters.iter().map(|c| (c.cone, c.face_count)).collect()
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    let faces = rd.levels()[0].faces as f64;
+    let top = rd.levels().len() as u32 - 1;
+    let mut total = 0.0;
+    for d in strata::culling::sphere_directions(views) {
+        let (mut tests, mut culled) = (0u64, 0u64);
+        let subtree_faces = |n: u32| -> u64 {
+            let mut stack = vec![n];
+            let mut f = 0;
+            while let Some(m) = stack.pop() {
+                if nodes[m as usize].level == 0 {
+                    f += nodes[m as usize].faces as u64;
+                } else {
+                    stack.extend(rd.children(m));
+                }
+            }
+            f
+        };
+        let mut stack: Vec<u32> = rd.level_nodes(top).collect();
+        while let Some(n) = stack.pop() {
+            tests += 1;
+            match facing_orthographic(&nodes[n as usize].cone, d) {
+                Facing::Back => culled += subtree_faces(n),
+                Facing::Front => {}
+                Facing::Mixed if nodes[n as usize].level > 0 => stack.extend(rd.children(n)),
+                Facing::Mixed => {
+                    for &(cone, count) in &clusters[n as usize] {
+                        tests += 1;
+                        if facing_orthographic(&cone, d) == Facing::Back {
+                            culled += count as u64;
+                        }
+                    }
+                }
+            }
+        }
+        total += (tests as f64 + faces - culled as f64) / faces;
+    }
+    total / views as f64
+}
+
+/// Largest node of any level over the median node of level 0, and the top level's faces.
+fn node_sizes(rd: &Reader<std::fs::File>) -> (f64, u64) {
+    let mut level0: Vec<u32> = rd.level_nodes(0).map(|n| rd.nodes()[n as usize].faces).collect();
+    level0.sort_unstable();
+    let median = level0[level0.len() / 2].max(1) as f64;
+    let largest = rd.nodes().iter().map(|n| n.faces).max().unwrap_or(0) as f64;
+    (largest / median, rd.levels().last().map_or(0, |l| l.faces))
+}
+
+fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &Path, Run)]) {
+    println!("\n## {name} ({faces} input faces)");
+    println!("| build | s | M faces/s | peak MB | levels | top faces | largest node / level-0 median | culling cost |");
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut distances: Vec<Vec<f32>> = Vec::new();
+    for (build, file, run) in runs {
+        let rd = Reader::open_path(file).expect("open");
+        assert!(strata::format::verify_path(file).is_sound(), "{} does not verify", file.display());
+        let (ratio, top) = node_sizes(&rd);
+        let peak = run.peak_kb.map_or("–".to_string(), |k| format!("{:.0}", k as f64 / 1024.0));
+        println!(
+            "| {build} | {:.2} | {:.3} | {peak} | {} | {top} | {ratio:.1} | {:.4} |",
+            run.seconds,
+            faces as f64 / run.seconds / 1e6,
+            rd.levels().len(),
+            culling_cost(&rd, 64)
+        );
+        if let Some(m) = input {
+            distances.push(
+                (0..rd.levels().len() as u32)
+                    .map(|l| strata::distance::surface_distance(&strata::assemble::to_mesh(&rd, l).expect("level"), m, 20_000, 7).mean)
+                    .collect(),
+            );
+        }
+    }
+    if distances.len() == 2 {
+        println!("\nmean sampled distance to the input, per level (fraction of the diagonal), and partitioned / in-core:");
+        let diag = input.map_or(1.0, |m| m.diagonal());
+        for l in 0..distances[0].len().max(distances[1].len()) {
+            let (a, b) = (distances[0].get(l), distances[1].get(l));
+            let ratio = match (a, b) {
+                (Some(a), Some(b)) if *a > 0.0 => format!("{:.2}", b / a),
+                _ => "–".into(),
+            };
+            let f = |x: Option<&f32>| x.map_or("–".into(), |x| format!("{:.2e}", x / diag));
+            println!("level {l}: in-core {}  partitioned {}  ratio {ratio}", f(a), f(b));
+        }
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|i| args.get(i + 1).cloned());
+    let memory = value("--memory").unwrap_or_else(|| "1G".into());
+    let large: Vec<u64> = args.windows(2).filter(|w| w[0] == "--large").filter_map(|w| w[1].parse().ok()).collect();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tmp = std::env::temp_dir().join(format!("strata-bench-partition-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = |n: &str| -> PathBuf { tmp.join(n) };
+
+    let mut inputs: Vec<(PathBuf, &str)> = vec![(root.join("fixtures/noisy_sphere.ply"), "16M")];
+    let ct = root.join("../shared/meshes/large/cthead_skin_native.ply");
+    if ct.exists() {
+        inputs.push((ct, "256M"));
+    } else {
+        println!("skipping {}: not found", ct.display());
+    }
+    for (input, budget) in &inputs {
+        let mesh = strata::import::import(input, None).expect("import").mesh;
+        let a = convert(input, &out("incore.strata"), &["--in-core"]);
+        let b = convert(input, &out("part.strata"), &["--partitioned", "--memory", budget]);
+        let name = format!("{} (partitioned at --memory {budget})", input.file_name().unwrap().to_string_lossy());
+        report(
+            &name,
+            mesh.face_count() as u64,
+            Some(&mesh),
+            &[("in-core", &out("incore.strata"), a), ("partitioned", &out("part.strata"), b)],
+        );
+    }
+    for n in large {
+        let ply = out(&format!("bumpy-{n}.ply"));
+        let mut w = std::io::BufWriter::new(std::fs::File::create(&ply).unwrap());
+        let (faces, _) = strata::fixtures::write_bumpy_sphere_ply(&mut w, n, 1, &mut |_| {}).unwrap();
+        drop(w);
+        let b = convert(&ply, &out("large.strata"), &["--partitioned", "--memory", &memory]);
+        report(
+            &format!("generated bumpy sphere (partitioned at --memory {memory})"),
+            faces,
+            None,
+            &[("partitioned", &out("large.strata"), b)],
+        );
+        let _ = std::fs::remove_file(&ply);
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}
