@@ -218,7 +218,9 @@ fn face_pairs(adj: &Adjacency) -> Vec<[u32; 2]> {
 /// by `pairs`, from threshold and cap `start`, until the top has at most `p.top_groups` groups, no
 /// round merges any more, or `h` has `max_levels` levels.
 fn grow(mesh: &Mesh, h: &mut Hierarchy, mut pairs: Vec<[u32; 2]>, p: &HierarchyParams, start: (f32, u32), max_levels: usize) {
-    let total = mesh.face_count().max(1) as u32;
+    // Caps count faces of the input, which the groups record (the mesh may be a coarse level).
+    let below = h.levels.last().unwrap_or(&h.clusters);
+    let total = below.groups.iter().map(|g| g.faces as u64).sum::<u64>().clamp(1, u32::MAX as u64) as u32;
     let round = |max_angle: f32, max_faces: u32| RoundParams { max_angle, max_faces, kc: p.kc, ks: p.ks, kn: p.kn };
     let (mut angle, mut cap) = start;
     while h.levels.len() < max_levels {
@@ -369,7 +371,13 @@ fn make_level(mesh: &Mesh, face_group: Vec<u32>, labels: Option<&[u32]>, below: 
                 .map(|v| center.distance(mesh.positions[v as usize]))
                 .fold(0.0f32, f32::max)
                 * (1.0 + 1e-6);
-            GroupInfo { cone, center, radius, min: lo, max: hi, faces: faces.len() as u32, area, area_normal }
+            // Faces of the input: the children's (the partitioned build's merge groups a coarse
+            // level mesh, whose faces are not the input's), else this mesh's own.
+            let input_faces = match labels {
+                Some(_) => children.get(g).iter().map(|&c| below[c as usize].faces).sum(),
+                None => faces.len() as u32,
+            };
+            GroupInfo { cone, center, radius, min: lo, max: hi, faces: input_faces, area, area_normal }
         })
         .collect();
     Level { face_group, parent: Vec::new(), children, neighbors: Lists::default(), groups, max_angle, max_faces }

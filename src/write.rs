@@ -18,7 +18,7 @@ use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::LevelMeshes;
 use crate::mesh::{Material, Mesh};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
@@ -446,7 +446,7 @@ fn node_geometry(
     order.sort_by_cached_key(|&f| (cluster_of(f), material_of(mesh, f as usize), morton(f), f));
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
-    let mut index_of: HashMap<Key, u32> = HashMap::with_capacity(order.len());
+    let mut index_of: FxHashMap<Key, u32> = FxHashMap::with_capacity_and_hasher(order.len(), Default::default());
     let mut lattice = lattice;
     if lattice.uv_bits > 0 {
         lattice.uv_bits = uv_bits(mesh, &order, lattice.uv_bits);
