@@ -121,10 +121,13 @@ pub struct TempDir {
 }
 
 impl TempDir {
-    /// A new folder inside `parent`, or the system's temporary folder.
+    /// A new folder inside `parent`, or the system's temporary folder. Work folders there of
+    /// processes that are gone (killed outright) are removed first.
     pub fn create(parent: Option<&Path>) -> Result<TempDir> {
-        let b = tempfile::Builder::new().prefix(".strata-work-").tempdir_in(parent.map_or_else(std::env::temp_dir, Path::to_path_buf));
-        let dir = b.map_err(|e| Error::io(parent.unwrap_or(Path::new("temporary folder")), e))?;
+        let parent = parent.map_or_else(std::env::temp_dir, Path::to_path_buf);
+        remove_stale_dirs(&parent);
+        let prefix = format!("{WORK_PREFIX}{}.", std::process::id());
+        let dir = tempfile::Builder::new().prefix(&prefix).tempdir_in(&parent).map_err(|e| Error::io(&parent, e))?;
         if let Ok(mut l) = PENDING_DIRS.lock() {
             l.push(dir.path().to_path_buf());
         }
@@ -246,6 +249,34 @@ fn alive(pid: u32) -> bool {
     {
         let _ = pid;
         true
+    }
+}
+
+/// What work folders' names start with, before the process id and a random part.
+const WORK_PREFIX: &str = ".strata-work.";
+
+/// Remove work folders in `dir` of processes that are gone, once untouched for [`STALE_AFTER`].
+fn remove_stale_dirs(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let now = SystemTime::now();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let pid = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(WORK_PREFIX))
+            .and_then(|r| r.split_once('.'))
+            .and_then(|(p, _)| p.parse::<u32>().ok());
+        let Some(pid) = pid else { continue };
+        if pid == std::process::id() || alive(pid) || !entry.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        let idle = entry.metadata().ok().and_then(|m| m.modified().ok()).and_then(|t| now.duration_since(t).ok());
+        if idle.is_some_and(|d| d >= STALE_AFTER) {
+            let path = entry.path();
+            if std::fs::remove_dir_all(&path).is_ok() {
+                REMOVED_STALE.lock().map(|mut l| l.push(path)).ok();
+            }
+        }
     }
 }
 

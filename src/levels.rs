@@ -9,7 +9,8 @@
 
 use crate::hierarchy::Hierarchy;
 use crate::mesh::Mesh;
-use crate::simplify::{simplify, SimplifyOptions};
+use crate::simplify::{simplify_pinned, SimplifyOptions};
+use rustc_hash::FxHashSet;
 
 /// One level's mesh and what each of its faces belongs to.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -57,21 +58,21 @@ const MIN_ADDED_NODE_FACES: usize = 32;
 /// after each level with its index, for progress reports.
 pub fn build(mesh: Mesh, h: &mut Hierarchy, p: &LevelParams, on_level: &mut dyn FnMut(usize)) -> LevelMeshes {
     let first = LevelMesh { mesh, face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()] };
-    build_from(first, h, p, false, on_level)
+    build_from(first, h, p, None, on_level)
 }
 
 /// [`build`] from a given first level (`h`'s level 0, with its errors: the partitioned build's
-/// merged cell tops). With `lock_borders`, open-border vertices never move
-/// ([`SimplifyOptions::lock_borders`]): a cell's levels then meet its neighbours' exactly.
+/// merged cell tops). Vertices at the positions `pinned` holds (as [`position_key`]s) never move
+/// ([`crate::simplify::simplify_pinned`]): a piece's levels then meet its neighbours' exactly.
 pub fn build_from(
     first: LevelMesh,
     h: &mut Hierarchy,
     p: &LevelParams,
-    lock_borders: bool,
+    pinned: Option<&FxHashSet<[u32; 3]>>,
     on_level: &mut dyn FnMut(usize),
 ) -> LevelMeshes {
     let ratio = p.ratio.clamp(0.0, 1.0);
-    let coarsen = |below: &LevelMesh, h: &Hierarchy, l: usize| coarsen(below, h, l, ratio, lock_borders);
+    let coarsen = |below: &LevelMesh, h: &Hierarchy, l: usize| coarsen(below, h, l, ratio, pinned);
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {
@@ -118,12 +119,18 @@ pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
 }
 
 /// Level `l` made from the level mesh `below` of level `l − 1`.
-fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, lock_borders: bool) -> LevelMesh {
+/// A position as the key welding compares: its coordinates' bits, −0 as +0.
+pub fn position_key(p: glam::Vec3) -> [u32; 3] {
+    (p + glam::Vec3::ZERO).to_array().map(f32::to_bits)
+}
+
+fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Option<&FxHashSet<[u32; 3]>>) -> LevelMesh {
     let parent = &h.levels[l - 1].parent;
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
     let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
-    let opts = SimplifyOptions { target_faces: target, lock_borders, ..SimplifyOptions::default() };
-    let s = simplify(&below.mesh, Some(&labels), &opts);
+    let opts = SimplifyOptions { target_faces: target, ..SimplifyOptions::default() };
+    let pins: Vec<bool> = pinned.map_or(Vec::new(), |set| below.mesh.positions.iter().map(|&p| set.contains(&position_key(p))).collect());
+    let s = simplify_pinned(&below.mesh, Some(&labels), &pins, &opts);
     let groups = &h.levels[l];
     let group_error = (0..groups.groups.len())
         .map(|g| {

@@ -78,10 +78,22 @@ impl Quantized {
     /// vertex (in vertex order) already holds goes to the free grid point nearest its input position
     /// in the smallest cube around its nearest grid point that has one.
     pub fn distinct(grid: &Grid, mesh: &Mesh) -> std::result::Result<Quantized, String> {
+        Quantized::distinct_keeping(grid, mesh, &[])
+    }
+
+    /// [`Quantized::distinct`], the vertices `kept[v]` on their nearest grid point whatever the
+    /// others do (taken first, never moved): a piece of a partitioned build keeps the vertices it
+    /// shares with other pieces where every piece puts them. Two kept vertices nearer than a grid
+    /// step may share a point.
+    pub fn distinct_keeping(grid: &Grid, mesh: &Mesh, kept: &[bool]) -> std::result::Result<Quantized, String> {
         let mut q = Quantized::new(grid, mesh);
         let key = |p: Vec3| (p + Vec3::ZERO).to_array().map(f32::to_bits);
         let mut holder: FxHashMap<[u32; 3], u32> = FxHashMap::with_capacity_and_hasher(q.points.len(), Default::default());
-        for v in 0..q.points.len() {
+        let is_kept = |v: usize| kept.get(v).copied().unwrap_or(false);
+        for v in (0..q.points.len()).filter(|&v| is_kept(v)) {
+            holder.entry(key(q.positions[v])).or_insert(v as u32);
+        }
+        for v in (0..q.points.len()).filter(|&v| !is_kept(v)) {
             let first = *holder.entry(key(q.positions[v])).or_insert(v as u32);
             if first == v as u32 || mesh.positions[first as usize] == mesh.positions[v] {
                 continue;

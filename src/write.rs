@@ -134,7 +134,7 @@ fn write_named<W: Write>(
         Some(p) => p.grid_bits,
     };
     let grid = model_grid(lv, bits);
-    let piece = Piece::new(h, lv, &grid, precision, None).map_err(bad)?;
+    let piece = Piece::new(h, lv, &grid, precision, None, &[]).map_err(bad)?;
     let writer_opts = WriterOptions {
         metres_per_unit: opts.metres_per_unit,
         params: opts.params,
@@ -179,17 +179,20 @@ pub(crate) struct Piece {
 impl Piece {
     /// `base`: the bounds of level 0 when they are known already (the partitioned build's merge,
     /// whose level 0 is the cells' tops); level 0 is then not the input and its positions are
-    /// rounded to the grid like any coarser level's.
+    /// rounded to the grid like any coarser level's. Otherwise level 0 is the input, its vertices
+    /// kept apart on the grid, those of `kept` on their nearest point
+    /// ([`Quantized::distinct_keeping`]).
     pub fn new(
         h: &Hierarchy,
         lv: &LevelMeshes,
         grid: &Grid,
         precision: Option<Precision>,
         base: Option<Vec<bounds::NodeBounds>>,
+        kept: &[bool],
     ) -> std::result::Result<Piece, String> {
         let mut quant = Vec::with_capacity(lv.levels.len());
         quant.push(match base {
-            None => Quantized::distinct(grid, &lv.levels[0].mesh)?,
+            None => Quantized::distinct_keeping(grid, &lv.levels[0].mesh, kept)?,
             Some(_) => Quantized::new(grid, &lv.levels[0].mesh),
         });
         quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(grid, &l.mesh)));

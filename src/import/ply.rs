@@ -71,6 +71,16 @@ pub struct Declared {
     /// Face-like records (polygons or strips), not triangles.
     pub faces: u64,
     pub binary: bool,
+    /// Whether it names texture images or has texture coordinates, which [`stream`] refuses.
+    pub textured: bool,
+}
+
+impl Declared {
+    /// About how many triangles the file holds: its face records, or twice its vertices (a closed
+    /// mesh's ratio) when more — quads, polygons and strips hold more triangles than records.
+    pub fn triangles(&self) -> u64 {
+        self.faces.max(self.vertices.saturating_mul(2))
+    }
 }
 
 /// Longest header [`stream`] and [`declared`] read.
@@ -80,7 +90,14 @@ const MAX_HEADER: usize = 16 << 20;
 pub fn declared(path: &Path) -> Result<Declared> {
     let (header, _) = read_header(path, &mut Vec::new())?;
     let count = |names: &[&str]| header.elements.iter().filter(|e| names.contains(&e.name.as_str())).map(|e| e.count).sum();
-    Ok(Declared { vertices: count(&["vertex"]), faces: count(&["face", "tristrips"]), binary: header.encoding != Encoding::Ascii })
+    let textured = !header.texture_files.is_empty()
+        || Plan::new(path, &header).is_ok_and(|p| p.has(U, 2) || p.faces.iter().flatten().any(|f| f.texcoord.is_some()));
+    Ok(Declared {
+        vertices: count(&["vertex"]),
+        faces: count(&["face", "tristrips"]),
+        binary: header.encoding != Encoding::Ascii,
+        textured,
+    })
 }
 
 fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)> {

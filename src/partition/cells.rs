@@ -158,7 +158,7 @@ impl Spool {
     pub fn finish(self) -> Result<Vec<(PathBuf, u64)>> {
         let mut out = Vec::with_capacity(self.files.len());
         for (path, w, n) in self.files {
-            w.into_inner().map_err(|e| Error::io(&path, e.into_error()))?.sync_data().ok();
+            w.into_inner().map_err(|e| Error::io(&path, e.into_error()))?;
             out.push((path, n));
         }
         Ok(out)

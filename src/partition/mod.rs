@@ -77,11 +77,17 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
     (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
 }
 
-/// Whether `input` is a file the partitioned build streams (PLY), and its declared faces.
+/// Whether `input` is a file the partitioned build streams (PLY without textures), and about how
+/// many triangles it declares.
 pub fn streamable(input: &Path) -> Option<u64> {
     let is_ply = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    is_ply.then(|| ply::declared(input).ok().map(|d| d.faces)).flatten()
+    let d = is_ply.then(|| ply::declared(input).ok()).flatten()?;
+    (!d.textured).then(|| d.triangles())
 }
+
+/// Most cells: node keys give a piece 12 bits, and each cell holds a file open while the input
+/// is streamed (systems allow about a thousand open files by default).
+pub const MAX_CELLS: u64 = 960;
 
 /// Node levels each cell builds for cells of `faces` faces: until a cell's locked border would be
 /// a large part of its faces (its border grows as the square root of its faces).
@@ -102,7 +108,22 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
     let declared = ply::declared(input)?;
-    let cell_faces = cell_faces(budget, declared.faces);
+    let triangles = declared.triangles();
+    let cell_faces = cell_faces(budget, triangles);
+    let cells = triangles.div_ceil(cell_faces);
+    let held = triangles.saturating_mul(HELD_BYTES_PER_FACE);
+    if cell_faces == MIN_CELL_FACES || cells > MAX_CELLS {
+        let need = held + budget.threads as u64 * (triangles / MAX_CELLS).max(MIN_CELL_FACES * 4) * IN_CORE_BYTES_PER_FACE * 10 / 6;
+        return Err(Error::invalid(
+            input,
+            None,
+            format!(
+                "about {triangles} triangles need about {} MiB for the partitioned build; --memory gives {} MiB",
+                need >> 20,
+                budget.memory >> 20
+            ),
+        ));
+    }
 
     // Distribute: faces to cells by centroid; computed normals need every face of a vertex, so
     // their sums are kept per input vertex and each cell looks its vertices up later.
@@ -113,7 +134,7 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
         &mut |v, tris| {
             let d = match &mut state {
                 Some(d) => d,
-                None => state.insert(Distribute::new(v, declared.faces, cell_faces, opts.normals, temp.path())?),
+                None => state.insert(Distribute::new(v, triangles, cell_faces, opts.normals, temp.path())?),
             };
             d.push(v, tris)
         },
@@ -122,7 +143,7 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     let Some(d) = state else {
         return Err(Error::invalid(input, None, "nothing to convert: no faces"));
     };
-    let (grid, layout, vertex_normals, spooled) = d.finish()?;
+    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } = d.finish()?;
     lap(&mut times.import_ms);
 
     let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: false, colors: layout.colors };
@@ -149,6 +170,7 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     let dir = output.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let writer = Writer::new(file.writer(), output, writer_opts, Some(dir))?;
     let job = work::Job {
+        input,
         hierarchy: opts.hierarchy,
         levels: opts.levels,
         grid,
@@ -157,6 +179,7 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
         cell_faces,
         layout,
         vertex_normals: vertex_normals.as_deref(),
+        shared: &shared,
         crease,
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
@@ -169,15 +192,30 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
 }
 
 /// What the distribution pass leaves: the file's grid, the cell files' layout, computed vertex
-/// normals (octahedral, per input vertex) and each cell's file and face count.
-type Distributed = (Grid, Layout, Option<Vec<[i16; 2]>>, Vec<(PathBuf, u64)>);
+/// normals (octahedral, per welded input vertex), which welded vertices more than one cell uses
+/// (a bit each) and each cell's file and face count.
+struct Distributed {
+    grid: Grid,
+    layout: Layout,
+    normals: Option<Vec<[i16; 2]>>,
+    shared: Vec<u64>,
+    spooled: Vec<(PathBuf, u64)>,
+}
+
+/// Marks a vertex used by faces of more than one cell in [`Distribute::owner`].
+const SHARED: u32 = u32::MAX;
 
 /// The distribution pass's state, made when the vertices are known.
 struct Distribute {
     cells: Cells,
     spool: Spool,
     layout: Layout,
-    /// Per input vertex, the sum of its faces' area-weighted normals (when normals are computed).
+    /// Per input vertex, the first vertex at the same position (+0 = −0): vertices are welded by
+    /// position as the in-core build welds them, before normals are summed or cells compared.
+    weld: Vec<u32>,
+    /// Per welded vertex: 0 unused so far, `c + 1` used by cell `c` alone, or [`SHARED`].
+    owner: Vec<u32>,
+    /// Per welded vertex, the sum of its faces' area-weighted normals (when normals are computed).
     sums: Option<Vec<Vec3>>,
     lo: Vec3,
     hi: Vec3,
@@ -190,8 +228,18 @@ impl Distribute {
         let layout = Layout { normals: has_normals, colors: !v.colors.is_empty() };
         let compute = v.normals.is_empty() && matches!(normals, Normals::Auto { .. });
         let spool = Spool::create(temp, cells.count, layout)?;
-        let sums = compute.then(|| vec![Vec3::ZERO; v.positions.len()]);
-        Ok(Distribute { cells, spool, layout, sums, lo: Vec3::splat(f32::MAX), hi: Vec3::splat(f32::MIN) })
+        let n = v.positions.len();
+        let sums = compute.then(|| vec![Vec3::ZERO; n]);
+        Ok(Distribute {
+            cells,
+            spool,
+            layout,
+            weld: weld(v.positions),
+            owner: vec![0; n],
+            sums,
+            lo: Vec3::splat(f32::MAX),
+            hi: Vec3::splat(f32::MIN),
+        })
     }
 
     fn push(&mut self, v: &ply::Vertices, tris: &[[u32; 3]]) -> Result<()> {
@@ -204,23 +252,32 @@ impl Distribute {
             let cell = self.cells.of((p[0] + p[1] + p[2]) / 3.0);
             let n = if self.layout.normals { t.map(|i| v.normals[i as usize]) } else { [Vec3::ZERO; 3] };
             let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
+            let welded = t.map(|i| self.weld[i as usize]);
             if let Some(sums) = &mut self.sums {
                 let cross = crate::mesh::triangle_cross(v.positions, t).as_vec3();
                 if cross.is_finite() {
-                    for &i in t {
+                    for &i in &welded {
                         sums[i as usize] += cross;
                     }
                 }
             }
-            self.spool.push(cell, *t, p, n, c)?;
+            for &i in &welded {
+                let o = &mut self.owner[i as usize];
+                *o = match *o {
+                    0 => cell as u32 + 1,
+                    x if x == cell as u32 + 1 => x,
+                    _ => SHARED,
+                };
+            }
+            self.spool.push(cell, welded, p, n, c)?;
         }
         Ok(())
     }
 
-    /// The file's grid: the step the input's bounds need (as the in-core build's), the origin
-    /// lowered on each axis to centre the bounds in the grid's span, so that a simplified vertex
-    /// straying outside the input's bounds (cells do not know the coarse levels' bounds beforehand)
-    /// stays on the grid where it can.
+    /// The grid: the step the input's bounds need (as the in-core build's), the origin lowered on
+    /// each axis by whole steps to centre the bounds in the grid's span, so that a simplified
+    /// vertex straying outside the input's bounds (pieces do not know the coarse levels' bounds
+    /// beforehand) stays on the grid where it can.
     fn finish(self) -> Result<Distributed> {
         let mut grid = Grid::fit(self.lo, self.hi, GRID_BITS);
         let span = grid.step * grid.last() as f64;
@@ -229,8 +286,27 @@ impl Distribute {
             grid.origin[k] -= ((span - extent) / 2.0 / grid.step).floor() * grid.step;
         }
         let normals = self.sums.map(|s| s.into_iter().map(|n| octa::encode(n.normalize_or(Vec3::Z))).collect());
-        Ok((grid, self.layout, normals, self.spool.finish()?))
+        let mut shared = vec![0u64; self.owner.len().div_ceil(64)];
+        for (i, _) in self.owner.iter().enumerate().filter(|(_, &o)| o == SHARED) {
+            shared[i / 64] |= 1 << (i % 64);
+        }
+        Ok(Distributed { grid, layout: self.layout, normals, shared, spooled: self.spool.finish()? })
     }
+}
+
+/// Per vertex, the first vertex at the same position (+0 = −0), found by sorting.
+fn weld(positions: &[Vec3]) -> Vec<u32> {
+    use rayon::prelude::*;
+    let key = |i: u32| crate::levels::position_key(positions[i as usize]);
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    order.par_sort_unstable_by_key(|&i| (key(i), i));
+    let mut weld = vec![0u32; positions.len()];
+    for run in order.chunk_by(|&a, &b| key(a) == key(b)) {
+        for &i in run {
+            weld[i as usize] = run[0];
+        }
+    }
+    weld
 }
 
 /// Give freed heap memory back to the system (glibc keeps it otherwise, and the next cell or the

@@ -15,16 +15,20 @@ use crate::bounds::NodeBounds;
 use crate::error::{Error, Result};
 use crate::format::{octa, Attributes, Grid, HierarchyParams, NodeIn, WriteSummary, Writer};
 use crate::hierarchy::{self, GroupInfo, Hierarchy, Level};
+use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
 use crate::mesh::{Adjacency, Mesh};
 use crate::pipeline::Progress;
 use crate::write::{Piece, Place};
 use glam::Vec3;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
+
+/// Positions (as [`position_key`]s) a piece keeps: those it shares with other pieces.
+type Pins = FxHashSet<[u32; 3]>;
 
 /// A node key of levels a cell or part builds: the piece in the high bits, its group in the low
 /// ones, so that pieces name their nodes without asking each other.
@@ -37,6 +41,8 @@ fn piece_key(piece: usize, group: u32) -> u32 {
 
 /// What every piece of work shares.
 pub struct Job<'a> {
+    /// The input, which errors name.
+    pub input: &'a Path,
     pub hierarchy: HierarchyParams,
     pub levels: LevelParams,
     pub grid: Grid,
@@ -46,8 +52,11 @@ pub struct Job<'a> {
     /// Faces a piece may hold.
     pub cell_faces: u64,
     pub layout: Layout,
-    /// Per input vertex, its computed normal, when normals are computed.
+    /// Per welded input vertex, its computed normal, when normals are computed.
     pub vertex_normals: Option<&'a [[i16; 2]]>,
+    /// Per welded input vertex, a bit: whether faces of more than one cell use it. Cells pin
+    /// those vertices.
+    pub shared: &'a [u64],
     /// Corners whose face turns more than this from their vertex's normal keep the face's normal.
     pub crease: f32,
 }
@@ -91,7 +100,7 @@ pub fn build<W: Write + Send>(
     progress: &mut dyn Progress,
 ) -> Result<(WriteSummary, Vec<String>)> {
     if spooled.len() >= MAX_PIECES {
-        return Err(Error::invalid(&spooled[0].0, None, format!("{} cells: at most {MAX_PIECES}", spooled.len() - 1)));
+        return Err(Error::invalid(job.input, None, format!("{} cells: at most {}", spooled.len(), MAX_PIECES - 1)));
     }
     let writer = Mutex::new(writer);
     let gathered = Mutex::new(Gathered::default());
@@ -100,6 +109,9 @@ pub fn build<W: Write + Send>(
         .into_iter()
         .flatten()
         .collect();
+    if tops.is_empty() {
+        return Err(Error::invalid(job.input, None, "no faces left after removing degenerate and duplicate faces"));
+    }
     let mut first = job.cell_levels;
     let mut round = 0;
     loop {
@@ -114,15 +126,34 @@ pub fn build<W: Write + Send>(
         let levels = part_levels(faces / parts);
         writer.lock().map_err(|_| poisoned())?.set_levels((first + levels + 1) as u32)?;
         progress.stage(&format!("parts, round {}", round + 1), runs.len() as u64);
-        let mut groups: Vec<Option<Vec<Top>>> = Vec::with_capacity(runs.len());
+        // A part pins its vertices that other parts' tops hold too: its outer border.
+        let mut part_of: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+        for (p, r) in runs.iter().enumerate() {
+            for t in &tops[r.clone()] {
+                for &q in &t.level.mesh.positions {
+                    let e = part_of.entry(position_key(q)).or_insert(p as u32);
+                    if *e != p as u32 {
+                        *e = u32::MAX;
+                    }
+                }
+            }
+        }
+        let mut groups: Vec<Option<(Vec<Top>, Pins)>> = Vec::with_capacity(runs.len());
         let mut rest = tops.into_iter();
         for r in &runs {
-            groups.push(Some(rest.by_ref().take(r.len()).collect()));
+            let part: Vec<Top> = rest.by_ref().take(r.len()).collect();
+            let pins = part
+                .iter()
+                .flat_map(|t| t.level.mesh.positions.iter().map(|&q| position_key(q)))
+                .filter(|k| part_of[k] == u32::MAX)
+                .collect();
+            groups.push(Some((part, pins)));
         }
+        drop(part_of);
         let groups = Mutex::new(groups);
         let next = run(runs.len(), threads, progress, |p| {
-            let part = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
-            merge(job, part, first, Some((p, levels)), &writer, &gathered).map(|t| t.into_iter().next())
+            let (part, pins) = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
+            merge(job, part, first, Some((p, levels, &pins)), &writer, &gathered)
         })?;
         tops = next.into_iter().flatten().collect();
         let after: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
@@ -145,7 +176,7 @@ pub fn build<W: Write + Send>(
 const MAX_ROUNDS: usize = 16;
 
 fn poisoned() -> Error {
-    Error::invalid(Path::new("<partitioned build>"), None, "a worker failed")
+    Error::invalid(Path::new("partitioned build"), None, "a worker thread panicked")
 }
 
 /// Run `work(i)` for `i in 0..n` on `threads` workers, results in order; the first error stops
@@ -243,8 +274,14 @@ fn cell<W: Write>(
             })
             .collect();
     }
+    let pinned: FxHashSet<[u32; 3]> = ids
+        .iter()
+        .zip(&mesh.positions)
+        .filter(|(&i, _)| job.shared.get(i as usize / 64).is_some_and(|w| w >> (i % 64) & 1 == 1))
+        .map(|(_, &p)| position_key(p))
+        .collect();
     drop(ids);
-    let (mesh, report) = mesh.clean().map_err(|v| Error::invalid(path, None, format!("vertex {} is not finite", v.index)))?;
+    let (mesh, report) = mesh.clean().map_err(|_| Error::invalid(job.input, None, format!("cell {c}: a vertex is not finite")))?;
     if report.degenerate_faces + report.duplicate_faces > 0 {
         let w = format!("cell {c}: removed {} degenerate and {} duplicate faces", report.degenerate_faces, report.duplicate_faces);
         gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
@@ -259,22 +296,23 @@ fn cell<W: Write>(
     drop(adjacency);
     let p = LevelParams { top_faces: usize::MAX, ..job.levels };
     let first = LevelMesh { face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()], mesh };
-    let lv = levels::build_from(first, &mut h, &p, true, &mut |_| {});
-    let bad = |m: String| Error::invalid(path, None, format!("cell {c}: {m}"));
+    let lv = levels::build_from(first, &mut h, &p, Some(&pinned), &mut |_| {});
+    let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
     let keys = |_: usize, g: u32| piece_key(c, g);
-    let top = finish_piece(job, h, lv, None, 0, k, &keys, writer, gathered, &bad)?;
+    let kept: Vec<bool> = lv.levels[0].mesh.positions.iter().map(|&q| pinned.contains(&position_key(q))).collect();
+    let top = finish_piece(job, h, lv, Base::Input(&kept), 0, k, &keys, writer, gathered, &bad)?;
     gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
     Ok(top)
 }
 
 /// Weld `tops` (whose level is file level `first`) into one mesh and build on it: with
-/// `part: Some((p, levels))`, `levels` more levels with the outer border locked, returning the
-/// new top; without, the coarsest levels of the file.
+/// `part: Some((p, levels, pinned))`, `levels` more levels with the vertices at `pinned` (its
+/// outer border) kept, returning the new top; without, the coarsest levels of the file.
 fn merge<W: Write>(
     job: &Job,
     tops: Vec<Top>,
     first: usize,
-    part: Option<(usize, usize)>,
+    part: Option<(usize, usize, &FxHashSet<[u32; 3]>)>,
     writer: &Mutex<Writer<W>>,
     gathered: &Mutex<Gathered>,
 ) -> Result<Option<Top>> {
@@ -324,20 +362,20 @@ fn merge<W: Write>(
         max_faces,
     };
     let adjacency = Adjacency::build(&mesh);
-    let mut h = hierarchy::extend(&mesh, &adjacency, base, &job.hierarchy, part.map(|(_, n)| n + 1));
+    let mut h = hierarchy::extend(&mesh, &adjacency, base, &job.hierarchy, part.map(|(_, n, _)| n + 1));
     drop(adjacency);
     let first_level = LevelMesh { mesh, face_group, group_error };
-    let bad = |m: String| Error::invalid(Path::new("<merge>"), None, m);
+    let bad = |m: String| Error::invalid(job.input, None, format!("merging cells: {m}"));
     match part {
-        Some((p, n)) => {
+        Some((p, n, pinned)) => {
             let lp = LevelParams { top_faces: usize::MAX, ..job.levels };
-            let lv = levels::build_from(first_level, &mut h, &lp, true, &mut |_| {});
+            let lv = levels::build_from(first_level, &mut h, &lp, Some(pinned), &mut |_| {});
             let key = |l: usize, g: u32| if l == 0 { keys[g as usize] } else { piece_key(p, g) };
-            finish_piece(job, h, lv, Some(bounds), first, n, &key, writer, gathered, &bad)
+            finish_piece(job, h, lv, Base::Tops(bounds), first, n, &key, writer, gathered, &bad)
         }
         None => {
-            let lv = levels::build_from(first_level, &mut h, &job.levels, false, &mut |_| {});
-            let piece = Piece::new(&h, &lv, &job.grid, None, Some(bounds)).map_err(bad)?;
+            let lv = levels::build_from(first_level, &mut h, &job.levels, None, &mut |_| {});
+            let piece = Piece::new(&h, &lv, &job.grid, None, Some(bounds), &[]).map_err(bad)?;
             let file_levels = first + h.levels.len();
             let mut w = writer.lock().map_err(|_| poisoned())?;
             w.set_levels(file_levels as u32)?;
@@ -349,6 +387,13 @@ fn merge<W: Write>(
     }
 }
 
+/// What a piece's level 0 is: the input (a cell), with the vertices it shares with other cells,
+/// or tops whose bounds are known (a part).
+enum Base<'a> {
+    Input(&'a [bool]),
+    Tops(Vec<NodeBounds>),
+}
+
 /// Write the levels `0..n` of a cell or part (piece level `l` is file level `first + l`, keys
 /// from `key`), record its open edges, and return its top (level `n`).
 #[allow(clippy::too_many_arguments)]
@@ -356,7 +401,7 @@ fn finish_piece<W: Write>(
     job: &Job,
     mut h: Hierarchy,
     lv: LevelMeshes,
-    base: Option<Vec<NodeBounds>>,
+    base: Base,
     first: usize,
     n: usize,
     key: &(dyn Fn(usize, u32) -> u32 + Sync),
@@ -367,7 +412,11 @@ fn finish_piece<W: Write>(
     if let Some(g) = h.levels.iter().map(|l| l.groups.len()).find(|&g| g >= 1 << GROUP_BITS) {
         return Err(bad(format!("{g} groups in one level, at most {}", 1 << GROUP_BITS)));
     }
-    let piece = Piece::new(&h, &lv, &job.grid, None, base).map_err(bad)?;
+    let piece = match base {
+        Base::Input(kept) => Piece::new(&h, &lv, &job.grid, None, None, kept),
+        Base::Tops(bounds) => Piece::new(&h, &lv, &job.grid, None, Some(bounds), &[]),
+    }
+    .map_err(bad)?;
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
     let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
     let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
@@ -379,10 +428,6 @@ fn finish_piece<W: Write>(
     let bounds = piece.bounds.into_iter().nth(n).unwrap_or_default();
     let keys = (0..top.groups.len() as u32).map(|g| key(n, g)).collect();
     Ok(Some(Top { level, groups: top.groups, bounds, keys, max_angle: top.max_angle, max_faces: top.max_faces }))
-}
-
-fn position_key(p: Vec3) -> [u32; 3] {
-    (p + Vec3::ZERO).to_array().map(f32::to_bits)
 }
 
 /// The open edges of `levels[0]`, by their ends' positions, with the key of the node on their

@@ -165,30 +165,22 @@ impl State {
         if usize::from(seen[0]) + usize::from(seen[1]) != e.n {
             return false;
         }
-        // Locked borders: an interior vertex merged into a border vertex must not join it to
-        // another border vertex by a new edge. A piece built alone cannot see whether its
-        // neighbour makes the same edge, and two pieces that both did would meet in an edge of
-        // four faces.
-        let ends = match (self.lock_borders, self.on_border.get(u as usize), self.on_border.get(v as usize)) {
-            (true, Some(true), Some(false)) => Some((u, v)),
-            (true, Some(false), Some(true)) => Some((v, u)),
+        // Pins: a vertex merged into a pinned one must not join it to another pinned vertex by a
+        // new edge. A piece built alone cannot see whether its neighbour makes the same edge, and
+        // two pieces that both did would meet in an edge of four faces.
+        let ends = match (self.is_pinned(u), self.is_pinned(v)) {
+            (true, false) => Some((u, v)),
+            (false, true) => Some((v, u)),
             _ => None,
         };
         if let Some((b, r)) = ends {
             let joined = |y: u32| self.faces_of(b).iter().any(|&f| self.tri(f).contains(&y));
             for &f in self.faces_of(r) {
                 for y in self.tri(f) {
-                    if y != u && y != v && self.on_border[y as usize] && !joined(y) {
+                    if y != u && y != v && self.is_pinned(y) && !joined(y) {
                         return false;
                     }
                 }
-            }
-        }
-        if e.n == 2 {
-            let spans =
-                |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
-            if spans(u) && spans(v) {
-                return false;
             }
         }
         // Group survival for collapses that remove faces of two groups (or one border face).

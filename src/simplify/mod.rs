@@ -111,10 +111,6 @@ pub struct SimplifyOptions {
     /// stops at a few faces per handle and component. Ignored with groups (a cap would join or
     /// split groups). Default false.
     pub topology: bool,
-    /// Vertices on open borders never move or go (collapses may still end on them), so every
-    /// open-border edge is kept as it is: a piece of a larger mesh simplified alone then still
-    /// meets its neighbours exactly. Default false.
-    pub lock_borders: bool,
 }
 
 impl Default for SimplifyOptions {
@@ -127,7 +123,6 @@ impl Default for SimplifyOptions {
             border_weight: 10.0,
             seam_weight: 1.0,
             topology: false,
-            lock_borders: false,
         }
     }
 }
@@ -164,16 +159,33 @@ pub struct Simplified {
 /// # Panics
 /// If `groups` is given with a length other than the face count.
 pub fn simplify(mesh: &Mesh, groups: Option<&[u32]>, opts: &SimplifyOptions) -> Simplified {
+    simplify_pinned(mesh, groups, &[], opts)
+}
+
+/// [`simplify`] with the vertices `pinned[v]` kept: they never move or go (collapses may end on
+/// them), and no collapse joins two of them by a new edge. A piece of a larger mesh simplified
+/// alone, its vertices shared with other pieces pinned, then still meets them exactly: every edge
+/// between two pinned vertices stays, and none appears that another piece could make too. An
+/// empty `pinned` pins nothing; topology changes are off while anything is pinned.
+///
+/// # Panics
+/// If `groups` is given with a length other than the face count, or `pinned` is neither empty
+/// nor one flag per vertex.
+pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opts: &SimplifyOptions) -> Simplified {
     if let Some(g) = groups {
         assert_eq!(g.len(), mesh.triangles.len(), "simplify: one group label per face");
     }
+    assert!(pinned.is_empty() || pinned.len() == mesh.positions.len(), "simplify: one pin flag per vertex");
+    let opts = &SimplifyOptions { topology: opts.topology && !pinned.contains(&true), ..opts.clone() };
     let mut s = State::new(mesh, groups);
+    s.pinned = pinned.to_vec();
     if mesh.triangles.len() > opts.target_faces {
         s.init(opts, false);
         s.run(opts);
         let face_target = opts.target_faces > 0 || opts.max_error.is_none();
         if opts.topology && face_target && s.faces_left > opts.target_faces && groups.is_none() {
             s = State::new(mesh, groups);
+            s.pinned = pinned.to_vec();
             s.init(opts, true);
             s.run(opts);
         }

@@ -81,10 +81,9 @@ pub(super) struct State {
     pub(super) scratch_k: Vec<u32>,
     /// Topology changes are made (see [`SimplifyOptions::topology`]); never with groups.
     pub(super) topology: bool,
-    /// Open-border vertices never move ([`SimplifyOptions::lock_borders`]).
-    pub(super) lock_borders: bool,
-    /// With `lock_borders`: whether each vertex is on an open edge (a set no collapse changes).
-    pub(super) on_border: Vec<bool>,
+    /// Vertices that never move or go, and that no collapse joins by a new edge (empty: none;
+    /// see [`super::simplify_pinned`]).
+    pub(super) pinned: Vec<bool>,
     pub(super) grouped: bool,
     /// Faces of the input; faces past them are caps.
     pub(super) input_faces: usize,
@@ -127,8 +126,7 @@ impl State {
             scratch_r: Vec::new(),
             scratch_k: Vec::new(),
             topology: false,
-            lock_borders: false,
-            on_border: Vec::new(),
+            pinned: Vec::new(),
             grouped: groups.is_some(),
             input_faces: nf,
             cap_source: Vec::new(),
@@ -180,23 +178,6 @@ impl State {
     pub(super) fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
         self.topology = topology && !self.grouped;
-        self.lock_borders = opts.lock_borders;
-        if self.lock_borders {
-            let mut count: rustc_hash::FxHashMap<u64, u32> = rustc_hash::FxHashMap::default();
-            for f in &self.faces {
-                for k in 0..3 {
-                    let (a, b) = (f.v[k].min(f.v[(k + 1) % 3]), f.v[k].max(f.v[(k + 1) % 3]));
-                    *count.entry((a as u64) << 32 | b as u64).or_insert(0) += 1;
-                }
-            }
-            self.on_border = vec![false; self.verts.len()];
-            for (e, n) in count {
-                if n == 1 {
-                    self.on_border[(e >> 32) as usize] = true;
-                    self.on_border[e as u32 as usize] = true;
-                }
-            }
-        }
         self.min_quality = f64::from(opts.min_face_quality);
         // A corner's wedge is the first corner of its vertex (in face list order) with the same
         // attributes, as `same_attributes` is an equivalence.
@@ -314,13 +295,11 @@ impl State {
         let mut fans = deg;
         let mut features = 0;
         let mut locked = false;
-        let mut open = false;
         for run in around.chunk_by(|a, b| a >> 32 == b >> 32) {
             let other = (run[0] >> 32) as u32;
             match *run {
                 [e] => {
                     features += 1;
-                    open = true;
                     if other > v {
                         let (_, c, _) = self.around_corners(v, e);
                         events.push((v, other, (c / 3) as u32, opts.border_weight));
@@ -353,7 +332,7 @@ impl State {
             }
         }
         let kind = match features {
-            _ if self.lock_borders && open => Kind::Corner,
+            _ if self.is_pinned(v) => Kind::Corner,
             0 => Kind::Free,
             2 => Kind::Line,
             _ => Kind::Corner,
@@ -424,6 +403,12 @@ impl State {
             || !self.same_corner(self.corner(e.f[0], b), self.corner(e.f[1], b))
     }
 
+    /// Whether `v` is pinned ([`super::simplify_pinned`]); vertices past the flags (copies made by
+    /// topology changes, which pins turn off) are not.
+    pub(super) fn is_pinned(&self, v: u32) -> bool {
+        self.pinned.get(v as usize).copied().unwrap_or(false)
+    }
+
     pub(super) fn kind(&mut self, v: u32) -> Kind {
         if self.verts[v as usize].kind != Kind::Unknown {
             return self.verts[v as usize].kind;
@@ -440,13 +425,9 @@ impl State {
         self.edges_around(v, edges);
         let mut features = 0;
         let mut manifold = true;
-        let mut open = false;
         for run in edges.chunk_by(|a, b| a >> 32 == b >> 32) {
             match *run {
-                [_] => {
-                    features += 1;
-                    open = true;
-                }
+                [_] => features += 1,
                 [e0, e1] => {
                     let ((_, c0, d0), (_, c1, d1)) = (self.around_corners(v, e0), self.around_corners(v, e1));
                     if !self.same_corner(c0, c1) || !self.same_corner(d0, d1) {
@@ -457,7 +438,7 @@ impl State {
             }
         }
         match features {
-            _ if self.lock_borders && open => Kind::Corner,
+            _ if self.is_pinned(v) => Kind::Corner,
             0 if manifold => Kind::Free,
             2 if manifold => Kind::Line,
             _ => Kind::Corner,
