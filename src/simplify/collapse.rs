@@ -183,6 +183,13 @@ impl State {
                 }
             }
         }
+        if e.n == 2 {
+            let spans =
+                |w: u32| self.faces_of(w).iter().any(|&f| !e.f.contains(&f) && self.tri(f).contains(&x0) && self.tri(f).contains(&x1));
+            if spans(u) && spans(v) {
+                return false;
+            }
+        }
         // Group survival for collapses that remove faces of two groups (or one border face).
         // Without groups it keeps components from vanishing, which topology changes allow.
         if self.topology {
