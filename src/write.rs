@@ -158,7 +158,9 @@ fn write_named<W: Write>(
 
 /// Where a piece's nodes go in the file: piece level `l` is file level `l + offset`; the levels in
 /// `levels` are written, group `g` of piece level `l` under key `key(l, g)` (its parent's key
-/// likewise, one level up). The in-core build is one piece; the partitioned build writes each
+/// likewise, one level up). `file_levels` is the file's number of levels, which tells the top
+/// level's nodes (no parent); `usize::MAX` when the piece writes no top node (its top goes to
+/// the piece that merges it). The in-core build is one piece; the partitioned build writes each
 /// cell and the merge of their tops as pieces of one file.
 pub(crate) struct Place<'a> {
     pub offset: usize,

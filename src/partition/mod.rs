@@ -4,11 +4,14 @@
 //! the coarse levels there → write. The file is the same format as the in-core build's; only how
 //! its levels were made differs (notes/partition.md says what that costs).
 //!
-//! Memory is bounded by the cells in flight (each cell is an in-core build of
-//! [`cell_faces`] faces), the vertex arrays while streaming (positions, and colors and normals when
-//! the input has them), and the merged tops. Cells meet exactly: their shared border vertices are
-//! locked at every level a cell builds, so the border edges of level ℓ nodes of two cells are the
-//! same edges, and the merge, which welds the tops by position, links such nodes as neighbours.
+//! Memory: the cells in flight (each an in-core build of [`cell_faces`] faces), the vertex arrays
+//! while streaming (positions, and colors and normals when the input has them), and what is held
+//! for later (the tops, the writer's node records, computed normals). It stays within the budget
+//! as long as the mesh simplifies where its cells meet; one that does not (a soup of separate
+//! triangles) leaves large tops, and the final merge, which holds them all, is said to exceed it.
+//! Cells meet exactly: the vertices faces of two cells use are pinned at every level a cell
+//! builds, so the border edges of level ℓ nodes of two cells are the same edges, and the pieces
+//! that weld the tops by position link such nodes as neighbours.
 
 mod cells;
 mod work;

@@ -49,7 +49,7 @@ pub struct Job<'a> {
     pub attributes: Attributes,
     /// Node levels a cell builds below its top.
     pub cell_levels: usize,
-    /// Faces a piece may hold.
+    /// Faces a cell holds at most; parts are cut to about as many.
     pub cell_faces: u64,
     pub layout: Layout,
     /// Per welded input vertex, its computed normal, when normals are computed.
@@ -162,6 +162,15 @@ pub fn build<W: Write + Send>(
         if after * 4 > faces * 3 {
             break;
         }
+    }
+    let faces: u64 = tops.iter().map(|t| t.level.mesh.face_count() as u64).sum();
+    if faces > 2 * job.cell_faces {
+        let w = format!(
+            "the final merge holds {faces} faces, more than twice a cell's {}: the mesh simplifies little at its cells' borders \
+             (many separate pieces?), and memory may go past --memory",
+            job.cell_faces
+        );
+        gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
     }
     progress.stage("merge", 0);
     merge(job, tops, first, None, &writer, &gathered)?;
