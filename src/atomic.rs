@@ -255,10 +255,23 @@ fn alive(pid: u32) -> bool {
 /// What work folders' names start with, before the process id and a random part.
 const WORK_PREFIX: &str = ".strata-work.";
 
-/// Remove work folders in `dir` of processes that are gone, once untouched for [`STALE_AFTER`].
+/// A work folder of a process that is gone is stale once nothing in it has changed for this long
+/// (longer than for a file: a folder shared by machines may belong to a live process elsewhere).
+const STALE_DIR_AFTER: Duration = Duration::from_secs(3600);
+
+/// Remove work folders in `dir` of processes that are gone, once nothing in them changed for
+/// [`STALE_DIR_AFTER`].
 fn remove_stale_dirs(dir: &Path) {
     let Ok(entries) = std::fs::read_dir(dir) else { return };
     let now = SystemTime::now();
+    let idle = |p: &Path| -> Option<Duration> {
+        let changed = |m: std::fs::Metadata| m.modified().ok().and_then(|t| now.duration_since(t).ok());
+        let mut least = changed(std::fs::metadata(p).ok()?)?;
+        for e in std::fs::read_dir(p).ok()?.flatten() {
+            least = least.min(changed(e.metadata().ok()?)?);
+        }
+        Some(least)
+    };
     for entry in entries.flatten() {
         let name = entry.file_name();
         let pid = name
@@ -270,12 +283,9 @@ fn remove_stale_dirs(dir: &Path) {
         if pid == std::process::id() || alive(pid) || !entry.file_type().is_ok_and(|t| t.is_dir()) {
             continue;
         }
-        let idle = entry.metadata().ok().and_then(|m| m.modified().ok()).and_then(|t| now.duration_since(t).ok());
-        if idle.is_some_and(|d| d >= STALE_AFTER) {
-            let path = entry.path();
-            if std::fs::remove_dir_all(&path).is_ok() {
-                REMOVED_STALE.lock().map(|mut l| l.push(path)).ok();
-            }
+        let path = entry.path();
+        if idle(&path).is_some_and(|d| d >= STALE_DIR_AFTER) && std::fs::remove_dir_all(&path).is_ok() {
+            REMOVED_STALE.lock().map(|mut l| l.push(path)).ok();
         }
     }
 }

@@ -120,6 +120,13 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions) -> R
         Build::Partitioned if opts.encoding != Encoding::V2 => {
             Err(crate::error::Error::invalid(input, None, "the partitioned build writes format 2 only"))
         }
+        Build::Partitioned if faces.is_none() && crate::import::ply::declared(input).is_ok_and(|d| d.textured) => {
+            Err(crate::error::Error::invalid(
+                input,
+                None,
+                "the partitioned build does not carry texture coordinates or images yet; convert this one in memory (--in-core)",
+            ))
+        }
         Build::Partitioned if faces.is_none() || import.format.is_some() => Err(crate::error::Error::invalid(
             input,
             None,

@@ -73,14 +73,29 @@ pub struct Declared {
     pub binary: bool,
     /// Whether it names texture images or has texture coordinates, which [`stream`] refuses.
     pub textured: bool,
+    /// About how many triangles the faces make: in a binary file, from the bytes the face lists
+    /// take (polygons and strips make more triangles than records); else the face records, or
+    /// twice the vertices (a closed mesh's ratio) for strips.
+    pub triangles: u64,
 }
 
-impl Declared {
-    /// About how many triangles the file holds: its face records, or twice its vertices (a closed
-    /// mesh's ratio) when more — quads, polygons and strips hold more triangles than records.
-    pub fn triangles(&self) -> u64 {
-        self.faces.max(self.vertices.saturating_mul(2))
-    }
+/// The triangles `header`'s face elements make in a binary body of `body` bytes, when every
+/// other element's records have a fixed size and each face element one list besides scalars.
+fn binary_triangles(header: &Header, body: u64) -> Option<u64> {
+    let scalars = |e: &Element| -> Option<u64> {
+        e.props.iter().map(|p| if let Kind::Scalar(t) = p.kind { Some(t.size() as u64) } else { None }).sum()
+    };
+    let face_like = |e: &Element| e.name == "face" || e.name == "tristrips";
+    let fixed: u64 = header.elements.iter().filter(|e| !face_like(e)).map(|e| scalars(e).map(|r| r * e.count)).sum::<Option<u64>>()?;
+    let faces: Vec<&Element> = header.elements.iter().filter(|e| face_like(e)).collect();
+    let [e] = faces[..] else { return None };
+    let lists: Vec<(Scalar, Scalar)> =
+        e.props.iter().filter_map(|p| if let Kind::List(c, t) = p.kind { Some((c, t)) } else { None }).collect();
+    let [(count, item)] = lists[..] else { return None };
+    let other: u64 = e.props.iter().map(|p| if let Kind::Scalar(t) = p.kind { t.size() as u64 } else { 0 }).sum();
+    let items = body.checked_sub(fixed)?.checked_sub(e.count * (count.size() as u64 + other))? / item.size() as u64;
+    // A polygon of n corners makes n − 2 triangles, and so does a strip of n indices.
+    Some(items.saturating_sub(2 * e.count))
 }
 
 /// Longest header [`stream`] and [`declared`] read.
@@ -88,16 +103,19 @@ const MAX_HEADER: usize = 16 << 20;
 
 /// Read the header of `path` alone.
 pub fn declared(path: &Path) -> Result<Declared> {
-    let (header, _) = read_header(path, &mut Vec::new())?;
+    let (header, len) = read_header(path, &mut Vec::new())?;
     let count = |names: &[&str]| header.elements.iter().filter(|e| names.contains(&e.name.as_str())).map(|e| e.count).sum();
     let textured = !header.texture_files.is_empty()
         || Plan::new(path, &header).is_ok_and(|p| p.has(U, 2) || p.faces.iter().flatten().any(|f| f.texcoord.is_some()));
-    Ok(Declared {
-        vertices: count(&["vertex"]),
-        faces: count(&["face", "tristrips"]),
-        binary: header.encoding != Encoding::Ascii,
-        textured,
-    })
+    let (vertices, faces): (u64, u64) = (count(&["vertex"]), count(&["face", "tristrips"]));
+    let binary = header.encoding != Encoding::Ascii;
+    let strips = header.elements.iter().any(|e| e.name == "tristrips");
+    let triangles = match binary.then(|| binary_triangles(&header, len.saturating_sub(header.body_start as u64))).flatten() {
+        Some(t) => t,
+        None if strips => faces.max(vertices.saturating_mul(2)),
+        None => faces,
+    };
+    Ok(Declared { vertices, faces, binary, textured, triangles })
 }
 
 fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)> {
@@ -1921,6 +1939,34 @@ mod tests {
                 }
                 (a, b) => panic!("whole read {:?}, stream {:?}", a.map(|m| m.face_count()), b.map(|t| t.len())),
             }
+        }
+    }
+
+    #[test]
+    fn declared_triangles_count_polygon_corners_in_binary_files() {
+        let header = [
+            "element vertex 4",
+            "property float x",
+            "property float y",
+            "property float z",
+            "element face 2",
+            "property list uchar int vertex_indices",
+        ];
+        let v = |x: f32, y: f32| vec![V::F(x), V::F(y), V::F(0.)];
+        let records = [
+            v(0., 0.),
+            v(1., 0.),
+            v(1., 1.),
+            v(0., 1.),
+            vec![V::Uc(4), V::I(0), V::I(1), V::I(2), V::I(3)],
+            vec![V::Uc(3), V::I(0), V::I(1), V::I(2)],
+        ];
+        for (encoding, expect) in [(Encoding::Little, 3), (Encoding::Ascii, 2)] {
+            let path = std::env::temp_dir().join(format!("strata-ply-declared-{}-{encoding:?}.ply", std::process::id()));
+            std::fs::write(&path, file(encoding, &header, &records)).unwrap();
+            let d = declared(&path).unwrap();
+            let _ = std::fs::remove_file(&path);
+            assert_eq!((d.faces, d.vertices, d.triangles), (2, 4, expect), "{encoding:?}");
         }
     }
 

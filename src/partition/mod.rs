@@ -85,7 +85,7 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
 pub fn streamable(input: &Path) -> Option<u64> {
     let is_ply = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     let d = is_ply.then(|| ply::declared(input).ok()).flatten()?;
-    (!d.textured).then(|| d.triangles())
+    (!d.textured).then_some(d.triangles)
 }
 
 /// Most cells: node keys give a piece 12 bits, and each cell holds a file open while the input
@@ -111,18 +111,20 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
     let declared = ply::declared(input)?;
-    let triangles = declared.triangles();
+    let triangles = declared.triangles.max(1);
     let cell_faces = cell_faces(budget, triangles);
     let cells = triangles.div_ceil(cell_faces);
     let held = triangles.saturating_mul(HELD_BYTES_PER_FACE);
-    if cell_faces == MIN_CELL_FACES || cells > MAX_CELLS {
-        let need = held + budget.threads as u64 * (triangles / MAX_CELLS).max(MIN_CELL_FACES * 4) * IN_CORE_BYTES_PER_FACE * 10 / 6;
+    let wanted = held + budget.threads as u64 * MIN_CELL_FACES * IN_CORE_BYTES_PER_FACE * 10 / 6;
+    let starved = budget.cell_faces == 0 && cells > 1 && wanted > budget.memory;
+    if starved || cells > MAX_CELLS {
+        let need = held + budget.threads as u64 * (triangles / MAX_CELLS).max(MIN_CELL_FACES) * IN_CORE_BYTES_PER_FACE * 10 / 6;
         return Err(Error::invalid(
             input,
             None,
             format!(
                 "about {triangles} triangles need about {} MiB for the partitioned build; --memory gives {} MiB",
-                need >> 20,
+                need.max(wanted) >> 20,
                 budget.memory >> 20
             ),
         ));

@@ -440,8 +440,9 @@ fn finish_piece<W: Write>(
 }
 
 /// The open edges of `levels[0]`, by their ends' positions, with the key of the node on their
-/// side at every level of `levels`. Borders are locked, so every level has the same open edges;
-/// an edge some level lacks (it cannot, but a file is not built on hope) is dropped.
+/// side at every level of `levels`. Edges between pieces join pinned vertices, so every level has
+/// them; edges of the input's own holes may simplify away, and an edge some level lacks is
+/// dropped (no other piece has it).
 fn border_edges(levels: &[LevelMesh], key: &dyn Fn(usize, u32) -> u32) -> Vec<([u32; 6], Vec<u32>)> {
     let open = |m: &Mesh, face_group: &[u32]| -> FxHashMap<[u32; 6], u32> {
         let mut count: FxHashMap<u64, (u32, u32)> = FxHashMap::default();
