@@ -84,6 +84,8 @@ struct Border {
 struct Gathered {
     borders: Vec<Border>,
     warnings: Vec<String>,
+    /// Degenerate and duplicate faces the cells removed.
+    removed: (usize, usize),
     /// Level-0 vertices of the cells, and vertices welded away since (shared by two pieces).
     vertices: usize,
     welded: usize,
@@ -175,7 +177,10 @@ pub fn build<W: Write + Send>(
     progress.stage("merge", 0);
     merge(job, tops, first, None, &writer, &gathered)?;
     let mut writer = writer.into_inner().map_err(|_| poisoned())?;
-    let g = gathered.into_inner().map_err(|_| poisoned())?;
+    let mut g = gathered.into_inner().map_err(|_| poisoned())?;
+    if g.removed.0 + g.removed.1 > 0 {
+        g.warnings.insert(0, format!("removed {} degenerate and {} duplicate faces", g.removed.0, g.removed.1));
+    }
     link(&mut writer, &g.borders);
     writer.set_input_vertices((g.vertices - g.welded) as u64);
     Ok((writer.finish()?, g.warnings))
@@ -291,9 +296,10 @@ fn cell<W: Write>(
         .collect();
     drop(ids);
     let (mesh, report) = mesh.clean().map_err(|_| Error::invalid(job.input, None, format!("cell {c}: a vertex is not finite")))?;
-    if report.degenerate_faces + report.duplicate_faces > 0 {
-        let w = format!("cell {c}: removed {} degenerate and {} duplicate faces", report.degenerate_faces, report.duplicate_faces);
-        gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
+    {
+        let mut g = gathered.lock().map_err(|_| poisoned())?;
+        g.removed.0 += report.degenerate_faces;
+        g.removed.1 += report.duplicate_faces;
     }
     if mesh.face_count() == 0 {
         return Ok(None);
