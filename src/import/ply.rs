@@ -353,7 +353,8 @@ impl<R: std::io::Read> AsciiStream<R> {
         }
     }
 
-    fn token(&mut self) -> Read<Vec<u8>> {
+    /// The next value on the current line, as its range in `buf`.
+    fn token(&mut self) -> Read<std::ops::Range<usize>> {
         self.fill_line();
         self.skip_blanks();
         match self.buf.get(self.pos) {
@@ -365,7 +366,11 @@ impl<R: std::io::Read> AsciiStream<R> {
         while self.pos < self.buf.len() && !self.buf[self.pos].is_ascii_whitespace() {
             self.pos += 1;
         }
-        Ok(self.buf[start..self.pos].to_vec())
+        Ok(start..self.pos)
+    }
+
+    fn bad(&self, token: std::ops::Range<usize>, t: Scalar) -> Fault {
+        Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(&self.buf[token]).into_owned(), t) }
     }
 
     /// At the end of the file: a cut value if the file ends inside one, else a missing one.
@@ -387,17 +392,12 @@ impl<R: std::io::Read> AsciiStream<R> {
 impl<R: std::io::Read> Source for AsciiStream<R> {
     fn value(&mut self, t: Scalar) -> Read<f64> {
         let token = self.token()?;
-        let parsed = match t {
-            Scalar::F32 => std::str::from_utf8(&token).ok().and_then(|s| s.parse::<f32>().ok()).map(f64::from),
-            Scalar::F64 => std::str::from_utf8(&token).ok().and_then(|s| s.parse::<f64>().ok()),
-            _ => parse_int(&token).map(|n| n as f64),
-        };
-        parsed.ok_or_else(|| Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(&token).into_owned(), t) })
+        parse_value(&self.buf[token.clone()], t).ok_or_else(|| self.bad(token, t))
     }
 
     fn int(&mut self, t: Scalar) -> Read<i64> {
         let token = self.token()?;
-        parse_int(&token).ok_or_else(|| Fault { at: self.at(), kind: FaultKind::Token(String::from_utf8_lossy(&token).into_owned(), t) })
+        parse_int(&self.buf[token.clone()]).ok_or_else(|| self.bad(token, t))
     }
 
     fn skip(&mut self, t: Scalar, n: usize) -> Read<()> {
@@ -1044,6 +1044,15 @@ impl<'a> Ascii<'a> {
     }
 }
 
+/// An ascii value of type `t` converted to f64, or `None`.
+fn parse_value(token: &[u8], t: Scalar) -> Option<f64> {
+    match t {
+        Scalar::F32 => std::str::from_utf8(token).ok().and_then(|s| s.parse::<f32>().ok()).map(f64::from),
+        Scalar::F64 => std::str::from_utf8(token).ok().and_then(|s| s.parse::<f64>().ok()),
+        _ => parse_int(token).map(|n| n as f64),
+    }
+}
+
 /// A decimal integer with an optional sign, or `None`.
 fn parse_int(token: &[u8]) -> Option<i64> {
     let (negative, digits) = match token.split_first()? {
@@ -1067,12 +1076,7 @@ fn parse_int(token: &[u8]) -> Option<i64> {
 impl Source for Ascii<'_> {
     fn value(&mut self, t: Scalar) -> Read<f64> {
         let token = self.token()?;
-        let parsed = match t {
-            Scalar::F32 => std::str::from_utf8(token).ok().and_then(|s| s.parse::<f32>().ok()).map(f64::from),
-            Scalar::F64 => std::str::from_utf8(token).ok().and_then(|s| s.parse::<f64>().ok()),
-            _ => parse_int(token).map(|n| n as f64),
-        };
-        parsed.ok_or_else(|| self.bad(token, t))
+        parse_value(token, t).ok_or_else(|| self.bad(token, t))
     }
 
     fn int(&mut self, t: Scalar) -> Read<i64> {
