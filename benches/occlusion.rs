@@ -140,7 +140,7 @@ fn main() {
         let mut streamer = Streamer::new(rd, Budgets::default()).expect("streamer");
         let mut holding = Streamer::new(Reader::open_path(&out).expect("open"), Budgets::default()).expect("streamer");
         let mut held_rgba = vec![0u8; 4 * 640 * 480];
-        let mut orderer = Orderer::new(streamer.reader().skeleton(), streamer.planes().clone());
+        let mut orderer = Orderer::new(streamer.reader().skeleton(), streamer.reader().read_planes().expect("planes"));
         let (w, h, n) = (640, 480, 32);
         let mut sums = Sums::default();
         let mut image = Image::new(w, h);

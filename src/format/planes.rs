@@ -151,18 +151,18 @@ pub fn decode_ordr(f: &mut Fields, width: u64, nodes: u32, child_counts: impl Fn
             let (first, second) = (index(f)?, index(f)?);
             let normal = [f.u16()? as i16, f.u16()? as i16];
             let (first_max, second_min) = (f.f32()?, f.f32()?);
-            let who = if p == 0 { "the top level".to_string() } else { format!("node {}", p - 1) };
+            let who = || if p == 0 { "the top level".to_string() } else { format!("node {}", p - 1) };
             let pair = (first.min(second), first.max(second));
             if first == second || pair.1 >= children {
-                return Err(f.error_at(at, format!("{who}: a plane between children {first} and {second} of {children}")));
+                return Err(f.error_at(at, format!("{}: a plane between children {first} and {second} of {children}", who())));
             }
             if last.is_some_and(|l| l >= pair) {
                 return Err(
-                    f.error_at(at, format!("{who}: the plane between children {} and {} is out of order or repeated", pair.0, pair.1))
+                    f.error_at(at, format!("{}: the plane between children {} and {} is out of order or repeated", who(), pair.0, pair.1))
                 );
             }
             if !(first_max.is_finite() && second_min.is_finite()) {
-                return Err(f.error_at(at, format!("{who}: plane bounds {first_max} and {second_min} must be finite")));
+                return Err(f.error_at(at, format!("{}: plane bounds {first_max} and {second_min} must be finite", who())));
             }
             last = Some(pair);
             entries.push(PlaneEntry { first, second, normal, first_max, second_min });

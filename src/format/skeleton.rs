@@ -247,15 +247,21 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     if nbrs.frame.size % width != 0 {
         return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
     }
-    let mut neighbors: Vec<u32> =
-        payload[nbrs.start..nbrs.end].chunks_exact(width as usize).map(|c| LE::read_uint(c, c.len()) as u32).collect();
+    let entries = &payload[nbrs.start..nbrs.end];
+    let mut neighbors: Vec<u32> = if width == 2 {
+        entries.chunks_exact(2).map(|c| LE::read_u16(c) as u32).collect()
+    } else {
+        entries.chunks_exact(4).map(LE::read_u32).collect()
+    };
 
     // NODE
-    let mut f = fields(node);
+    let f = fields(node);
     let want = h.nodes as u64 * NODE_RECORD_BYTES;
     if node.frame.size != want {
         return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
     }
+    // The size is checked: records are read from fixed 56-byte slices.
+    let mut records = payload[node.start..node.end].chunks_exact(NODE_RECORD_BYTES as usize);
     let grid = h.grid;
     let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(h.nodes as usize);
     let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
@@ -272,13 +278,16 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
         }
         next_child = end;
         for i in lev.first_node..lev.first_node + lev.nodes {
-            let at = f.offset();
-            let (child_count, neighbor_count) = (f.u16()? as u32, f.u16()? as u32);
-            let axis = octa::decode([f.u16()? as i16, f.u16()? as i16]);
-            let (half, radius_code) = (f.u16()?, f.u16()?);
-            let (lo_bits, hi_bits) = (f.u64()?, f.u64()?);
-            let (lo, hi, center) = (unpack(lo_bits), unpack(hi_bits), unpack(f.u64()?));
-            let (error, faces, vertices, size, crc) = (f.f32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?);
+            let at = node.payload_offset() + i as u64 * NODE_RECORD_BYTES;
+            let r = records.next().ok_or_else(|| f.error_at(at, format!("node {i}: past the end of the chunk")))?;
+            let u16_at = |k: usize| LE::read_u16(&r[k..]);
+            let u32_at = |k: usize| LE::read_u32(&r[k..]);
+            let (child_count, neighbor_count) = (u16_at(0) as u32, u16_at(2) as u32);
+            let axis = octa::decode([u16_at(4) as i16, u16_at(6) as i16]);
+            let (half, radius_code) = (u16_at(8), u16_at(10));
+            let (lo_bits, hi_bits) = (LE::read_u64(&r[12..]), LE::read_u64(&r[20..]));
+            let (lo, hi, center) = (unpack(lo_bits), unpack(hi_bits), unpack(LE::read_u64(&r[28..])));
+            let (error, faces, vertices, size, crc) = (LE::read_f32(&r[36..]), u32_at(40), u32_at(44), u32_at(48), u32_at(52));
             let bad = |msg: String| f.error_at(at, format!("node {i}: {msg}"));
             let first_child = if child_count > 0 { next_child as u32 } else { 0 };
             if l == 0 && child_count > 0 {

@@ -120,7 +120,9 @@ pub struct Streamer<S> {
     images: ImageCache,
     /// Decoded bytes of every image's coarsest level, kept out of the geometry's share of the budget.
     pinned: u64,
-    orderer: Orderer,
+    /// Built with the separating planes when a front first shows more than the top level: the
+    /// first frame needs neither (its nodes go nearest box first).
+    orderer: Option<Orderer>,
     warnings: Vec<String>,
     /// Nodes the renderer found hidden in the last frame, ascending: not refined in the next.
     hidden: Vec<u32>,
@@ -128,8 +130,9 @@ pub struct Streamer<S> {
 
 impl<S: ByteSource> Streamer<S> {
     /// Start a session. Budgets must admit the whole top level, which the first frame shows. The
-    /// separating planes (`ORDR`, a file's last chunk) are read here, for the drawing order; when
-    /// they are damaged, the front is ordered without them and [`Streamer::take_warnings`] says so.
+    /// separating planes (`ORDR`, a file's last chunk) are read when a front first shows more than
+    /// the top level, for the drawing order; when they are damaged, the front is ordered without
+    /// them and [`Streamer::take_warnings`] says so.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
@@ -151,14 +154,10 @@ impl<S: ByteSource> Streamer<S> {
         if budgets.pixel_error.is_nan() || budgets.pixel_error < 0.0 {
             return Err(Error::invalid(reader.path(), None, "the pixel-error threshold must be zero or more"));
         }
-        let (planes, warnings) = match reader.read_planes() {
-            Ok(p) => (p, Vec::new()),
-            Err(e) => (Planes::default(), vec![format!("{e}; the front is drawn nearest box first, without the separating planes")]),
-        };
         Ok(Streamer {
-            warnings,
+            warnings: Vec::new(),
             hidden: Vec::new(),
-            orderer: Orderer::new(reader.skeleton(), planes),
+            orderer: None,
             cache: Cache::new(budgets.bytes.map(|b| b - pinned)),
             images: ImageCache::default(),
             pinned,
@@ -253,9 +252,21 @@ impl<S: ByteSource> Streamer<S> {
             }
         }
 
+        let top = self.reader.levels().len().saturating_sub(1) as u32;
+        let nodes = self.reader.nodes();
+        if self.orderer.is_none() && cut.shown.iter().any(|&i| nodes[i as usize].level != top) {
+            let planes = self.reader.read_planes().unwrap_or_else(|e| {
+                self.warnings.push(format!("{e}; the front is drawn nearest box first, without the separating planes"));
+                Planes::default()
+            });
+            self.orderer = Some(Orderer::new(self.reader.skeleton(), planes));
+        }
         let ordered = Instant::now();
         let mut order = Vec::with_capacity(cut.shown.len());
-        self.orderer.order(self.reader.skeleton(), &cut.shown, camera, &mut order);
+        match &mut self.orderer {
+            Some(o) => o.order(self.reader.skeleton(), &cut.shown, camera, &mut order),
+            None => order::nearest_box_first(self.reader.skeleton(), &cut.shown, camera, &mut order),
+        }
         let order_ms = ordered.elapsed().as_secs_f64() * 1e3;
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {
@@ -313,11 +324,6 @@ impl<S: ByteSource> Streamer<S> {
         self.hidden.clear();
         self.hidden.extend_from_slice(nodes);
         self.hidden.sort_unstable();
-    }
-
-    /// The file's separating planes (empty for a file older than 2.3).
-    pub fn planes(&self) -> &Planes {
-        self.orderer.planes()
     }
 
     /// The mark node `i` got in the last frame.

@@ -65,6 +65,27 @@ fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
     }
 }
 
+/// `front` sorted by key, nearest box first. For a front of top-level nodes without planes between
+/// them this is §5's order; a streamer draws its first frame, the top level, so before reading the
+/// planes.
+pub fn nearest_box_first(sk: &Skeleton, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
+    let eye = match camera.projection {
+        Projection::Perspective { .. } => Eye::At(camera.eye.as_dvec3()),
+        Projection::Orthographic { .. } => Eye::Along(camera.forward().as_dvec3()),
+    };
+    let mut keyed: Vec<Key> = front
+        .iter()
+        .filter(|&&n| (n as usize) < sk.nodes.len())
+        .map(|&n| {
+            let (lo, hi) = sk.node_box(n);
+            Key(key((lo.as_dvec3(), hi.as_dvec3()), eye), n)
+        })
+        .collect();
+    keyed.sort_unstable();
+    out.clear();
+    out.extend(keyed.iter().map(|k| k.1));
+}
+
 /// A total order on f64 keys (they are finite: boxes and eye are checked finite).
 #[derive(Clone, Copy, Debug)]
 struct Key(f64, u32);

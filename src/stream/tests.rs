@@ -117,6 +117,7 @@ fn first_frame_shows_the_top_level() {
     let top = r.levels().len() as u32 - 1;
     let (c, rad) = sphere(&r);
     let expected: Vec<u32> = r.level_nodes(top).collect();
+    let at_open = r.bytes_read();
     let mut s = Streamer::new(r, Budgets { pixel_error: f32::INFINITY, ..Budgets::default() }).unwrap();
     let cam = Camera::framing(c, rad, Vec3::Z, 1.0, 64, 64);
     let rep = s.update(&cam, None).unwrap();
@@ -125,7 +126,8 @@ fn first_frame_shows_the_top_level() {
     all.sort_unstable();
     assert_eq!(all, expected);
     assert_eq!(rep.added, rep.front);
-    assert!(rep.stats.bytes_read < s.reader().file_size());
+    let geometry: u64 = rep.front.iter().map(|&i| s.reader().nodes()[i as usize].size as u64).sum();
+    assert_eq!(rep.stats.bytes_read, at_open + geometry, "the skeleton and the top level's geometry, not the planes");
 }
 
 #[test]
