@@ -25,8 +25,9 @@ pub struct Orderer {
     links: Vec<[u32; 3]>,
     state: Vec<u8>,
     touched: Vec<u32>,
-    /// One per depth of the walk.
-    scratch: Vec<Scratch>,
+    /// The walk's stack, and the working set of a parent of more than [`SMALL`] children.
+    stack: Vec<u32>,
+    big: Scratch,
 }
 
 /// The working set of one parent's children.
@@ -159,20 +160,20 @@ impl Orderer {
             }
         }
         for &n in front {
-            let mut p = sk.nodes.get(n as usize).map_or(u32::MAX, |r| r.parent);
+            let mut p = self.links.get(n as usize).map_or(u32::MAX, |l| l[0]);
             while let Some(s) = self.state.get_mut(p as usize) {
                 if *s != OFF {
                     break;
                 }
                 *s = ABOVE;
                 self.touched.push(p);
-                p = sk.nodes[p as usize].parent;
+                p = self.links.get(p as usize).map_or(u32::MAX, |l| l[0]);
             }
         }
         let top = sk.level_nodes(sk.top());
         let view =
             View { planes: &self.planes, normals: &self.normals, boxes: &self.boxes, links: &self.links, state: &self.state, eye, key_eye };
-        view.walk(None, top, &mut self.scratch, out);
+        view.walk(top, &mut self.big, &mut self.stack, out);
         for &n in &self.touched {
             self.state[n as usize] = OFF;
         }
@@ -186,54 +187,97 @@ impl View<'_> {
         first..first + count
     }
 
-    /// The walk, with an explicit stack (a file may have any number of levels): one scratch per
-    /// parent on the way down with two or more live children, each with the next child to take.
-    fn walk(&self, parent: Option<u32>, kids: std::ops::Range<u32>, scratch: &mut Vec<Scratch>, out: &mut Vec<u32>) {
-        let mut next: Vec<usize> = Vec::new();
-        self.enter(parent, kids, scratch, &mut next, out);
-        while let Some(&k) = next.last() {
-            let depth = next.len() - 1;
-            let Some(&c) = scratch[depth].live.get(k) else {
-                next.pop();
-                continue;
-            };
-            next[depth] += 1;
+    /// The walk, with an explicit stack of nodes (a file may have any number of levels): a parent's
+    /// live children are pushed so that the first to take is on top.
+    fn walk(&self, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<u32>, out: &mut Vec<u32>) {
+        stack.clear();
+        self.push_children(None, kids, big, stack);
+        while let Some(c) = stack.pop() {
             if self.state[c as usize] == SHOWN {
                 out.push(c);
             } else {
-                self.enter(Some(c), self.children(c), scratch, &mut next, out);
+                self.push_children(Some(c), self.children(c), big, stack);
             }
         }
     }
 
-    /// Start on `parent`'s children: a chain of single live children is followed at once; two or
-    /// more are arranged into the next scratch and pushed.
-    fn enter(
-        &self,
-        mut parent: Option<u32>,
-        mut kids: std::ops::Range<u32>,
-        scratch: &mut Vec<Scratch>,
-        next: &mut Vec<usize>,
-        out: &mut Vec<u32>,
-    ) {
+    /// Push `parent`'s live children (shown, or above a shown node) onto `stack` in reverse drawing
+    /// order.
+    fn push_children(&self, parent: Option<u32>, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<u32>) {
+        if kids.len() <= SMALL {
+            return self.push_few(parent, kids, stack);
+        }
         let state = self.state;
-        loop {
-            let mut live = kids.clone().filter(|&c| state[c as usize] != OFF);
-            match (live.next(), live.next()) {
-                (None, _) => return,
-                (Some(c), None) if state[c as usize] == SHOWN => return out.push(c),
-                (Some(c), None) => (parent, kids) = (Some(c), self.children(c)),
-                _ => break,
+        big.live.clear();
+        big.live.extend(kids.clone().filter(|&c| state[c as usize] != OFF));
+        match big.live.len() {
+            0 => {}
+            1 => stack.push(big.live[0]),
+            _ => {
+                self.arrange(parent, kids, big);
+                stack.extend(big.live.iter().rev());
             }
         }
-        if scratch.len() <= next.len() {
-            scratch.push(Scratch::default());
+    }
+
+    /// [`View::push_children`] for at most [`SMALL`] children, on the stack: each taken child is
+    /// the least key among those whose predecessors are all taken (or among all left, on a cycle),
+    /// found by scanning masks of predecessors.
+    fn push_few(&self, parent: Option<u32>, kids: std::ops::Range<u32>, stack: &mut Vec<u32>) {
+        let state = &self.state[kids.start as usize..kids.end as usize];
+        let mut found = state.iter().enumerate().filter(|(_, &s)| s != OFF);
+        match (found.next(), found.next()) {
+            (None, _) => return,
+            (Some((k, _)), None) => return stack.push(kids.start + k as u32),
+            _ => {}
         }
-        let s = &mut scratch[next.len()];
-        s.live.clear();
-        s.live.extend(kids.clone().filter(|&c| state[c as usize] != OFF));
-        self.arrange(parent, kids, s);
-        next.push(0);
+        let mut live = [0u32; SMALL];
+        let mut local = [u8::MAX; SMALL];
+        let mut n = 0;
+        for (k, &s) in state.iter().enumerate() {
+            if s != OFF {
+                local[k] = n as u8;
+                live[n] = kids.start + k as u32;
+                n += 1;
+            }
+        }
+        let mut before = [0u32; SMALL];
+        let range = self.planes.range(parent);
+        for (e, &normal) in self.planes.entries[range.clone()].iter().zip(&self.normals[range]) {
+            let (Some(&a), Some(&b)) = (local.get(e.first as usize), local.get(e.second as usize)) else { continue };
+            if a == u8::MAX || b == u8::MAX {
+                continue;
+            }
+            match e.decide_with(normal, self.eye) {
+                Decision::FirstBeforeSecond => before[b as usize] |= 1 << a,
+                Decision::SecondBeforeFirst => before[a as usize] |= 1 << b,
+                Decision::Undecided => {}
+            }
+        }
+        let mut keys = [Key(0.0, 0); SMALL];
+        for k in 0..n {
+            keys[k] = Key(key(self.boxes[live[k] as usize], self.key_eye), live[k]);
+        }
+        let mut order = [0u32; SMALL];
+        let mut done = 0u32;
+        for slot in order.iter_mut().take(n) {
+            let (mut ready, mut any) = (usize::MAX, usize::MAX);
+            for k in 0..n {
+                if done & (1 << k) != 0 {
+                    continue;
+                }
+                if any == usize::MAX || keys[k] < keys[any] {
+                    any = k;
+                }
+                if before[k] & !done == 0 && (ready == usize::MAX || keys[k] < keys[ready]) {
+                    ready = k;
+                }
+            }
+            let k = if ready == usize::MAX { any } else { ready };
+            done |= 1 << k;
+            *slot = live[k];
+        }
+        stack.extend(order[..n].iter().rev());
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
