@@ -33,12 +33,12 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a PLY file that an in-core build would not fit in `memory`
+    /// Partitioned when the input is a PLY or OBJ file that an in-core build would not fit in `memory`
     /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in memory.
     Auto,
     /// Always in memory.
     InCore,
-    /// Always partitioned (PLY input, format 2).
+    /// Always partitioned (PLY or OBJ input, format 2).
     Partitioned,
 }
 
@@ -104,35 +104,52 @@ pub struct Converted {
 
 /// The partitioned build's budget when it is the one to run, or `None` for the in-core build.
 fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions) -> Result<Option<crate::partition::Budget>> {
+    use crate::partition::{declared, IN_CORE_BYTES_PER_FACE};
     let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
     let budget = || {
         let mut b = crate::partition::Budget::new(memory);
         b.temp = opts.temp.clone();
         b
     };
-    let faces = crate::partition::streamable(input);
     match opts.build {
         Build::InCore => Ok(None),
         Build::Auto => {
-            let plain = import.format.is_none() && opts.encoding == Encoding::V2;
-            Ok(faces.filter(|&f| plain && f.saturating_mul(crate::partition::IN_CORE_BYTES_PER_FACE) > memory).map(|_| budget()))
+            if import.format.is_some() || opts.encoding != Encoding::V2 {
+                return Ok(None);
+            }
+            // A text file makes at most one triangle per two bytes: small ones fit without a look.
+            let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
+            if (size / 2).saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory {
+                return Ok(None);
+            }
+            let fits =
+                |d: &crate::import::stream::Declared| d.refused.is_some() || d.triangles.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
+            Ok(match declared(input) {
+                Some(Ok(d)) if !fits(&d) => Some(budget()),
+                _ => None,
+            })
         }
         Build::Partitioned if opts.encoding != Encoding::V2 => {
             Err(crate::error::Error::invalid(input, None, "the partitioned build writes format 2 only"))
         }
-        Build::Partitioned if faces.is_none() && crate::import::ply::declared(input).is_ok_and(|d| d.textured) => {
-            Err(crate::error::Error::invalid(
-                input,
-                None,
-                "the partitioned build does not carry texture coordinates or images yet; convert this one in memory (--in-core)",
-            ))
-        }
-        Build::Partitioned if faces.is_none() || import.format.is_some() => Err(crate::error::Error::invalid(
+        Build::Partitioned if import.format.is_some() => Err(crate::error::Error::invalid(
             input,
             None,
-            "the partitioned build reads PLY files; convert this one in memory (without --partitioned)",
+            "the partitioned build picks the reader by the file's extension; convert without --format",
         )),
-        Build::Partitioned => Ok(Some(budget())),
+        Build::Partitioned => match declared(input) {
+            None => Err(crate::error::Error::invalid(
+                input,
+                None,
+                format!(
+                    "the partitioned build reads {} files; convert this one in memory (without --partitioned)",
+                    crate::import::Format::streaming_list()
+                ),
+            )),
+            Some(Ok(crate::import::stream::Declared { refused: Some(why), .. })) => Err(crate::error::Error::invalid(input, None, why)),
+            Some(Err(e)) => Err(e),
+            Some(Ok(_)) => Ok(Some(budget())),
+        },
     }
 }
 

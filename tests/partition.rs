@@ -115,9 +115,9 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
     std::fs::create_dir_all(&work).unwrap();
     let out = temp("bad.strata");
 
-    // Not a PLY file.
-    let e = convert(&fixture("cube.obj"), &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
-    assert!(e.contains("reads PLY"), "{e}");
+    // A format without a streaming reader.
+    let e = convert(&fixture("two_materials.glb"), &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("reads OBJ and PLY"), "{e}");
 
     // A binary PLY cut inside its faces.
     let bytes = std::fs::read(fixture("noisy_sphere.ply")).unwrap();
@@ -138,6 +138,103 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
     assert!(!out.exists(), "an output was left");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
     for p in [cut, wild] {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(&work);
+}
+
+/// The noisy sphere written as OBJ (positions, per-corner normals).
+fn sphere_obj(name: &str) -> PathBuf {
+    let mesh = strata::import(&fixture("noisy_sphere.ply"), None).expect("import").mesh;
+    let obj = temp(name);
+    strata::export::obj::write(&obj, &mesh).expect("write OBJ");
+    obj
+}
+
+#[test]
+fn an_obj_file_streams_to_the_same_file_as_its_ply() {
+    let work = temp("obj-work");
+    std::fs::create_dir_all(&work).unwrap();
+    let obj = sphere_obj("sphere.obj");
+    let (from_obj, from_ply) = (temp("from-obj.strata"), temp("from-ply.strata"));
+    convert(&obj, &Default::default(), &from_obj, &partitioned(&work), &mut Silent).expect("partitioned OBJ");
+    convert(&fixture("noisy_sphere.ply"), &Default::default(), &from_ply, &partitioned(&work), &mut Silent).expect("partitioned PLY");
+    assert!(strata::format::verify_path(&from_obj).is_sound(), "the file from OBJ does not verify");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+    let rd = Reader::open_path(&from_obj).unwrap();
+    assert!(rd.header().attributes.normals, "the OBJ's normals are carried");
+    assert!(rd.levels().len() >= 4 && rd.levels()[0].faces == 99_372, "{} levels", rd.levels().len());
+    // The same positions, normals and faces in the same order: the same build, byte for byte.
+    assert!(std::fs::read(&from_obj).unwrap() == std::fs::read(&from_ply).unwrap(), "OBJ and PLY streams built different files");
+    for p in [obj, from_obj, from_ply] {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(&work);
+}
+
+#[test]
+fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
+    let work = temp("objidx-work");
+    std::fs::create_dir_all(&work).unwrap();
+    // A 40 × 40 grid of quads, faces written between the vertices they use: every other row
+    // by negative indices, and the last row's faces before the vertices they name.
+    let n = 40;
+    let mut text = String::from("# grid\n");
+    let id = |i: usize, j: usize| i * (n + 1) + j + 1;
+    for i in 0..=n {
+        for j in 0..=n {
+            text += &format!("v {} {} {}\n", j as f32 / n as f32, i as f32 / n as f32, ((i * j) as f32 * 0.01).sin() * 0.05);
+        }
+        if i == n - 1 {
+            // Forward: row n - 1's faces use row n's vertices, defined below.
+            for j in 0..n {
+                text += &format!("f {} {} {} {}\n", id(i, j), id(i, j + 1), id(i + 1, j + 1), id(i + 1, j));
+            }
+        }
+        if i > 0 && i < n {
+            let seen = (i + 1) * (n + 1);
+            for j in 0..n {
+                let rel = |v: usize| v as i64 - seen as i64 - 1;
+                let q = [id(i - 1, j), id(i - 1, j + 1), id(i, j + 1), id(i, j)];
+                if i % 2 == 0 {
+                    text += &format!("f {} {} {} {}\n", rel(q[0]), rel(q[1]), rel(q[2]), rel(q[3]));
+                } else {
+                    text += &format!("f {} {} {} {}\n", q[0], q[1], q[2], q[3]);
+                }
+            }
+        }
+    }
+    let obj = temp("grid.obj");
+    std::fs::write(&obj, &text).unwrap();
+    let (part, core) = (temp("grid-part.strata"), temp("grid-core.strata"));
+    let opts = ConvertOptions { build: Build::Partitioned, memory: 16 << 20, temp: Some(work.clone()), ..ConvertOptions::default() };
+    convert(&obj, &Default::default(), &part, &opts, &mut Silent).expect("partitioned OBJ");
+    convert(&obj, &Default::default(), &core, &ConvertOptions { build: Build::InCore, ..ConvertOptions::default() }, &mut Silent)
+        .expect("in-core OBJ");
+    let (rp, rc) = (Reader::open_path(&part).unwrap(), Reader::open_path(&core).unwrap());
+    assert_eq!(rp.levels()[0].faces, 2 * (n * n) as u64);
+    assert_eq!(rp.levels()[0].faces, rc.levels()[0].faces);
+    assert_eq!(rp.header().input_vertices, rc.header().input_vertices);
+    // The same level-0 surface: every edge of the grid's interior has two faces, its border one.
+    let edges = level_edges(&rp, 0);
+    assert_eq!(edges.values().filter(|f| f.len() == 1).count(), 4 * n, "the grid's border");
+    assert!(edges.values().all(|f| f.len() <= 2), "a non-manifold edge");
+
+    // Bad lines are named, and leave no output.
+    std::fs::remove_file(&part).unwrap();
+    for (body, want) in [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "line 4: face vertex index 4 out of range: the file has 3 vertices"),
+        ("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", "line 3: relative vertex index -3 reaches before the first of 2 so far"),
+        ("v 0 0 0\nv 1 zero 0\n", "line 2: v: 'zero' is not a number"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1 2 3\n", "texture coordinates"),
+    ] {
+        std::fs::write(&obj, body).unwrap();
+        let e = convert(&obj, &Default::default(), &part, &opts, &mut Silent).unwrap_err().to_string();
+        assert!(e.contains("grid.obj") && e.contains(want), "{e}");
+    }
+    assert!(!part.exists(), "a bad input left an output");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+    for p in [obj, part, core] {
         let _ = std::fs::remove_file(p);
     }
     let _ = std::fs::remove_dir(&work);

@@ -43,14 +43,14 @@ pub struct Args {
     /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
     #[arg(long, default_value_t = 60.0)]
     pub crease_angle: f32,
-    /// Memory to stay within (bytes, or with K, M, G: 512M, 1G): a PLY file whose in-core build
+    /// Memory to stay within (bytes, or with K, M, G: 512M, 1G): a PLY or OBJ file whose in-core build
     /// would need more is built partitioned, in cells on disk. Default: half of this machine's.
     #[arg(long, value_parser = parse_size)]
     pub memory: Option<u64>,
     /// Folder for the partitioned build's cell files (default: the system's temporary folder).
     #[arg(long)]
     pub temp: Option<PathBuf>,
-    /// Build partitioned (PLY input) whatever its size.
+    /// Build partitioned (PLY or OBJ input) whatever its size.
     #[arg(long, conflicts_with = "in_core")]
     pub partitioned: bool,
     /// Build in memory whatever the input's size.

@@ -14,7 +14,9 @@ pub mod heightfield;
 pub mod heightmap_png;
 pub mod hgt;
 pub mod obj;
+mod obj_stream;
 pub mod ply;
+pub mod stream;
 
 use crate::error::{Error, Result};
 use crate::format::Georef;
@@ -34,17 +36,29 @@ pub struct Importer {
     /// Lower-case, without the dot.
     pub extensions: &'static [&'static str],
     pub read: fn(&Path, &ImportOptions, &mut Vec<String>) -> Result<Raw>,
+    /// Its streaming reader, for the partitioned build, if it has one.
+    pub stream: Option<stream::Streaming>,
 }
 
 /// Every format strata reads.
 pub static IMPORTERS: &[Importer] = &[
-    Importer { name: "obj", extensions: &["obj"], read: obj::read },
-    Importer { name: "gltf", extensions: &["gltf", "glb"], read: gltf::read },
-    Importer { name: "ply", extensions: &["ply"], read: ply::read },
-    Importer { name: "asc", extensions: &["asc"], read: asc::read },
-    Importer { name: "geotiff", extensions: &["tif", "tiff"], read: geotiff::read },
-    Importer { name: "hgt", extensions: &["hgt"], read: hgt::read },
-    Importer { name: "png", extensions: &["png"], read: heightmap_png::read },
+    Importer {
+        name: "obj",
+        extensions: &["obj"],
+        read: obj::read,
+        stream: Some(stream::Streaming { declared: obj_stream::declared, stream: obj_stream::stream }),
+    },
+    Importer { name: "gltf", extensions: &["gltf", "glb"], read: gltf::read, stream: None },
+    Importer {
+        name: "ply",
+        extensions: &["ply"],
+        read: ply::read,
+        stream: Some(stream::Streaming { declared: ply::streaming_declared, stream: ply::stream }),
+    },
+    Importer { name: "asc", extensions: &["asc"], read: asc::read, stream: None },
+    Importer { name: "geotiff", extensions: &["tif", "tiff"], read: geotiff::read, stream: None },
+    Importer { name: "hgt", extensions: &["hgt"], read: hgt::read, stream: None },
+    Importer { name: "png", extensions: &["png"], read: heightmap_png::read, stream: None },
 ];
 
 /// What a format's reader makes of a file: the raw mesh (positions not yet welded, corner arrays
@@ -78,6 +92,20 @@ impl Format {
 
     pub fn name(self) -> &'static str {
         self.0.name
+    }
+
+    /// Its streaming reader, for the partitioned build, if it has one.
+    pub fn streaming(self) -> Option<&'static stream::Streaming> {
+        self.0.stream.as_ref()
+    }
+
+    /// The names of the formats that have a streaming reader, for messages: `OBJ and PLY`.
+    pub fn streaming_list() -> String {
+        let names: Vec<String> = IMPORTERS.iter().filter(|i| i.stream.is_some()).map(|i| i.name.to_ascii_uppercase()).collect();
+        match names.split_last() {
+            Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+            _ => names.join(""),
+        }
     }
 
     /// The formats' extensions as a list for messages: `.obj, .gltf, .glb or .ply`.

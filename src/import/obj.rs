@@ -445,7 +445,7 @@ fn material_from(t: &tobj::Material) -> Material {
     }
 }
 
-fn unit_to_u8(c: f32) -> u8 {
+pub(super) fn unit_to_u8(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 

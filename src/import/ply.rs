@@ -12,6 +12,7 @@
 //! its record is an error naming the line, and so is a last value that runs into the end of the
 //! file instead of ending in a line end or blank (the file was cut, perhaps inside that number).
 
+use super::stream::{FaceSink, Faces, Vertices, BATCH};
 use super::{ImportOptions, Raw};
 use crate::error::{Error, Location, Result};
 use crate::format::{MapKind, TextureSlot, Wrap};
@@ -55,13 +56,6 @@ fn parse(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Mesh> 
         Encoding::Big => reader.run(&header, &plan, &mut Binary::<BigEndian>::new(body, header.body_start))?,
     }
     Ok(reader.finish(&plan, &header.texture_files, warnings))
-}
-
-/// A PLY file's vertex arrays, per vertex (empty when absent), as [`stream`] holds them.
-pub struct Vertices<'a> {
-    pub positions: &'a [Vec3],
-    pub normals: &'a [Vec3],
-    pub colors: &'a [[u8; 4]],
 }
 
 /// What a PLY header declares.
@@ -118,6 +112,13 @@ pub fn declared(path: &Path) -> Result<Declared> {
     Ok(Declared { vertices, faces, binary, textured, triangles })
 }
 
+/// [`declared`] as the partitioned build asks it ([`super::stream::Streaming`]).
+pub fn streaming_declared(path: &Path) -> Result<super::stream::Declared> {
+    let d = declared(path)?;
+    let refused = d.textured.then(|| super::stream::refused("the file has texture coordinates or names texture images"));
+    Ok(super::stream::Declared { triangles: d.triangles, refused })
+}
+
 fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)> {
     use std::io::Read as _;
     let (file, len) = super::open_regular(path)?;
@@ -139,13 +140,7 @@ pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> 
     let (header, len) = read_header(path, warnings)?;
     check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
     let plan = Plan::new(path, &header)?;
-    let refuse = |what: &str| {
-        Err(Error::invalid(
-            path,
-            None,
-            format!("{what}: the partitioned build does not carry them yet; convert without --memory, in memory"),
-        ))
-    };
+    let refuse = |what: &str| Err(Error::invalid(path, None, super::stream::refused(what)));
     if !header.texture_files.is_empty() {
         return refuse("the file names texture images");
     }
@@ -1144,12 +1139,6 @@ struct Reader<'p> {
     sink: Option<&'p mut FaceSink<'p>>,
 }
 
-/// Where [`stream`] hands triangles, with the vertex arrays they index.
-pub type FaceSink<'a> = dyn FnMut(&Vertices, &[[u32; 3]]) -> Result<()> + 'a;
-
-/// Triangles per batch handed to a [`FaceSink`].
-const BATCH: usize = 1 << 16;
-
 impl<'p> Reader<'p> {
     fn new(path: &'p Path, plan: &Plan) -> Self {
         Reader {
@@ -1171,7 +1160,7 @@ impl<'p> Reader<'p> {
     fn flush(&mut self) -> Result<()> {
         if let Some(sink) = self.sink.as_mut() {
             let v = Vertices { positions: &self.positions, normals: &self.normals, colors: &self.colors };
-            sink(&v, &self.triangles)?;
+            sink(&v, &Faces { triangles: &self.triangles, normals: &[] })?;
             self.triangles.clear();
         }
         Ok(())
@@ -1906,7 +1895,7 @@ mod tests {
         let r = stream(
             &path,
             &mut |_, t| {
-                tris.extend_from_slice(t);
+                tris.extend_from_slice(t.triangles);
                 Ok(())
             },
             &mut Vec::new(),

@@ -18,7 +18,8 @@ mod work;
 
 use crate::error::{Error, Result};
 use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
-use crate::import::ply;
+use crate::import::stream::{Declared, Faces, Streaming, Vertices};
+use crate::import::Format;
 use crate::pipeline::{ConvertOptions, Converted, Normals, Progress, StageTimes};
 use cells::{Cells, Layout, Spool};
 use glam::Vec3;
@@ -80,12 +81,14 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
     (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
 }
 
-/// Whether `input` is a file the partitioned build streams (PLY without textures), and about how
-/// many triangles it declares.
-pub fn streamable(input: &Path) -> Option<u64> {
-    let is_ply = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    let d = is_ply.then(|| ply::declared(input).ok()).flatten()?;
-    (!d.textured).then_some(d.triangles)
+/// The streaming reader of `input`'s format (by its extension), if it has one.
+pub fn streaming(input: &Path) -> Option<&'static Streaming> {
+    Format::from_path(input)?.streaming()
+}
+
+/// What `input` declares, when its format has a streaming reader.
+pub fn declared(input: &Path) -> Option<Result<Declared>> {
+    streaming(input).map(|s| (s.declared)(input))
 }
 
 /// Most cells: node keys give a piece 12 bits, and each cell holds a file open while the input
@@ -98,7 +101,8 @@ pub fn cell_levels(faces: u64) -> usize {
     (((faces as f64).sqrt() / 24.0).log2().floor() as i64).clamp(1, 12) as usize
 }
 
-/// Convert the PLY file `input` into `output` by the partitioned build.
+/// Convert `input` (a format with a streaming reader: PLY, OBJ) into `output` by the partitioned
+/// build.
 pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budget, progress: &mut dyn Progress) -> Result<Converted> {
     let mut times = StageTimes::default();
     let mut clock = Instant::now();
@@ -110,7 +114,12 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     crate::atomic::check_output(output)?;
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
-    let declared = ply::declared(input)?;
+    let reader = streaming(input)
+        .ok_or_else(|| Error::invalid(input, None, format!("the partitioned build reads {} files", Format::streaming_list())))?;
+    let declared = (reader.declared)(input)?;
+    if let Some(why) = declared.refused {
+        return Err(Error::invalid(input, None, why));
+    }
     let triangles = declared.triangles.max(1);
     let cell_faces = cell_faces(budget, triangles);
     let cells = triangles.div_ceil(cell_faces);
@@ -134,14 +143,14 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     // their sums are kept per input vertex and each cell looks its vertices up later.
     progress.stage("distribute", 0);
     let mut state: Option<Distribute> = None;
-    ply::stream(
+    (reader.stream)(
         input,
-        &mut |v, tris| {
+        &mut |v, faces| {
             let d = match &mut state {
                 Some(d) => d,
-                None => state.insert(Distribute::new(v, triangles, cell_faces, opts.normals, temp.path())?),
+                None => state.insert(Distribute::new(v, faces, triangles, cell_faces, opts.normals, temp.path())?),
             };
-            d.push(v, tris)
+            d.push(v, faces)
         },
         &mut warnings,
     )?;
@@ -227,11 +236,12 @@ struct Distribute {
 }
 
 impl Distribute {
-    fn new(v: &ply::Vertices, faces: u64, cell_faces: u64, normals: Normals, temp: &Path) -> Result<Distribute> {
+    /// The state for the vertices `v` and a first batch like `first`, of `faces` faces in all.
+    fn new(v: &Vertices, first: &Faces, faces: u64, cell_faces: u64, normals: Normals, temp: &Path) -> Result<Distribute> {
         let cells = Cells::split(v.positions, faces, cell_faces);
-        let has_normals = !v.normals.is_empty() && normals != Normals::None;
-        let layout = Layout { normals: has_normals, colors: !v.colors.is_empty() };
-        let compute = v.normals.is_empty() && matches!(normals, Normals::Auto { .. });
+        let given = !v.normals.is_empty() || !first.normals.is_empty();
+        let layout = Layout { normals: given && normals != Normals::None, colors: !v.colors.is_empty() };
+        let compute = !given && matches!(normals, Normals::Auto { .. });
         let spool = Spool::create(temp, cells.count, layout)?;
         let n = v.positions.len();
         let sums = compute.then(|| vec![Vec3::ZERO; n]);
@@ -247,15 +257,19 @@ impl Distribute {
         })
     }
 
-    fn push(&mut self, v: &ply::Vertices, tris: &[[u32; 3]]) -> Result<()> {
-        for t in tris {
+    fn push(&mut self, v: &Vertices, faces: &Faces) -> Result<()> {
+        for (f, t) in faces.triangles.iter().enumerate() {
             let p = t.map(|i| v.positions[i as usize]);
             for q in p {
                 self.lo = self.lo.min(q);
                 self.hi = self.hi.max(q);
             }
             let cell = self.cells.of((p[0] + p[1] + p[2]) / 3.0);
-            let n = if self.layout.normals { t.map(|i| v.normals[i as usize]) } else { [Vec3::ZERO; 3] };
+            let n = match faces.normals.get(f) {
+                _ if !self.layout.normals => [Vec3::ZERO; 3],
+                Some(&corners) => corners,
+                None => t.map(|i| v.normals[i as usize]),
+            };
             let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
             let welded = t.map(|i| self.weld[i as usize]);
             if let Some(sums) = &mut self.sums {
