@@ -1,7 +1,8 @@
 //! The partitioned build against the in-core build, side by side in one run (issue 14): wall time
 //! and peak memory of `strata convert` (a child process under `/usr/bin/time`), throughput, each
 //! level's sampled distance to the input, the culling cost measured on the file, node sizes
-//! (largest node of any level over level 0's median) and the top level's faces.
+//! (largest node of any level over level 0's median), the top level's faces and the time from
+//! opening the file to its first frame (`strata stream`).
 //!
 //! `cargo bench --bench partition [-- --large FACES ...] [-- --memory 1G]`; without arguments the
 //! CT head of ../shared/meshes (partitioned at a budget that makes it several cells) and the
@@ -101,10 +102,23 @@ fn node_sizes(rd: &Reader<std::fs::File>) -> (f64, u64) {
     (largest / median, rd.levels().last().map_or(0, |l| l.faces))
 }
 
+/// Milliseconds from opening `file` to its first frame (the top level read and drawn), by
+/// `strata stream` in a fresh process, the least of three runs.
+fn first_frame_ms(file: &Path) -> Option<f64> {
+    (0..3)
+        .filter_map(|_| {
+            let out = Command::new(env!("CARGO_BIN_EXE_strata")).arg("stream").arg(file).args(["--orbit", "1"]).output().ok()?;
+            let text = String::from_utf8_lossy(&out.stdout).into_owned();
+            let line = text.lines().find(|l| l.contains("first frame ready"))?;
+            line.split_whitespace().nth(3)?.parse::<f64>().ok()
+        })
+        .min_by(f64::total_cmp)
+}
+
 fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &Path, Run)]) {
     println!("\n## {name} ({faces} input faces)");
-    println!("| build | s | M faces/s | peak MB | levels | top faces | largest node / level-0 median | culling cost |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| build | s | M faces/s | peak MB | levels | top faces | largest node / level-0 median | culling cost | first frame ms |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let mut distances: Vec<Vec<f32>> = Vec::new();
     for (build, file, run) in runs {
         let rd = Reader::open_path(file).expect("open");
@@ -112,11 +126,12 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
         let (ratio, top) = node_sizes(&rd);
         let peak = run.peak_kb.map_or("–".to_string(), |k| format!("{:.0}", k as f64 / 1024.0));
         println!(
-            "| {build} | {:.2} | {:.3} | {peak} | {} | {top} | {ratio:.1} | {:.4} |",
+            "| {build} | {:.2} | {:.3} | {peak} | {} | {top} | {ratio:.1} | {:.4} | {} |",
             run.seconds,
             faces as f64 / run.seconds / 1e6,
             rd.levels().len(),
-            culling_cost(&rd, 64)
+            culling_cost(&rd, 64),
+            first_frame_ms(file).map_or("–".to_string(), |ms| format!("{ms:.1}"))
         );
         if let Some(m) = input {
             distances.push(
