@@ -102,54 +102,65 @@ pub struct Converted {
     pub warnings: Vec<String>,
 }
 
-/// The partitioned build's budget when it is the one to run, or `None` for the in-core build.
-fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions) -> Result<Option<crate::partition::Budget>> {
-    use crate::partition::{declared, IN_CORE_BYTES_PER_FACE};
+/// What the partitioned build needs when it is the one to run: its budget, the input's streaming
+/// reader and what that says of the file.
+type Partitioned = (crate::partition::Budget, &'static crate::import::stream::Streaming, crate::import::stream::Declared);
+
+/// Which build runs (see [`Build`]): `None` for the in-core build, with a warning in `warnings`
+/// when that is chosen for a file the partitioned build cannot take and memory may not hold.
+fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warnings: &mut Vec<String>) -> Result<Option<Partitioned>> {
+    use crate::error::Error;
+    use crate::partition::IN_CORE_BYTES_PER_FACE;
     let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
     let budget = || {
         let mut b = crate::partition::Budget::new(memory);
         b.temp = opts.temp.clone();
         b
     };
+    let reader = crate::partition::streaming(input, import.format);
     match opts.build {
         Build::InCore => Ok(None),
         Build::Auto => {
-            if import.format.is_some() || opts.encoding != Encoding::V2 {
-                return Ok(None);
-            }
-            // A text file makes at most one triangle per two bytes: small ones fit without a look.
+            let Some(reader) = reader.filter(|_| opts.encoding == Encoding::V2) else { return Ok(None) };
+            // No format makes more than one triangle per byte: small files fit without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
-            if (size / 2).saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory {
+            if size.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory {
                 return Ok(None);
             }
-            let fits =
-                |d: &crate::import::stream::Declared| d.refused.is_some() || d.triangles.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
-            Ok(match declared(input) {
-                Some(Ok(d)) if !fits(&d) => Some(budget()),
-                _ => None,
+            Ok(match (reader.declared)(input) {
+                Ok(d) if d.triangles.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory => None,
+                Ok(crate::import::stream::Declared { triangles, refused: Some(why) }) => {
+                    warnings.push(format!(
+                        "about {triangles} triangles need about {} MiB in memory, more than the {} MiB of --memory, but {why}; built in memory",
+                        triangles.saturating_mul(IN_CORE_BYTES_PER_FACE) >> 20,
+                        memory >> 20
+                    ));
+                    None
+                }
+                Ok(d) => Some((budget(), reader, d)),
+                Err(_) => None,
             })
         }
         Build::Partitioned if opts.encoding != Encoding::V2 => {
-            Err(crate::error::Error::invalid(input, None, "the partitioned build writes format 2 only"))
+            Err(Error::invalid(input, None, "the partitioned build writes format 2 only"))
         }
-        Build::Partitioned if import.format.is_some() => Err(crate::error::Error::invalid(
-            input,
-            None,
-            "the partitioned build picks the reader by the file's extension; convert without --format",
-        )),
-        Build::Partitioned => match declared(input) {
-            None => Err(crate::error::Error::invalid(
-                input,
-                None,
-                format!(
-                    "the partitioned build reads {} files; convert this one in memory (without --partitioned)",
-                    crate::import::Format::streaming_list()
-                ),
-            )),
-            Some(Ok(crate::import::stream::Declared { refused: Some(why), .. })) => Err(crate::error::Error::invalid(input, None, why)),
-            Some(Err(e)) => Err(e),
-            Some(Ok(_)) => Ok(Some(budget())),
-        },
+        Build::Partitioned => {
+            let Some(reader) = reader else {
+                return Err(Error::invalid(
+                    input,
+                    None,
+                    format!(
+                        "the partitioned build reads {} files; convert this one in memory (without --partitioned)",
+                        crate::import::Format::streaming_list()
+                    ),
+                ));
+            };
+            let d = (reader.declared)(input)?;
+            match d.refused {
+                Some(why) => Err(Error::invalid(input, None, format!("{why}; convert it in memory (without --partitioned)"))),
+                None => Ok(Some((budget(), reader, d))),
+            }
+        }
     }
 }
 
@@ -169,8 +180,9 @@ pub fn convert(
         clock = Instant::now();
     };
 
-    if let Some(budget) = partitioned(input, import, opts)? {
-        return crate::partition::convert(input, output, opts, &budget, progress);
+    let mut choice_warnings = Vec::new();
+    if let Some((budget, reader, declared)) = partitioned(input, import, opts, &mut choice_warnings)? {
+        return crate::partition::convert(input, reader, declared, output, opts, &budget, progress);
     }
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
@@ -217,5 +229,6 @@ pub fn convert(
     let summary = write::write(output, &h, &lv, &write_opts)?;
     lap(&mut times.write_ms);
 
-    Ok(Converted { summary, times, warnings: imported.warnings })
+    choice_warnings.extend(imported.warnings);
+    Ok(Converted { summary, times, warnings: choice_warnings })
 }

@@ -227,6 +227,10 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
         ("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", "line 3: relative vertex index -3 reaches before the first of 2 so far"),
         ("v 0 0 0\nv 1 zero 0\n", "line 2: v: 'zero' is not a number"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1 2 3\n", "texture coordinates"),
+        ("v 0 0 0\nv 1000000010 0 0\nv 0 1 0\nf 1 2 3\n", "line 2: coordinate 1.00000001e9 exceeds"),
+        ("v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r", "line 1: v has 15 numbers"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf //1 2 3\n", "line 4: face vertex '//1' has no position index"),
+        ("", "the file is empty"),
     ] {
         std::fs::write(&obj, body).unwrap();
         let e = convert(&obj, &Default::default(), &part, &opts, &mut Silent).unwrap_err().to_string();
@@ -235,6 +239,27 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
     assert!(!part.exists(), "a bad input left an output");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
     for p in [obj, part, core] {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(&work);
+}
+
+#[test]
+fn auto_builds_an_obj_partitioned_only_when_it_would_not_fit() {
+    let work = temp("auto-work");
+    std::fs::create_dir_all(&work).unwrap();
+    let obj = sphere_obj("auto.obj");
+    let (auto_small, forced, auto_large) = (temp("auto-small.strata"), temp("auto-forced.strata"), temp("auto-large.strata"));
+    let with = |build: Build, memory: u64| ConvertOptions { build, memory, temp: Some(work.clone()), ..ConvertOptions::default() };
+    // 99k faces need about 45 MB in core: 16 MB sends the file to the partitioned build.
+    convert(&obj, &Default::default(), &auto_small, &with(Build::Auto, 16 << 20), &mut Silent).expect("auto, 16 MB");
+    convert(&obj, &Default::default(), &forced, &with(Build::Partitioned, 16 << 20), &mut Silent).expect("partitioned");
+    convert(&obj, &Default::default(), &auto_large, &with(Build::Auto, 1 << 30), &mut Silent).expect("auto, 1 GB");
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    assert!(bytes(&auto_small) == bytes(&forced), "Auto under 16 MB did not build partitioned");
+    assert!(bytes(&auto_large) != bytes(&forced), "Auto under 1 GB built partitioned");
+    assert_eq!(Reader::open_path(&auto_large).unwrap().levels()[0].faces, 99_372);
+    for p in [obj, auto_small, forced, auto_large] {
         let _ = std::fs::remove_file(p);
     }
     let _ = std::fs::remove_dir(&work);

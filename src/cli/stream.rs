@@ -198,7 +198,7 @@ pub fn run(a: Args) -> Result<()> {
         Ok(())
     })?;
     for w in streamer.take_warnings() {
-        eprintln!("warning: {}: {w}", a.file.display());
+        eprintln!("warning: {w}");
     }
     if let Some(out) = &a.export_cut {
         let mesh = streamer.front_mesh()?;

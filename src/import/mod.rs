@@ -210,7 +210,7 @@ fn read_file(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-const EMPTY: &str = "the file is empty (0 bytes)";
+pub(super) const EMPTY: &str = "the file is empty (0 bytes)";
 
 /// If `bytes` look like UTF-16 text, an error message saying so: they start with a UTF-16 byte
 /// order mark, or have NUL in every other byte, as ASCII text saved as UTF-16 without a mark does.

@@ -3,7 +3,9 @@
 //! faces on in batches, fan-triangulated as the whole-file reader does (`obj.rs`), their indices
 //! resolved (positive ones may point further down the file, negative ones count back from their
 //! line) and checked, each corner's normal with it. Errors name the line. Texture coordinates and
-//! materials (`usemtl`) are refused: the partitioned build does not carry them.
+//! materials (`usemtl`) are refused: the partitioned build does not carry them. Vertices keep the
+//! file's order; the whole-file reader's tobj numbers them per object (`o`, `g`), so for a file of
+//! several objects the two builds number the same surface's vertices differently.
 
 use super::stream::{refused, Declared, FaceSink, Faces, Vertices, BATCH};
 use crate::error::{Error, Result};
@@ -12,25 +14,37 @@ use glam::Vec3;
 use std::io::BufRead;
 use std::path::Path;
 
-/// Call `each` with every line of `path` (1-based number, bytes without the line end).
+/// Longest line read: a polygon of a million corners fits.
+const MAX_LINE: u64 = 16 << 20;
+
+/// Call `each` with every line of `path` (1-based number, bytes without the line end), after the
+/// checks the whole-file reader makes first: not empty, not UTF-16.
 fn lines(path: &Path, mut each: impl FnMut(usize, &[u8]) -> Result<()>) -> Result<()> {
-    let (file, _) = super::open_regular(path)?;
+    use std::io::Read as _;
+    let (file, len) = super::open_regular(path)?;
+    if len == 0 {
+        return Err(Error::invalid(path, None, super::EMPTY));
+    }
     let mut file = std::io::BufReader::with_capacity(1 << 20, file);
+    let head = file.fill_buf().map_err(|e| Error::io(path, e))?;
+    if let Some(why) = super::utf16_hint(&head[..head.len().min(1024)]) {
+        return Err(Error::invalid(path, None, why));
+    }
     let mut line = Vec::with_capacity(256);
     let mut n = 0;
     loop {
         line.clear();
-        if file.read_until(b'\n', &mut line).map_err(|e| Error::io(path, e))? == 0 {
+        let read = (&mut file).take(MAX_LINE + 1).read_until(b'\n', &mut line).map_err(|e| Error::io(path, e))?;
+        if read == 0 {
             return Ok(());
         }
         n += 1;
+        if read as u64 > MAX_LINE {
+            let cr = if line.contains(&b'\r') { " (its lines may end in CR alone, as old Mac files do)" } else { "" };
+            return Err(Error::at_line(path, n, format!("a line longer than {} MiB{cr}", MAX_LINE >> 20)));
+        }
         while line.last().is_some_and(|&b| b == b'\n' || b == b'\r') {
             line.pop();
-        }
-        if n == 1 {
-            if let Some(why) = super::utf16_hint(&line) {
-                return Err(Error::invalid(path, None, why));
-            }
         }
         each(n, &line)?;
     }
@@ -45,7 +59,7 @@ fn text(word: &[u8]) -> std::borrow::Cow<'_, str> {
 }
 
 /// One number of a `v`/`vn` line, or what was expected.
-fn number(word: Option<&[u8]>, element: &str, expected: &str) -> std::result::Result<f32, String> {
+fn number<T: std::str::FromStr>(word: Option<&[u8]>, element: &str, expected: &str) -> std::result::Result<T, String> {
     let w = word.ok_or_else(|| format!("{element} needs {expected}"))?;
     std::str::from_utf8(w).ok().and_then(|s| s.parse().ok()).ok_or_else(|| format!("{element}: '{}' is not a number", text(w)))
 }
@@ -73,6 +87,8 @@ struct Held {
     colors: Vec<[u8; 4]>,
     /// Vertices with a color after their coordinates.
     colored: usize,
+    /// Whether a vertex without a color came (then `colors` stops growing).
+    uncolored: bool,
     normals: Vec<Vec3>,
 }
 
@@ -83,38 +99,49 @@ fn first_pass(path: &Path, warnings: &mut Vec<String>) -> Result<Held> {
         let bad = |e: String| Error::at_line(path, n, e);
         match w.next() {
             Some(b"v") => {
+                // Checked in f64 as the whole-file reader checks them, stored as f32 parsed directly
+                // as its reader (tobj) parses them.
+                let xyz = [w.next(), w.next(), w.next()];
                 let mut p = [0f32; 3];
-                for c in &mut p {
-                    *c = number(w.next(), "v", "3 coordinates").map_err(bad)?;
+                let mut check = [0f64; 3];
+                for ((c, k), word) in p.iter_mut().zip(&mut check).zip(xyz) {
+                    *k = number(word, "v", "3 coordinates").map_err(bad)?;
+                    *c = number(word, "v", "3 coordinates").map_err(bad)?;
                 }
-                if let Some(problem) = coordinate_problem(p.map(f64::from)) {
+                if let Some(problem) = coordinate_problem(check) {
                     return Err(bad(problem));
                 }
-                let rest: Vec<&[u8]> = w.collect();
-                match rest[..] {
-                    [] => h.colors.push([0, 0, 0, 255]),
-                    [weight] => {
-                        if number(Some(weight), "v", "a w weight").map_err(bad)? == 0.0 {
+                let rest = [w.next(), w.next(), w.next(), w.next()];
+                match rest {
+                    [None, ..] => h.uncolored = true,
+                    [Some(weight), None, ..] => {
+                        if number::<f32>(Some(weight), "v", "a w weight").map_err(bad)? == 0.0 {
                             return Err(bad("vertex weight w is 0".into()));
                         }
-                        h.colors.push([0, 0, 0, 255]);
+                        h.uncolored = true;
                     }
-                    [r, g, b] => {
+                    [Some(r), Some(g), Some(b), None] => {
                         let mut c = [0u8, 0, 0, 255];
                         for (slot, word) in c.iter_mut().zip([r, g, b]) {
                             *slot = super::obj::unit_to_u8(number(Some(word), "v", "an RGB color").map_err(bad)?);
                         }
-                        h.colors.push(c);
+                        // Colors are kept while every vertex so far has one.
+                        if !h.uncolored {
+                            h.colors.push(c);
+                        }
                         h.colored += 1;
                     }
-                    _ => return Err(bad(format!("v has {} numbers; expected 3, 4 (x y z w) or 6 (x y z r g b)", 3 + rest.len()))),
+                    _ => {
+                        let k = 3 + rest.iter().flatten().count() + w.count();
+                        return Err(bad(format!("v has {k} numbers; expected 3, 4 (x y z w) or 6 (x y z r g b)")));
+                    }
                 }
                 h.positions.push(Vec3::from_array(p));
             }
             Some(b"vn") => {
                 let mut v = [0f32; 3];
                 for c in &mut v {
-                    *c = number(w.next(), "vn", "3 components").map_err(bad)?;
+                    *c = number::<f32>(w.next(), "vn", "3 components").map_err(bad)?;
                 }
                 h.normals.push(Vec3::from_array(v));
             }
@@ -151,7 +178,7 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
     lines(path, |n, line| {
         let mut w = words(line);
         let first = w.next();
-        any_text |= first.is_some();
+        any_text |= !String::from_utf8_lossy(line).trim().is_empty();
         match first {
             Some(b"v") => seen_v += 1,
             Some(b"vn") => seen_vn += 1,
@@ -169,14 +196,15 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
                             format!("face vertex '{}' has more than 3 '/'-separated indices", text(token)),
                         ));
                     }
+                    if p[0].is_none_or(<[u8]>::is_empty) {
+                        return Err(Error::at_line(path, n, format!("face vertex '{}' has no position index", text(token))));
+                    }
                     let mut index = [None::<usize>; 3];
                     for (kind, part) in p.iter().enumerate() {
                         let Some(part) = part.filter(|p| !p.is_empty()) else { continue };
                         index[kind] = Some(resolve(part, kind, seen[kind], totals[kind]).map_err(|e| Error::at_line(path, n, e))?);
                     }
-                    let Some(v) = index[0] else {
-                        return Err(Error::at_line(path, n, format!("face vertex '{}' has no position index", text(token))));
-                    };
+                    let v = index[0].unwrap_or(0);
                     let normal = match index[2] {
                         Some(k) => held.normals[k],
                         None => {

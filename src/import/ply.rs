@@ -115,7 +115,13 @@ pub fn declared(path: &Path) -> Result<Declared> {
 /// [`declared`] as the partitioned build asks it ([`super::stream::Streaming`]).
 pub fn streaming_declared(path: &Path) -> Result<super::stream::Declared> {
     let d = declared(path)?;
-    let refused = d.textured.then(|| super::stream::refused("the file has texture coordinates or names texture images"));
+    let (header, _) = read_header(path, &mut Vec::new())?;
+    let faces_first = Plan::new(path, &header).is_ok_and(|p| p.faces.iter().position(Option::is_some).is_some_and(|f| f < p.vertex));
+    let refused = if d.textured {
+        Some(super::stream::refused("the file has texture coordinates or names texture images"))
+    } else {
+        faces_first.then(|| "its faces come before its vertices, which a stream cannot index".into())
+    };
     Ok(super::stream::Declared { triangles: d.triangles, refused })
 }
 

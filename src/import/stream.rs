@@ -43,7 +43,7 @@ pub struct Streaming {
     pub stream: fn(&Path, &mut FaceSink, &mut Vec<String>) -> Result<()>,
 }
 
-/// The message for what a streaming reader refuses.
+/// Why a streaming reader refuses a file: `what` it has that the partitioned build cannot carry.
 pub fn refused(what: &str) -> String {
-    format!("{what}: the partitioned build does not carry them yet; convert it in memory (without --partitioned)")
+    format!("{what}: the partitioned build does not carry them yet")
 }

@@ -81,14 +81,9 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
     (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
 }
 
-/// The streaming reader of `input`'s format (by its extension), if it has one.
-pub fn streaming(input: &Path) -> Option<&'static Streaming> {
-    Format::from_path(input)?.streaming()
-}
-
-/// What `input` declares, when its format has a streaming reader.
-pub fn declared(input: &Path) -> Option<Result<Declared>> {
-    streaming(input).map(|s| (s.declared)(input))
+/// The streaming reader for `input`: its `format`'s, else its extension's, if that has one.
+pub fn streaming(input: &Path, format: Option<Format>) -> Option<&'static Streaming> {
+    format.or_else(|| Format::from_path(input))?.streaming()
 }
 
 /// Most cells: node keys give a piece 12 bits, and each cell holds a file open while the input
@@ -101,9 +96,17 @@ pub fn cell_levels(faces: u64) -> usize {
     (((faces as f64).sqrt() / 24.0).log2().floor() as i64).clamp(1, 12) as usize
 }
 
-/// Convert `input` (a format with a streaming reader: PLY, OBJ) into `output` by the partitioned
-/// build.
-pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budget, progress: &mut dyn Progress) -> Result<Converted> {
+/// Convert `input` into `output` by the partitioned build, reading it with `reader` (its format's
+/// streaming reader, [`streaming`]); `declared` is what `reader.declared` said of it.
+pub fn convert(
+    input: &Path,
+    reader: &Streaming,
+    declared: Declared,
+    output: &Path,
+    opts: &ConvertOptions,
+    budget: &Budget,
+    progress: &mut dyn Progress,
+) -> Result<Converted> {
     let mut times = StageTimes::default();
     let mut clock = Instant::now();
     let mut lap = |slot: &mut f64| {
@@ -114,9 +117,6 @@ pub fn convert(input: &Path, output: &Path, opts: &ConvertOptions, budget: &Budg
     crate::atomic::check_output(output)?;
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
-    let reader = streaming(input)
-        .ok_or_else(|| Error::invalid(input, None, format!("the partitioned build reads {} files", Format::streaming_list())))?;
-    let declared = (reader.declared)(input)?;
     if let Some(why) = declared.refused {
         return Err(Error::invalid(input, None, why));
     }

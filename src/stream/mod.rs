@@ -120,8 +120,8 @@ pub struct Streamer<S> {
     images: ImageCache,
     /// Decoded bytes of every image's coarsest level, kept out of the geometry's share of the budget.
     pinned: u64,
-    /// Built with the separating planes when a front first shows more than the top level: the
-    /// first frame needs neither (its nodes go nearest box first).
+    /// Built with the separating planes after the first frame, or for it when it shows more than
+    /// the top level: a first frame of the top level alone goes nearest box first (selection.md §6).
     orderer: Option<Orderer>,
     warnings: Vec<String>,
     /// Nodes the renderer found hidden in the last frame, ascending: not refined in the next.
@@ -130,9 +130,9 @@ pub struct Streamer<S> {
 
 impl<S: ByteSource> Streamer<S> {
     /// Start a session. Budgets must admit the whole top level, which the first frame shows. The
-    /// separating planes (`ORDR`, a file's last chunk) are read when a front first shows more than
-    /// the top level, for the drawing order; when they are damaged, the front is ordered without
-    /// them and [`Streamer::take_warnings`] says so.
+    /// separating planes (`ORDR`, a file's last chunk) are read for the drawing order by the second
+    /// [`Streamer::update`], or by the first when its front shows more than the top level; when they
+    /// are damaged, fronts are ordered without them and [`Streamer::take_warnings`] says so.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
@@ -254,9 +254,9 @@ impl<S: ByteSource> Streamer<S> {
 
         let top = self.reader.levels().len().saturating_sub(1) as u32;
         let nodes = self.reader.nodes();
-        if self.orderer.is_none() && cut.shown.iter().any(|&i| nodes[i as usize].level != top) {
+        if self.orderer.is_none() && (self.frame > 0 || cut.shown.iter().any(|&i| nodes[i as usize].level != top)) {
             let planes = self.reader.read_planes().unwrap_or_else(|e| {
-                self.warnings.push(format!("{e}; the front is drawn nearest box first, without the separating planes"));
+                self.warnings.push(format!("{e}; fronts are drawn nearest box first, without the separating planes"));
                 Planes::default()
             });
             self.orderer = Some(Orderer::new(self.reader.skeleton(), planes));

@@ -66,9 +66,9 @@ fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
     }
 }
 
-/// `front` sorted by key, nearest box first. For a front of top-level nodes without planes between
-/// them this is §5's order; a streamer draws its first frame, the top level, so before reading the
-/// planes.
+/// `front` sorted by key, nearest box first: §5's order for a front of top-level nodes when no
+/// entry of the top level decides, and how a streamer orders a first frame of the top level alone,
+/// before it has read the planes (selection.md §6).
 pub fn nearest_box_first(sk: &Skeleton, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
     let eye = match camera.projection {
         Projection::Perspective { .. } => Eye::At(camera.eye.as_dvec3()),
