@@ -108,3 +108,47 @@ fn missing_file_fails_cleanly() {
     assert!(stderr.contains("/nonexistent/strata/mesh.obj"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// The PLY and OBJ cases through the partitioned build's streaming readers (`convert
+/// --partitioned`), and hostile face indices: the same clear errors, and no output left.
+#[test]
+fn malformed_files_fail_cleanly_when_streamed() {
+    let dir = temp_dir().join("streamed");
+    std::fs::create_dir_all(&dir).unwrap();
+    let extra = [
+        Case { name: "far_relative.obj", bytes: b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -9223372036854775808 1 2\n".to_vec(), expect: &["line 4"] },
+        Case { name: "huge_index.obj", bytes: b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n".to_vec(), expect: &["line 4"] },
+        Case { name: "non_utf8.obj", bytes: b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \xff\n".to_vec(), expect: &["line 4"] },
+    ];
+    let mut failures = Vec::new();
+    for case in cases().into_iter().chain(extra).filter(|c| c.name.ends_with(".ply") || c.name.ends_with(".obj")) {
+        let path = dir.join(case.name);
+        std::fs::write(&path, &case.bytes).unwrap();
+        let out_file = dir.join(format!("{}.strata", case.name));
+        let out = Command::new(env!("CARGO_BIN_EXE_strata"))
+            .args(["convert", "--partitioned", "--memory", "16M", "--temp"])
+            .arg(&dir)
+            .arg(&path)
+            .arg(&out_file)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        let problems: Vec<String> = [
+            (out.status.success(), "exited 0".to_string()),
+            (stderr.contains("panicked"), "panicked".to_string()),
+            (!stderr.contains(case.name), "error does not name the file".to_string()),
+            (out_file.exists(), "left an output".to_string()),
+        ]
+        .into_iter()
+        .filter_map(|(bad, what)| bad.then_some(what))
+        .chain(case.expect.iter().filter(|e| !stderr.contains(*e)).map(|e| format!("error lacks {e:?}")))
+        .collect();
+        if !problems.is_empty() {
+            failures.push(format!("{}: {} — stderr: {}", case.name, problems.join(", "), stderr.trim()));
+        }
+    }
+    let left: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.path().is_dir()).collect();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(failures.is_empty(), "bad input not handled when streamed:\n{}", failures.join("\n"));
+    assert!(left.is_empty(), "work folders left behind: {left:?}");
+}

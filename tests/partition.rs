@@ -16,6 +16,21 @@ fn temp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("strata-partition-{}-{name}", std::process::id()))
 }
 
+/// An empty folder for a test's work files.
+fn work_dir(name: &str) -> PathBuf {
+    let work = temp(name);
+    std::fs::create_dir_all(&work).unwrap();
+    work
+}
+
+/// Remove a test's outputs and its (by then empty) work folder.
+fn clean_up<const N: usize>(files: [PathBuf; N], work: &Path) {
+    for p in files {
+        let _ = std::fs::remove_file(p);
+    }
+    let _ = std::fs::remove_dir(work);
+}
+
 /// Options that make the noisy sphere (99k faces) about ten cells.
 fn partitioned(work: &Path) -> ConvertOptions {
     ConvertOptions { build: Build::Partitioned, memory: 16 << 20, temp: Some(work.to_path_buf()), ..ConvertOptions::default() }
@@ -48,8 +63,7 @@ fn level_edges(rd: &Reader<std::fs::File>, level: u32) -> HashMap<Edge, Vec<u32>
 
 #[test]
 fn cells_meet_exactly_and_are_linked_as_neighbours() {
-    let work = temp("work");
-    std::fs::create_dir_all(&work).unwrap();
+    let work = work_dir("work");
     let input = fixture("noisy_sphere.ply");
     let out = temp("sphere.strata");
     let incore = temp("sphere-incore.strata");
@@ -103,16 +117,12 @@ fn cells_meet_exactly_and_are_linked_as_neighbours() {
         finest = finest.min(f.front.iter().map(|&n| s.reader().nodes()[n as usize].level).min().unwrap_or(u32::MAX));
     }
     assert!(finest < top, "refinement never went below the top level");
-    for p in [out, incore] {
-        let _ = std::fs::remove_file(p);
-    }
-    let _ = std::fs::remove_dir(&work);
+    clean_up([out, incore], &work);
 }
 
 #[test]
 fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
-    let work = temp("bad-work");
-    std::fs::create_dir_all(&work).unwrap();
+    let work = work_dir("bad-work");
     let out = temp("bad.strata");
 
     // A format without a streaming reader.
@@ -137,10 +147,7 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
 
     assert!(!out.exists(), "an output was left");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
-    for p in [cut, wild] {
-        let _ = std::fs::remove_file(p);
-    }
-    let _ = std::fs::remove_dir(&work);
+    clean_up([cut, wild], &work);
 }
 
 /// The noisy sphere written as OBJ (positions, per-corner normals).
@@ -153,8 +160,7 @@ fn sphere_obj(name: &str) -> PathBuf {
 
 #[test]
 fn an_obj_file_streams_to_the_same_file_as_its_ply() {
-    let work = temp("obj-work");
-    std::fs::create_dir_all(&work).unwrap();
+    let work = work_dir("obj-work");
     let obj = sphere_obj("sphere.obj");
     let (from_obj, from_ply) = (temp("from-obj.strata"), temp("from-ply.strata"));
     convert(&obj, &Default::default(), &from_obj, &partitioned(&work), &mut Silent).expect("partitioned OBJ");
@@ -166,16 +172,12 @@ fn an_obj_file_streams_to_the_same_file_as_its_ply() {
     assert!(rd.levels().len() >= 4 && rd.levels()[0].faces == 99_372, "{} levels", rd.levels().len());
     // The same positions, normals and faces in the same order: the same build, byte for byte.
     assert!(std::fs::read(&from_obj).unwrap() == std::fs::read(&from_ply).unwrap(), "OBJ and PLY streams built different files");
-    for p in [obj, from_obj, from_ply] {
-        let _ = std::fs::remove_file(p);
-    }
-    let _ = std::fs::remove_dir(&work);
+    clean_up([obj, from_obj, from_ply], &work);
 }
 
 #[test]
 fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
-    let work = temp("objidx-work");
-    std::fs::create_dir_all(&work).unwrap();
+    let work = work_dir("objidx-work");
     // A 40 × 40 grid of quads, faces written between the vertices they use: every other row
     // by negative indices, and the last row's faces before the vertices they name.
     let n = 40;
@@ -238,16 +240,12 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
     }
     assert!(!part.exists(), "a bad input left an output");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
-    for p in [obj, part, core] {
-        let _ = std::fs::remove_file(p);
-    }
-    let _ = std::fs::remove_dir(&work);
+    clean_up([obj, part, core], &work);
 }
 
 #[test]
 fn auto_builds_an_obj_partitioned_only_when_it_would_not_fit() {
-    let work = temp("auto-work");
-    std::fs::create_dir_all(&work).unwrap();
+    let work = work_dir("auto-work");
     let obj = sphere_obj("auto.obj");
     let (auto_small, forced, auto_large) = (temp("auto-small.strata"), temp("auto-forced.strata"), temp("auto-large.strata"));
     let with = |build: Build, memory: u64| ConvertOptions { build, memory, temp: Some(work.clone()), ..ConvertOptions::default() };
@@ -259,8 +257,5 @@ fn auto_builds_an_obj_partitioned_only_when_it_would_not_fit() {
     assert!(bytes(&auto_small) == bytes(&forced), "Auto under 16 MB did not build partitioned");
     assert!(bytes(&auto_large) != bytes(&forced), "Auto under 1 GB built partitioned");
     assert_eq!(Reader::open_path(&auto_large).unwrap().levels()[0].faces, 99_372);
-    for p in [obj, auto_small, forced, auto_large] {
-        let _ = std::fs::remove_file(p);
-    }
-    let _ = std::fs::remove_dir(&work);
+    clean_up([obj, auto_small, forced, auto_large], &work);
 }

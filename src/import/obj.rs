@@ -223,6 +223,30 @@ struct ForwardRef {
 const KIND_NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
 const KIND_PLURALS: [&str; 3] = ["vertices", "texture coordinates", "normals"];
 
+/// A face index of `kind` (0 position, 1 texture coordinate, 2 normal) as written: an integer, not
+/// 0, and when negative (relative) not reaching before the first of the `seen` above its line.
+pub(super) fn face_index(part: &[u8], kind: usize, seen: usize) -> std::result::Result<i64, String> {
+    let what = KIND_NAMES[kind];
+    let index: i64 = std::str::from_utf8(part)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| format!("face {what} index '{}' is not an integer", String::from_utf8_lossy(part)))?;
+    if index == 0 {
+        return Err(format!("face {what} index 0 (OBJ indices start at 1)"));
+    }
+    if index < 0 && index.unsigned_abs() > seen as u64 {
+        return Err(format!("relative {what} index {index} reaches before the first of {seen} so far"));
+    }
+    Ok(index)
+}
+
+/// The message for a positive face `index` of `kind` past the file's `total`.
+pub(super) fn out_of_range(kind: usize, index: i64, total: usize) -> String {
+    let what = KIND_NAMES[kind];
+    let counted = if total == 1 { what } else { KIND_PLURALS[kind] };
+    format!("face {what} index {index} out of range: the file has {total} {counted}")
+}
+
 /// Check every line tobj would act on; on the first bad one return its 1-based number and what
 /// is wrong with it.
 fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
@@ -287,14 +311,7 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
                     }
                     for (kind, part) in parts.iter().enumerate() {
                         let Some(part) = part.filter(|p| !p.is_empty()) else { continue };
-                        let what = KIND_NAMES[kind];
-                        let index: i64 = part.parse().map_err(|_| (n, format!("face {what} index '{part}' is not an integer")))?;
-                        if index == 0 {
-                            return Err((n, format!("face {what} index 0 (OBJ indices start at 1)")));
-                        }
-                        if index < 0 && index.unsigned_abs() > counts[kind] as u64 {
-                            return Err((n, format!("relative {what} index {index} reaches before the first of {} so far", counts[kind])));
-                        }
+                        let index = face_index(part.as_bytes(), kind, counts[kind]).map_err(|e| (n, e))?;
                         if index > 0 && index as u64 > counts[kind] as u64 {
                             forward.push(ForwardRef { line: n, kind, index: index as usize });
                         }
@@ -325,9 +342,7 @@ fn scan(text: &str) -> std::result::Result<Scan, (usize, String)> {
     }
     let totals = [s.positions, s.texcoords, s.normals];
     if let Some(f) = forward.iter().find(|f| f.index > totals[f.kind]) {
-        let (what, total) = (KIND_NAMES[f.kind], totals[f.kind]);
-        let counted = if total == 1 { what } else { KIND_PLURALS[f.kind] };
-        return Err((f.line, format!("face {what} index {} out of range: the file has {total} {counted}", f.index)));
+        return Err((f.line, out_of_range(f.kind, f.index as i64, totals[f.kind])));
     }
     Ok(s)
 }

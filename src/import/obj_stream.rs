@@ -262,30 +262,15 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
     Ok(())
 }
 
-const KIND_NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
-const KIND_PLURALS: [&str; 3] = ["vertices", "texture coordinates", "normals"];
-
 /// A face index of `kind` as a 0-based index into its array of `total`, `seen` of which lie above
-/// its line.
+/// its line; checked as the whole-file reader checks it.
 fn resolve(part: &[u8], kind: usize, seen: usize, total: usize) -> std::result::Result<usize, String> {
-    let what = KIND_NAMES[kind];
-    let index: i64 = std::str::from_utf8(part)
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .ok_or_else(|| format!("face {what} index '{}' is not an integer", text(part)))?;
-    if index == 0 {
-        return Err(format!("face {what} index 0 (OBJ indices start at 1)"));
-    }
+    let index = super::obj::face_index(part, kind, seen)?;
     if index < 0 {
-        let back = index.unsigned_abs();
-        if back > seen as u64 {
-            return Err(format!("relative {what} index {index} reaches before the first of {seen} so far"));
-        }
-        return Ok(seen - back as usize);
+        return Ok(seen - index.unsigned_abs() as usize);
     }
     if index as u64 > total as u64 {
-        let counted = if total == 1 { what } else { KIND_PLURALS[kind] };
-        return Err(format!("face {what} index {index} out of range: the file has {total} {counted}"));
+        return Err(super::obj::out_of_range(kind, index, total));
     }
     Ok(index as usize - 1)
 }

@@ -98,31 +98,43 @@ const MAX_HEADER: usize = 16 << 20;
 /// Read the header of `path` alone.
 pub fn declared(path: &Path) -> Result<Declared> {
     let (header, len) = read_header(path, &mut Vec::new())?;
+    Ok(declared_by(path, &header, len))
+}
+
+/// What `header` (of a file of `len` bytes) declares.
+fn declared_by(path: &Path, header: &Header, len: u64) -> Declared {
     let count = |names: &[&str]| header.elements.iter().filter(|e| names.contains(&e.name.as_str())).map(|e| e.count).sum();
-    let textured = !header.texture_files.is_empty()
-        || Plan::new(path, &header).is_ok_and(|p| p.has(U, 2) || p.faces.iter().flatten().any(|f| f.texcoord.is_some()));
+    let textured = !header.texture_files.is_empty() || Plan::new(path, header).is_ok_and(|p| p.has_texcoords());
     let (vertices, faces): (u64, u64) = (count(&["vertex"]), count(&["face", "tristrips"]));
     let binary = header.encoding != Encoding::Ascii;
     let strips = header.elements.iter().any(|e| e.name == "tristrips");
-    let triangles = match binary.then(|| binary_triangles(&header, len.saturating_sub(header.body_start as u64))).flatten() {
+    let triangles = match binary.then(|| binary_triangles(header, len.saturating_sub(header.body_start as u64))).flatten() {
         Some(t) => t,
         None if strips => faces.max(vertices.saturating_mul(2)),
         None => faces,
     };
-    Ok(Declared { vertices, faces, binary, textured, triangles })
+    Declared { vertices, faces, binary, textured, triangles }
 }
 
-/// [`declared`] as the partitioned build asks it ([`super::stream::Streaming`]).
+/// [`declared`] as the partitioned build asks it ([`super::stream::Streaming`]): with why [`stream`]
+/// would refuse the file, if it would.
 pub fn streaming_declared(path: &Path) -> Result<super::stream::Declared> {
-    let d = declared(path)?;
-    let (header, _) = read_header(path, &mut Vec::new())?;
-    let faces_first = Plan::new(path, &header).is_ok_and(|p| p.faces.iter().position(Option::is_some).is_some_and(|f| f < p.vertex));
-    let refused = if d.textured {
-        Some(super::stream::refused("the file has texture coordinates or names texture images"))
-    } else {
-        faces_first.then(|| "its faces come before its vertices, which a stream cannot index".into())
-    };
-    Ok(super::stream::Declared { triangles: d.triangles, refused })
+    let (header, len) = read_header(path, &mut Vec::new())?;
+    let refused = Plan::new(path, &header).ok().and_then(|plan| unstreamable(&header, &plan));
+    Ok(super::stream::Declared { triangles: declared_by(path, &header, len).triangles, refused })
+}
+
+/// Why [`stream`] cannot read a file of this header, if it cannot: what the partitioned build
+/// does not carry, or faces before the vertices they index.
+fn unstreamable(header: &Header, plan: &Plan) -> Option<String> {
+    if !header.texture_files.is_empty() {
+        return Some(super::stream::refused("the file names texture images"));
+    }
+    if plan.has_texcoords() {
+        return Some(super::stream::refused("the file has texture coordinates"));
+    }
+    let faces_first = plan.faces.iter().position(Option::is_some).is_some_and(|f| f < plan.vertex);
+    faces_first.then(|| "faces come before vertices: a stream cannot index vertices it has not read".into())
 }
 
 fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)> {
@@ -146,15 +158,8 @@ pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> 
     let (header, len) = read_header(path, warnings)?;
     check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
     let plan = Plan::new(path, &header)?;
-    let refuse = |what: &str| Err(Error::invalid(path, None, super::stream::refused(what)));
-    if !header.texture_files.is_empty() {
-        return refuse("the file names texture images");
-    }
-    if plan.has(U, 2) || plan.faces.iter().flatten().any(|f| f.texcoord.is_some()) {
-        return refuse("the file has texture coordinates");
-    }
-    if plan.faces.iter().position(Option::is_some).is_some_and(|f| f < plan.vertex) {
-        return Err(Error::invalid(path, None, "faces come before vertices: a stream cannot index vertices it has not read"));
+    if let Some(why) = unstreamable(&header, &plan) {
+        return Err(Error::invalid(path, None, why));
     }
     let mut reader = Reader::new(path, &plan);
     reader.sink = Some(faces);
@@ -782,6 +787,11 @@ impl Plan {
 
     fn has(&self, slot: usize, n: usize) -> bool {
         self.slot_types[slot..slot + n].iter().all(Option::is_some)
+    }
+
+    /// Whether vertices or faces carry texture coordinates.
+    fn has_texcoords(&self) -> bool {
+        self.has(U, 2) || self.faces.iter().flatten().any(|f| f.texcoord.is_some())
     }
 }
 

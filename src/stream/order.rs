@@ -36,7 +36,7 @@ struct Scratch {
     live: Vec<u32>,
     local: Vec<u32>,
     /// Per child, the children that must come before it (at most [`SMALL`] children).
-    before: Vec<u64>,
+    before: Vec<u32>,
     indegree: Vec<u32>,
     edges: Vec<(u32, u32)>,
     /// The edges' second children grouped by first child, and the groups' starts (and a cursor).
@@ -70,10 +70,7 @@ fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
 /// entry of the top level decides, and how a streamer orders a first frame of the top level alone,
 /// before it has read the planes (selection.md §6).
 pub fn nearest_box_first(sk: &Skeleton, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
-    let eye = match camera.projection {
-        Projection::Perspective { .. } => Eye::At(camera.eye.as_dvec3()),
-        Projection::Orthographic { .. } => Eye::Along(camera.forward().as_dvec3()),
-    };
+    let eye = key_eye(camera);
     let mut keyed: Vec<Key> = front
         .iter()
         .filter(|&&n| (n as usize) < sk.nodes.len())
@@ -85,6 +82,14 @@ pub fn nearest_box_first(sk: &Skeleton, front: &[u32], camera: &Camera, out: &mu
     keyed.sort_unstable();
     out.clear();
     out.extend(keyed.iter().map(|k| k.1));
+}
+
+/// The eye keys are measured from (§5): the eye in model units, or the view direction.
+fn key_eye(camera: &Camera) -> Eye {
+    match camera.projection {
+        Projection::Perspective { .. } => Eye::At(camera.eye.as_dvec3()),
+        Projection::Orthographic { .. } => Eye::Along(camera.forward().as_dvec3()),
+    }
 }
 
 /// A total order on f64 keys (they are finite: boxes and eye are checked finite).
@@ -144,13 +149,10 @@ impl Orderer {
         if self.state.len() != sk.nodes.len() {
             self.state = vec![OFF; sk.nodes.len()];
         }
-        let eye = match camera.projection {
-            Projection::Perspective { .. } => Eye::At(grid_eye(&sk.header.grid, camera.eye)),
-            Projection::Orthographic { .. } => Eye::Along(camera.forward().as_dvec3()),
-        };
-        // Key positions are model units for both; the grid eye serves the planes.
-        let key_eye = match eye {
-            Eye::At(_) => Eye::At(camera.eye.as_dvec3()),
+        // The grid eye serves the planes; keys are in model units.
+        let key_eye = key_eye(camera);
+        let eye = match key_eye {
+            Eye::At(_) => Eye::At(grid_eye(&sk.header.grid, camera.eye)),
             along => along,
         };
         for &n in front {
@@ -259,25 +261,8 @@ impl View<'_> {
             keys[k] = Key(key(self.boxes[live[k] as usize], self.key_eye), live[k]);
         }
         let mut order = [0u32; SMALL];
-        let mut done = 0u32;
-        for slot in order.iter_mut().take(n) {
-            let (mut ready, mut any) = (usize::MAX, usize::MAX);
-            for k in 0..n {
-                if done & (1 << k) != 0 {
-                    continue;
-                }
-                if any == usize::MAX || keys[k] < keys[any] {
-                    any = k;
-                }
-                if before[k] & !done == 0 && (ready == usize::MAX || keys[k] < keys[ready]) {
-                    ready = k;
-                }
-            }
-            let k = if ready == usize::MAX { any } else { ready };
-            done |= 1 << k;
-            *slot = live[k];
-        }
-        stack.extend(order[..n].iter().rev());
+        take_in_order(&keys[..n], &before[..n], &mut order);
+        stack.extend(order[..n].iter().rev().map(|&k| live[k as usize]));
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
@@ -384,27 +369,34 @@ fn small(s: &mut Scratch) {
     for &(a, b) in &s.edges {
         s.before[b as usize] |= 1 << a;
     }
-    let mut done = 0u64;
-    for taken in 0..n {
-        let (mut ready, mut any) = (None::<usize>, None::<usize>);
-        for k in (0..n).filter(|&k| done & (1 << k) == 0) {
-            let less = |best: Option<usize>| best.is_none_or(|b| s.keys[k] < s.keys[b]);
-            if less(any) {
-                any = Some(k);
-            }
-            if s.before[k] & !done == 0 && less(ready) {
-                ready = Some(k);
-            }
-        }
-        let k = ready.or(any).unwrap_or(0);
-        done |= 1 << k;
-        s.local[taken] = k as u32;
-    }
+    take_in_order(&s.keys, &s.before, &mut s.local[..n]);
     for k in 0..n {
         s.local[k] = s.live[s.local[k] as usize];
     }
     s.live.clear();
     s.live.extend_from_slice(&s.local[..n]);
+}
+
+/// §5's choice among at most [`SMALL`] children with keys `keys` and predecessors `before` (a
+/// mask each): repeatedly the least key among those whose predecessors are all taken, or among all
+/// left on a cycle. Their local indices in drawing order go to `order`.
+fn take_in_order(keys: &[Key], before: &[u32], order: &mut [u32]) {
+    let mut done = 0u32;
+    for slot in order.iter_mut().take(keys.len()) {
+        let (mut ready, mut any) = (None::<usize>, None::<usize>);
+        for k in (0..keys.len()).filter(|&k| done & (1 << k) == 0) {
+            let less = |best: Option<usize>| best.is_none_or(|b| keys[k] < keys[b]);
+            if less(any) {
+                any = Some(k);
+            }
+            if before[k] & !done == 0 && less(ready) {
+                ready = Some(k);
+            }
+        }
+        let k = ready.or(any).unwrap_or(0);
+        done |= 1 << k;
+        *slot = k as u32;
+    }
 }
 
 #[cfg(test)]
