@@ -76,6 +76,21 @@ fn run_info(path: &Path) -> (bool, String) {
     (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// What is wrong with how a run handled `case`: it succeeded, panicked, did not name the file or
+/// say what `case` expects, or left an output.
+fn problems(case: &Case, ok: bool, stderr: &str, left_output: bool) -> Vec<String> {
+    [
+        (ok, "exited 0".to_string()),
+        (stderr.contains("panicked"), "panicked".to_string()),
+        (!stderr.contains(case.name), "error does not name the file".to_string()),
+        (left_output, "left an output".to_string()),
+    ]
+    .into_iter()
+    .filter_map(|(bad, what)| bad.then_some(what))
+    .chain(case.expect.iter().filter(|e| !stderr.contains(*e)).map(|e| format!("error lacks {e:?}")))
+    .collect()
+}
+
 #[test]
 fn malformed_files_fail_cleanly() {
     let dir = temp_dir();
@@ -84,15 +99,7 @@ fn malformed_files_fail_cleanly() {
         let path = dir.join(case.name);
         std::fs::write(&path, &case.bytes).unwrap();
         let (ok, stderr) = run_info(&path);
-        let problems: Vec<String> = [
-            (ok, "exited 0".to_string()),
-            (stderr.contains("panicked"), "panicked".to_string()),
-            (!stderr.contains(case.name), "error does not name the file".to_string()),
-        ]
-        .into_iter()
-        .filter_map(|(bad, what)| bad.then_some(what))
-        .chain(case.expect.iter().filter(|e| !stderr.contains(*e)).map(|e| format!("error lacks {e:?}")))
-        .collect();
+        let problems = problems(&case, ok, &stderr, false);
         if !problems.is_empty() {
             failures.push(format!("{}: {} — stderr: {}", case.name, problems.join(", "), stderr.trim()));
         }
@@ -133,16 +140,7 @@ fn malformed_files_fail_cleanly_when_streamed() {
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        let problems: Vec<String> = [
-            (out.status.success(), "exited 0".to_string()),
-            (stderr.contains("panicked"), "panicked".to_string()),
-            (!stderr.contains(case.name), "error does not name the file".to_string()),
-            (out_file.exists(), "left an output".to_string()),
-        ]
-        .into_iter()
-        .filter_map(|(bad, what)| bad.then_some(what))
-        .chain(case.expect.iter().filter(|e| !stderr.contains(*e)).map(|e| format!("error lacks {e:?}")))
-        .collect();
+        let problems = problems(&case, out.status.success(), &stderr, out_file.exists());
         if !problems.is_empty() {
             failures.push(format!("{}: {} — stderr: {}", case.name, problems.join(", "), stderr.trim()));
         }
