@@ -65,8 +65,9 @@ fn cases() -> Vec<Case> {
     ]
 }
 
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("strata-bad-input-{}", std::process::id()));
+/// A work folder of this process for one test: tests run in parallel, so none shares another's.
+fn temp_dir(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("strata-bad-input-{}-{test}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
@@ -93,7 +94,7 @@ fn problems(case: &Case, ok: bool, stderr: &str, left_output: bool) -> Vec<Strin
 
 #[test]
 fn malformed_files_fail_cleanly() {
-    let dir = temp_dir();
+    let dir = temp_dir("info");
     let mut failures = Vec::new();
     for case in cases() {
         let path = dir.join(case.name);
@@ -120,8 +121,7 @@ fn missing_file_fails_cleanly() {
 /// --partitioned`), and hostile face indices: the same clear errors, and no output left.
 #[test]
 fn malformed_files_fail_cleanly_when_streamed() {
-    let dir = temp_dir().join("streamed");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = temp_dir("streamed");
     let extra = [
         Case { name: "far_relative.obj", bytes: b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -9223372036854775808 1 2\n".to_vec(), expect: &["line 4"] },
         Case { name: "huge_index.obj", bytes: b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n".to_vec(), expect: &["line 4"] },
