@@ -7,7 +7,9 @@
 //! - **levels** 0 (finest node level, the streamed leaves) … L (top): each level-ℓ group is a union of
 //!   level-(ℓ−1) groups (of clusters for level 0); a virtual root holds the top groups.
 //!
-//! Groups only grow across edges shared by two faces, so no group spans disconnected parts.
+//! Groups only grow across edges shared by two faces, so no group spans disconnected parts, with one
+//! exception made after grouping: a small component that leaves a coarse level is taken in by a
+//! group of that level near it ([`Hierarchy::absorb`], [`crate::small_components`]).
 
 use crate::cone::{smallest_enclosing, Cone};
 use crate::group::{group_round, RoundParams, Unit};
@@ -158,6 +160,105 @@ impl Hierarchy {
                 top.parent = vec![NO_PARENT; top.groups.len()];
             }
         }
+    }
+}
+
+impl GroupInfo {
+    /// Bounds, cone and counts that cover both groups.
+    pub fn union(&self, other: &GroupInfo) -> GroupInfo {
+        let (min, max) = (self.min.min(other.min), self.max.max(other.max));
+        let center = 0.5 * (min + max);
+        let radius = (center.distance(self.center) + self.radius).max(center.distance(other.center) + other.radius) * (1.0 + 1e-6);
+        GroupInfo {
+            cone: self.cone.merge(&other.cone),
+            center,
+            radius,
+            min,
+            max,
+            faces: self.faces + other.faces,
+            area: self.area + other.area,
+            area_normal: self.area_normal + other.area_normal,
+        }
+    }
+}
+
+impl Hierarchy {
+    /// Move whole groups of level `l` into others: group `g` goes into `into[g]` (itself when it
+    /// stays), which must stay. A moved group has no neighbours (a whole component); its faces,
+    /// children and bounds become its absorber's, and the groups above it that held nothing else
+    /// go the same way, level by level up to the top. Groups are renumbered in order; returns, per
+    /// old group of level `l`, its new number (for a moved group, its absorber's).
+    pub fn absorb(&mut self, l: usize, into: &[u32]) -> Vec<u32> {
+        let mut fate = into.to_vec();
+        let mut first_renumber = Vec::new();
+        for k in l..self.levels.len() {
+            let n = self.levels[k].groups.len();
+            debug_assert_eq!(fate.len(), n);
+            let mut renumber = vec![u32::MAX; n];
+            let mut kept = 0u32;
+            for g in 0..n {
+                if fate[g] as usize == g {
+                    renumber[g] = kept;
+                    kept += 1;
+                }
+            }
+            for g in 0..n {
+                let target = fate[g] as usize;
+                debug_assert_eq!(fate[target] as usize, target, "an absorber must stay");
+                renumber[g] = renumber[target];
+            }
+            let old_parent = std::mem::take(&mut self.levels[k].parent);
+            let level = &mut self.levels[k];
+            let mut groups: Vec<GroupInfo> = (0..n).filter(|&g| fate[g] as usize == g).map(|g| level.groups[g]).collect();
+            for g in (0..n).filter(|&g| fate[g] as usize != g) {
+                let r = renumber[g] as usize;
+                groups[r] = groups[r].union(&level.groups[g]);
+            }
+            level.groups = groups;
+            for g in &mut level.face_group {
+                *g = renumber[*g as usize];
+            }
+            let mut offsets = vec![0u32];
+            let mut items = Vec::with_capacity(level.neighbors.items.len());
+            for g in (0..n).filter(|&g| fate[g] as usize == g) {
+                items.extend(level.neighbors.get(g).iter().map(|&x| renumber[x as usize]));
+                offsets.push(items.len() as u32);
+            }
+            level.neighbors = Lists { offsets, items };
+            let kept = kept as usize;
+            // The level below points at the new numbers; children follow from it.
+            let below = if k == 0 { &mut self.clusters } else { &mut self.levels[k - 1] };
+            for p in &mut below.parent {
+                *p = renumber[*p as usize];
+            }
+            if k > 0 {
+                self.levels[k].children = Lists::from_labels(&self.levels[k - 1].parent, kept);
+            }
+            // Above: a group goes when all its children went, into the parent of their absorber.
+            let parent: Vec<u32> = (0..n).filter(|&g| fate[g] as usize == g).map(|g| old_parent[g]).collect();
+            if k + 1 < self.levels.len() {
+                let above = self.levels[k + 1].groups.len();
+                let mut stays = vec![false; above];
+                let mut next: Vec<u32> = (0..above as u32).collect();
+                for g in 0..n {
+                    if fate[g] as usize == g {
+                        stays[old_parent[g] as usize] = true;
+                    }
+                }
+                for g in 0..n {
+                    let p = old_parent[g] as usize;
+                    if !stays[p] {
+                        next[p] = old_parent[fate[g] as usize];
+                    }
+                }
+                fate = next;
+            }
+            self.levels[k].parent = parent;
+            if k == l {
+                first_renumber = renumber;
+            }
+        }
+        first_renumber
     }
 }
 

@@ -1,6 +1,6 @@
 //! The level meshes M0 … ML: M0 is the input; Mℓ is Mℓ−1 simplified while every group of level ℓ
-//! stays a connected, non-empty patch (METHOD.md §4). A node — group g of level ℓ — owns the faces
-//! of Mℓ labelled g.
+//! stays a connected, non-empty patch (METHOD.md §4), minus the small components that leave it
+//! ([`crate::small_components`]). A node — group g of level ℓ — owns the faces of Mℓ labelled g.
 //!
 //! A node's geometric error bounds, in model units, how far its surface may lie from the input:
 //! each level adds the simplifier's estimate for the group (an RMS distance to the planes the
@@ -72,11 +72,19 @@ pub fn build_from(
     on_level: &mut dyn FnMut(usize),
 ) -> LevelMeshes {
     let ratio = p.ratio.clamp(0.0, 1.0);
-    let coarsen = |below: &LevelMesh, h: &Hierarchy, l: usize| coarsen(below, h, l, ratio, pinned);
+    // A piece with pinned vertices is part of a larger mesh: a component it sees whole may not be.
+    let coarsen = |below: &LevelMesh, h: &mut Hierarchy, l: usize| {
+        let mut level = coarsen(below, h, l, ratio, pinned);
+        if pinned.is_none() {
+            crate::small_components::leave(&mut level, h, l);
+        }
+        level
+    };
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {
-        levels.push(coarsen(&levels[l - 1], h, l));
+        let next = coarsen(&levels[l - 1], h, l);
+        levels.push(next);
         on_level(l);
     }
     // An added level costs a node per top group in the skeleton every reader loads (a record,
@@ -94,6 +102,7 @@ pub fn build_from(
         }
         h.repeat_top();
         let next = coarsen(&levels[levels.len() - 1], h, levels.len());
+        let nodes = h.levels[levels.len()].groups.len();
         if next.mesh.face_count() as f64 > below as f64 * worthwhile || next.mesh.face_count() < MIN_ADDED_NODE_FACES * nodes {
             h.pop_top();
             break;

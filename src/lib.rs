@@ -39,6 +39,7 @@ pub mod pipeline;
 pub mod quantize;
 pub mod render;
 pub mod simplify;
+pub mod small_components;
 pub mod stream;
 pub mod texture;
 pub mod write;

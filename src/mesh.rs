@@ -193,10 +193,22 @@ impl Mesh {
         }
         drop(seen);
 
-        // Renumber vertices in order of first use.
+        let distinct = weld.iter().enumerate().filter(|&(i, &w)| i as u32 == w).count();
+        report.welded_vertices = self.positions.len() - distinct;
+        let mut mesh = self.subset(&keep);
+        report.unreferenced_vertices = distinct - mesh.positions.len();
+        mesh.compute_face_geometry();
+        Ok((mesh, report))
+    }
+}
+
+impl Mesh {
+    /// The faces `keep` (in that order) with their corners and per-face values and the vertices
+    /// they use, renumbered in order of first use; materials and images are kept whole.
+    pub fn subset(self, keep: &[usize]) -> Mesh {
         let mut remap = vec![u32::MAX; self.positions.len()];
-        let mut positions = Vec::with_capacity(self.positions.len());
-        let triangles: Vec<[u32; 3]> = keep
+        let mut positions = Vec::new();
+        let triangles = keep
             .iter()
             .map(|&f| {
                 self.triangles[f].map(|v| {
@@ -209,25 +221,26 @@ impl Mesh {
                 })
             })
             .collect();
-        let distinct = weld.iter().enumerate().filter(|&(i, &w)| i as u32 == w).count();
-        report.welded_vertices = self.positions.len() - distinct;
-        report.unreferenced_vertices = distinct - positions.len();
-
-        let mut mesh = Mesh {
-            normals: corners_of(&self.normals, &keep),
-            uvs: corners_of(&self.uvs, &keep),
-            colors: corners_of(&self.colors, &keep),
-            face_materials: keep.iter().map(|&f| self.face_materials[f]).collect(),
-            materials: self.materials,
-            images: self.images,
+        Mesh {
             positions,
             triangles,
-            face_normals: Vec::new(),
-            face_areas: Vec::new(),
-        };
-        mesh.compute_face_geometry();
-        Ok((mesh, report))
+            normals: corners_of(&self.normals, keep),
+            uvs: corners_of(&self.uvs, keep),
+            colors: corners_of(&self.colors, keep),
+            face_materials: faces_of(&self.face_materials, keep),
+            materials: self.materials,
+            images: self.images,
+            face_normals: faces_of(&self.face_normals, keep),
+            face_areas: faces_of(&self.face_areas, keep),
+        }
     }
+}
+
+fn faces_of<T: Copy>(a: &[T], keep: &[usize]) -> Vec<T> {
+    if a.is_empty() {
+        return Vec::new();
+    }
+    keep.iter().map(|&f| a[f]).collect()
 }
 
 fn corners_of<T: Copy>(a: &[T], keep: &[usize]) -> Vec<T> {
