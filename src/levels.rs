@@ -137,7 +137,9 @@ fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Optio
     let parent = &h.levels[l - 1].parent;
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
     let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
-    let opts = SimplifyOptions { target_faces: target, ..SimplifyOptions::default() };
+    // Topology changes apply where every group is whole components (coarse levels of a mesh of
+    // many parts), which is where handles stop the simplification.
+    let opts = SimplifyOptions { target_faces: target, topology: true, ..SimplifyOptions::default() };
     let pins: Vec<bool> = pinned.map_or(Vec::new(), |set| below.mesh.positions.iter().map(|&p| set.contains(&position_key(p))).collect());
     let s = simplify_pinned(&below.mesh, Some(&labels), &pins, &opts);
     let groups = &h.levels[l];

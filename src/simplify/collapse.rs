@@ -192,7 +192,7 @@ impl State {
         }
         // Group survival for collapses that remove faces of two groups (or one border face).
         // Without groups it keeps components from vanishing, which topology changes allow.
-        if self.topology {
+        if self.topology && !self.grouped {
             return true;
         }
         for i in 0..e.n {

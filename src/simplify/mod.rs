@@ -32,7 +32,7 @@
 //! face is duplicated), turns a face normal by more than `max_normal_turn` from its input normal, or
 //! creates a degenerate or sliver face.
 //!
-//! Topology (opt-in, without groups): a noisy scan has many tiny handles and components, each of
+//! Topology (opt-in; with groups only where each group is whole components): a noisy scan has many tiny handles and components, each of
 //! which keeps a dozen faces that no collapse may remove. When the target is not reached, the
 //! simplification runs again, and where a collapse is blocked by the link condition alone the
 //! mesh is cut along the triangle of edges that blocks it (a handle or neck) and both sides are
@@ -108,8 +108,11 @@ pub struct SimplifyOptions {
     /// than `max_error`; collapses may also remove a component's last faces. The copies of cut vertices come after the others in the output; they
     /// start where their originals are, and where no later collapse moves them, a reader that
     /// welds vertices by position sees the two caps as one doubled face. Without it a mesh of many handles and components (a noisy scan)
-    /// stops at a few faces per handle and component. Ignored with groups (a cap would join or
-    /// split groups). Default false.
+    /// stops at a few faces per handle and component. With groups, only where
+    /// every group is made of whole components (no vertex has faces of two groups), so a cap
+    /// joins no groups; there no tetrahedron is dropped and no group loses its last faces, but a
+    /// cut through a neck leaves its group in two pieces, and the cap's move counts in the
+    /// group's error. Default false.
     pub topology: bool,
 }
 
@@ -183,7 +186,7 @@ pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opt
         s.init(opts, false);
         s.run(opts);
         let face_target = opts.target_faces > 0 || opts.max_error.is_none();
-        if opts.topology && face_target && s.faces_left > opts.target_faces && groups.is_none() {
+        if opts.topology && face_target && s.faces_left > opts.target_faces && (groups.is_none() || s.groups_are_components()) {
             s = State::new(mesh, groups);
             s.pinned = pinned.to_vec();
             s.init(opts, true);

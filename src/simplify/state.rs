@@ -79,7 +79,8 @@ pub(super) struct State {
     pub(super) scratch_edges: Vec<u64>,
     pub(super) scratch_r: Vec<u32>,
     pub(super) scratch_k: Vec<u32>,
-    /// Topology changes are made (see [`SimplifyOptions::topology`]); never with groups.
+    /// Topology changes are made (see [`SimplifyOptions::topology`]); with groups only where
+    /// each group is a whole component.
     pub(super) topology: bool,
     /// Vertices that never move or go, and that no collapse joins by a new edge (empty: none;
     /// see [`super::simplify_pinned`]).
@@ -177,7 +178,7 @@ impl State {
     /// in the same order as a sequential scatter would.
     pub(super) fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
-        self.topology = topology && !self.grouped;
+        self.topology = topology && (!self.grouped || self.groups_are_components());
         self.min_quality = f64::from(opts.min_face_quality);
         // A corner's wedge is the first corner of its vertex (in face list order) with the same
         // attributes, as `same_attributes` is an equivalence.
@@ -459,6 +460,15 @@ impl State {
             }
         }
         (e.n > 0).then_some(e)
+    }
+
+    /// Whether no vertex has faces of two groups: every group is then made of whole components,
+    /// and cutting or capping inside one cannot touch another.
+    pub(super) fn groups_are_components(&self) -> bool {
+        self.verts.iter().all(|x| {
+            let faces = &self.face_lists[x.start as usize..(x.start + x.len) as usize];
+            faces.iter().all(|&f| self.faces[f as usize].group == faces.first().map_or(0, |&g| self.faces[g as usize].group))
+        })
     }
 
     pub(super) fn finish(self, mesh: &Mesh, with_groups: bool) -> Simplified {

@@ -385,10 +385,29 @@ fn topology_changes_reach_targets_that_handles_block() {
     let limited = simplify(&m, None, &SimplifyOptions { topology: true, max_error: Some(0.01), ..opts(12) });
     check(&m, &limited);
     assert!(limited.error <= 0.01, "{}", limited.error);
-    // Groups forbid it.
-    let groups = patches(&m, 3);
+    // Groups that meet forbid it.
+    let groups = patches(&m, 6);
+    assert!((0..6).all(|g| groups.contains(&g)));
     let grouped = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
     check(&m, &grouped);
+    // Groups that are whole components (one torus each) allow it: cuts, but no group loses its
+    // last faces (no tetrahedron is dropped), and caps take their group's label.
+    let groups = patches(&m, 3);
+    let whole = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
+    check_manifold(&m, &whole);
+    assert!(
+        whole.mesh.face_count() < grouped.mesh.face_count(),
+        "{} faces, {} without cuts",
+        whole.mesh.face_count(),
+        grouped.mesh.face_count()
+    );
+    for g in 0..3u32 {
+        assert!(whole.face_groups.contains(&g), "group {g} kept faces");
+    }
+    for (f, &g) in whole.face_groups.iter().enumerate() {
+        assert_eq!(groups[whole.source_faces[f] as usize], g, "face {f} has its source's group");
+    }
+    assert!(whole.group_error.iter().all(|&e| e > 0.0));
 }
 
 #[test]

@@ -33,7 +33,8 @@ impl State {
     /// Remove a closed tetrahedron, a component that no collapse can shrink, if (u, v) is on one.
     fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64) -> bool {
         let corners = [u, v, e.x[0], e.x[1]];
-        if corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked) {
+        // With groups, a tetrahedron may be a group's last faces.
+        if self.grouped || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked) {
             return false;
         }
         let mut faces: Vec<u32> = corners.iter().flat_map(|&w| self.faces_of(w).iter().copied()).collect();
@@ -98,7 +99,15 @@ impl State {
         if (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0 {
             return false;
         }
-        self.error_sq = self.error_sq.max(self.spread_sq(&cycle));
+        let spread_sq = self.spread_sq(&cycle);
+        self.error_sq = self.error_sq.max(spread_sq);
+        if self.grouped {
+            // The cap's move counts in the group's error (its vertices', which the copies inherit).
+            for &v in &cycle {
+                let q = &mut self.quadrics[v as usize];
+                q.err_sq = q.err_sq.max(spread_sq);
+            }
+        }
         let copies: [u32; 3] = std::array::from_fn(|i| self.verts.len() as u32 + i as u32);
         for (i, &v) in cycle.iter().enumerate() {
             let x = self.verts[v as usize];
@@ -121,7 +130,8 @@ impl State {
             let p = cap.map(|w| self.pos(w));
             let normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero().as_vec3();
             let source = if side == 0 { sides[0].0[0] } else { sides[0].1[0] };
-            self.faces.push(Face { v: cap, group: 0, normal });
+            let group = self.faces[source as usize].group;
+            self.faces.push(Face { v: cap, group, normal });
             self.wedges.push([0; 3]);
             self.face_materials.push(self.face_materials[source as usize]);
             self.cap_source.push(if (source as usize) < self.input_faces {
