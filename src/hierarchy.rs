@@ -184,11 +184,13 @@ impl GroupInfo {
 
 impl Hierarchy {
     /// Move whole groups of level `l` into others: group `g` goes into `into[g]` (itself when it
-    /// stays), which must stay. A moved group has no neighbours (a whole component); its faces,
+    /// stays), which must stay; `l ≥ 1`. A moved group has no neighbours (it shares no edge with another); its faces,
     /// children and bounds become its absorber's, and the groups above it that held nothing else
     /// go the same way, level by level up to the top. Groups are renumbered in order; returns, per
     /// old group of level `l`, its new number (for a moved group, its absorber's).
     pub fn absorb(&mut self, l: usize, into: &[u32]) -> Vec<u32> {
+        assert!(l >= 1, "level 0's groups hold the clusters; they never move");
+        debug_assert!((0..into.len()).all(|g| into[g] as usize == g || self.levels[l].neighbors.get(g).is_empty()));
         let mut fate = into.to_vec();
         let mut first_renumber = Vec::new();
         for k in l..self.levels.len() {
@@ -248,6 +250,8 @@ impl Hierarchy {
                 for g in 0..n {
                     let p = old_parent[g] as usize;
                     if !stays[p] {
+                        // Its one child: groups merge across shared edges, which a moved one lacks.
+                        debug_assert_eq!(self.levels[k + 1].children.get(p).len(), 1);
                         next[p] = old_parent[fate[g] as usize];
                     }
                 }

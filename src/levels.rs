@@ -4,8 +4,9 @@
 //!
 //! A node's geometric error bounds, in model units, how far its surface may lie from the input:
 //! each level adds the simplifier's estimate for the group (an RMS distance to the planes the
-//! group's vertices replaced, see [`crate::simplify`]) to the largest error of its children. The
-//! estimate is area-weighted, not a Hausdorff bound; [`crate::distance`] measures the real thing.
+//! group's vertices replaced, see [`crate::simplify`]) to the largest error of its children (an
+//! absorber's errors cover the components it took in). The estimate is area-weighted, not a
+//! Hausdorff bound; [`crate::distance`] measures the real thing.
 
 use crate::hierarchy::Hierarchy;
 use crate::mesh::Mesh;

@@ -195,6 +195,8 @@ impl Mesh {
 
         let distinct = weld.iter().enumerate().filter(|&(i, &w)| i as u32 == w).count();
         report.welded_vertices = self.positions.len() - distinct;
+        // Face geometry is recomputed, whatever the input held.
+        (self.face_normals, self.face_areas) = (Vec::new(), Vec::new());
         let mut mesh = self.subset(&keep);
         report.unreferenced_vertices = distinct - mesh.positions.len();
         mesh.compute_face_geometry();
@@ -428,6 +430,17 @@ mod tests {
         assert_eq!(r, CleanReport { welded_vertices: 2, degenerate_faces: 1, duplicate_faces: 1, unreferenced_vertices: 1 });
         assert_eq!(m.validate(), Ok(()));
         assert!((m.face_areas.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        assert!(m.face_normals.iter().all(|n| (n.z - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn clean_ignores_stale_face_geometry() {
+        // Face normals and areas for one face of the four: cleaning computes its own.
+        let mut m = quad_with_extras();
+        m.face_normals = vec![Vec3::X];
+        m.face_areas = vec![7.0];
+        let (m, _) = m.clean().unwrap();
+        assert_eq!((m.face_normals.len(), m.face_areas.len()), (2, 2));
         assert!(m.face_normals.iter().all(|n| (n.z - 1.0).abs() < 1e-6));
     }
 

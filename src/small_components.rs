@@ -3,14 +3,17 @@
 //! components each speck would stay a node of its own at every level, holding up the top level's
 //! size and the skeleton's.
 //!
-//! A whole component (a group of level ℓ with no neighbours) leaves level ℓ when a group of that
+//! A whole component — a group of level ℓ that shares no edge with another: a component, or a
+//! piece joined to the rest only at vertices or non-manifold edges, whose removal opens no hole —
+//! leaves level ℓ when a group of that
 //! level near it already has an error of at least the component's size (the diagonal of its faces'
 //! box in Mℓ): its faces are dropped
 //! from Mℓ and that group takes it in (its bounds, cone and children, [`Hierarchy::absorb`]), so
-//! the component's finer node is reached by refining the absorber. No node's error grows: what
-//! the front loses by drawing the absorber instead is within the error the absorber already
-//! claims. "Near" means inside the absorber's sphere grown to twice its radius, so an absorber's
-//! bounds at most double; among the groups that qualify, the one whose sphere grows least, then
+//! the component's finer node is reached by refining the absorber. What the front loses by drawing
+//! the absorber instead is within the error the absorber already claims; its error is raised only
+//! where the component's own error is larger (its children's, which any parent covers). "Near"
+//! means inside the absorber's sphere grown to twice its radius (a chain of absorbers in one call
+//! can reach further); among the groups that qualify, the one whose sphere grows least, then
 //! whose cone widens least, is chosen (an absorber's sphere and cone decide when it is refined and
 //! culled).
 
@@ -38,19 +41,24 @@ pub fn leave(level: &mut LevelMesh, h: &mut Hierarchy, l: usize) -> usize {
     let grid = Reach::new(&hl.groups, |g| errors[g] >= smallest && hl.groups[g].radius > 0.0);
     let mut into: Vec<u32> = (0..n as u32).collect();
     let mut absorbed_size = vec![0.0f32; n];
-    let mut left = 0;
+    let mut left = Vec::new();
     for &c in &candidates {
         let info = &hl.groups[c as usize];
         let d = size[c as usize];
         let mut best: Option<(f32, f32, u32)> = None;
+        let mut examined = 0;
         grid.around(info.center, |p| {
+            examined += 1;
+            if examined > MAX_EXAMINED || best.is_some_and(|b| b.0 <= 1.0 && b.1 <= 0.0) {
+                return false;
+            }
             if p == c || into[p as usize] != p || errors[p as usize] < d {
-                return;
+                return true;
             }
             let pi = &hl.groups[p as usize];
             let dist = pi.center.distance(info.center);
             if dist + info.radius > 2.0 * pi.radius {
-                return;
+                return true;
             }
             let widening = pi.cone.merge(&info.cone).half_angle - pi.cone.half_angle;
             let growth = (dist + info.radius).max(pi.radius) / pi.radius;
@@ -58,23 +66,21 @@ pub fn leave(level: &mut LevelMesh, h: &mut Hierarchy, l: usize) -> usize {
             if best.is_none_or(|b| (key.0, key.1, key.2) < b) {
                 best = Some(key);
             }
+            true
         });
         if let Some((_, _, p)) = best {
             into[c as usize] = p;
             absorbed_size[p as usize] = absorbed_size[p as usize].max(d);
-            left += 1;
+            left.push(c);
         }
     }
-    if left == 0 {
+    if left.is_empty() {
         return 0;
     }
-    // A group that took others in and left later hands them on: follow each chain to its end.
-    for g in 0..n {
-        let mut t = into[g];
-        while into[t as usize] != t {
-            t = into[t as usize];
-        }
-        into[g] = t;
+    // A group that took others in and left later hands them on. Its absorber was still there
+    // when it left, so going back from the last to leave, each absorber's own is already final.
+    for &c in left.iter().rev() {
+        into[c as usize] = into[into[c as usize] as usize];
     }
     let children_error: Vec<f32> = (0..n).map(|g| errors[g]).collect();
     let renumber = h.absorb(l, &into);
@@ -88,8 +94,12 @@ pub fn leave(level: &mut LevelMesh, h: &mut Hierarchy, l: usize) -> usize {
     level.mesh = std::mem::take(&mut level.mesh).subset(&keep);
     level.face_group = keep.iter().map(|&f| renumber[level.face_group[f] as usize]).collect();
     level.group_error = group_error;
-    left
+    left.len()
 }
+
+/// Groups a query looks at, at most, for one candidate: coincident specks would otherwise make
+/// each query scan them all. The first that grows no sphere and widens no cone also ends it.
+const MAX_EXAMINED: usize = 4096;
 
 /// Per group of `level`, the size of what leaving takes from the level's image: the diagonal of
 /// the box of its own faces in that level (what it absorbed earlier is already gone from it).
@@ -128,15 +138,18 @@ impl Reach {
         Reach { classes: classes.into_iter().map(|(c, m)| (cell_size(c), m)).collect() }
     }
 
-    /// Call `f` with every group whose doubled sphere could hold `p` (and some that do not).
-    fn around(&self, p: Vec3, mut f: impl FnMut(u32)) {
+    /// Call `f` with every group whose doubled sphere could hold `p` (and some that do not),
+    /// until it returns false.
+    fn around(&self, p: Vec3, mut f: impl FnMut(u32) -> bool) {
         for (size, cells) in &self.classes {
             let [x, y, z] = cell_of(p, *size);
             for dx in -1..=1 {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
                         if let Some(list) = cells.get(&[x + dx, y + dy, z + dz]) {
-                            list.iter().for_each(|&g| f(g));
+                            if !list.iter().all(|&g| f(g)) {
+                                return;
+                            }
                         }
                     }
                 }
@@ -156,6 +169,8 @@ fn cell_size(class: i32) -> f32 {
     2f32.powi(class + 2)
 }
 
+/// The cell holding `p`, clamped one short of the i32 range so that neighbouring cells exist.
 fn cell_of(p: Vec3, size: f32) -> [i32; 3] {
-    (p / size).floor().to_array().map(|c| c.clamp(i32::MIN as f32, i32::MAX as f32) as i32)
+    const LIMIT: f32 = (1u32 << 30) as f32;
+    (p / size).floor().to_array().map(|c| c.clamp(-LIMIT, LIMIT) as i32)
 }

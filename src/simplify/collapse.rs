@@ -329,6 +329,9 @@ impl State {
 
         for &f in &e.f[..e.n] {
             self.faces[f as usize].v = [DEAD; 3];
+            if let Some(n) = self.group_faces.get_mut(self.faces[f as usize].group as usize) {
+                *n -= 1;
+            }
         }
         self.faces_left -= e.n;
         for &f in &rf {

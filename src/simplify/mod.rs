@@ -110,7 +110,8 @@ pub struct SimplifyOptions {
     /// welds vertices by position sees the two caps as one doubled face. Without it a mesh of many handles and components (a noisy scan)
     /// stops at a few faces per handle and component. With groups, only where
     /// every group is made of whole components (no vertex has faces of two groups), so a cap
-    /// joins no groups; there no tetrahedron is dropped and no group loses its last faces, but a
+    /// joins no groups; there no group loses its last faces (a tetrahedron is dropped only from a
+    /// group that keeps others), but a
     /// cut through a neck leaves its group in two pieces, and the cap's move counts in the
     /// group's error. Default false.
     pub topology: bool,

@@ -86,6 +86,9 @@ pub(super) struct State {
     /// see [`super::simplify_pinned`]).
     pub(super) pinned: Vec<bool>,
     pub(super) grouped: bool,
+    /// Live faces per group (with topology changes and groups only, else empty): a tetrahedron
+    /// is dropped only from a group that keeps other faces.
+    pub(super) group_faces: Vec<u32>,
     /// Faces of the input; faces past them are caps.
     pub(super) input_faces: usize,
     /// Per cap, the input face whose attributes it took.
@@ -129,6 +132,7 @@ impl State {
             topology: false,
             pinned: Vec::new(),
             grouped: groups.is_some(),
+            group_faces: Vec::new(),
             input_faces: nf,
             cap_source: Vec::new(),
         }
@@ -179,6 +183,13 @@ impl State {
     pub(super) fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
         self.topology = topology && (!self.grouped || self.groups_are_components());
+        if self.topology && self.grouped {
+            let n = self.faces.iter().map(|f| f.group as usize + 1).max().unwrap_or(0);
+            self.group_faces = vec![0; n];
+            for f in &self.faces {
+                self.group_faces[f.group as usize] += 1;
+            }
+        }
         self.min_quality = f64::from(opts.min_face_quality);
         // A corner's wedge is the first corner of its vertex (in face list order) with the same
         // attributes, as `same_attributes` is an equivalence.

@@ -391,7 +391,7 @@ fn topology_changes_reach_targets_that_handles_block() {
     let grouped = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
     check(&m, &grouped);
     // Groups that are whole components (one torus each) allow it: cuts, but no group loses its
-    // last faces (no tetrahedron is dropped), and caps take their group's label.
+    // last faces (a tetrahedron goes only from a group with more), and caps take their group's label.
     let groups = patches(&m, 3);
     let whole = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
     check_manifold(&m, &whole);

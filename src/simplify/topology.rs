@@ -33,8 +33,12 @@ impl State {
     /// Remove a closed tetrahedron, a component that no collapse can shrink, if (u, v) is on one.
     fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64) -> bool {
         let corners = [u, v, e.x[0], e.x[1]];
-        // With groups, a tetrahedron may be a group's last faces.
-        if self.grouped || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked) {
+        // With groups, not a group's last faces (groups are whole components here, so all four
+        // faces are of one group).
+        let group = self.faces[e.f[0] as usize].group as usize;
+        if (self.grouped && self.group_faces.get(group).is_none_or(|&n| n <= 4))
+            || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked)
+        {
             return false;
         }
         let mut faces: Vec<u32> = corners.iter().flat_map(|&w| self.faces_of(w).iter().copied()).collect();
@@ -53,6 +57,9 @@ impl State {
         }
         for &f in &faces {
             self.faces[f as usize].v = [DEAD; 3];
+        }
+        if let Some(n) = self.group_faces.get_mut(group) {
+            *n -= 4;
         }
         self.faces_left -= 4;
         true
@@ -132,6 +139,9 @@ impl State {
             let source = if side == 0 { sides[0].0[0] } else { sides[0].1[0] };
             let group = self.faces[source as usize].group;
             self.faces.push(Face { v: cap, group, normal });
+            if let Some(n) = self.group_faces.get_mut(group as usize) {
+                *n += 1;
+            }
             self.wedges.push([0; 3]);
             self.face_materials.push(self.face_materials[source as usize]);
             self.cap_source.push(if (source as usize) < self.input_faces {
