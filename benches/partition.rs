@@ -1,12 +1,13 @@
 //! The partitioned build against the in-core build, side by side in one run (issue 14): wall time
 //! and peak memory of `strata convert` (a child process under `/usr/bin/time`), throughput, each
 //! level's sampled distance to the input, the culling cost measured on the file, node sizes
-//! (largest node of any level over level 0's median), the top level's faces and the time from
-//! opening the file to its first frame (`strata stream`).
+//! (largest node of any level over level 0's median), the top level's faces, the time from
+//! opening the file to its first frame (`strata stream`) and the shape retention of fronts under
+//! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure).
 //!
 //! `cargo bench --bench partition [-- --large FACES ...] [-- --memory 1G]`; without arguments the
-//! CT head of ../shared/meshes (partitioned at a budget that makes it several cells) and the
-//! shipped noisy sphere. `--large N` also generates an N-face binary PLY (fixtures'
+//! bunny and the CT head of ../shared/meshes (partitioned at budgets that make them several
+//! cells) and the shipped noisy sphere. `--large N` also generates an N-face binary PLY (fixtures'
 //! `write_bumpy_sphere_ply`) and converts it partitioned within `--memory` (in-core too when it
 //! would fit this machine; quality is compared there only, the input being imported whole).
 
@@ -14,6 +15,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use strata::cone::{facing_orthographic, Facing};
 use strata::format::Reader;
+
+#[path = "common/retention_views.rs"]
+mod retention_views;
 
 struct Run {
     seconds: f64,
@@ -117,21 +121,33 @@ fn first_frame_ms(file: &Path) -> Option<f64> {
 
 fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &Path, Run)]) {
     println!("\n## {name} ({faces} input faces)");
-    println!("| build | s | M faces/s | peak MB | levels | top faces | largest node / level-0 median | culling cost | first frame ms |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!(
+        "| build | s | M faces/s | peak MB | levels | top faces | largest node / level-0 median | culling cost | first frame ms | retention 10 % | 25 % |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut distances: Vec<Vec<f32>> = Vec::new();
     for (build, file, run) in runs {
         let rd = Reader::open_path(file).expect("open");
         assert!(strata::format::verify_path(file).is_sound(), "{} does not verify", file.display());
         let (ratio, top) = node_sizes(&rd);
         let peak = run.peak_kb.map_or("–".to_string(), |k| format!("{:.0}", k as f64 / 1024.0));
+        let retention = |share: f64| -> String {
+            let views = retention_views::Views::of(file).expect("views");
+            let budget = (rd.header().input_faces as f64 * share) as u64;
+            match views.retention(file, budget, strata::stream::Budgets::default().priority).expect("retention") {
+                Some((shaded, _)) => format!("{shaded:.3}"),
+                None => "top too large".into(),
+            }
+        };
         println!(
-            "| {build} | {:.2} | {:.3} | {peak} | {} | {top} | {ratio:.1} | {:.4} | {} |",
+            "| {build} | {:.2} | {:.3} | {peak} | {} | {top} | {ratio:.1} | {:.4} | {} | {} | {} |",
             run.seconds,
             faces as f64 / run.seconds / 1e6,
             rd.levels().len(),
             culling_cost(&rd, 64),
-            first_frame_ms(file).map_or("–".to_string(), |ms| format!("{ms:.1}"))
+            first_frame_ms(file).map_or("–".to_string(), |ms| format!("{ms:.1}")),
+            retention(0.10),
+            retention(0.25),
         );
         if let Some(m) = input {
             distances.push(
@@ -167,11 +183,13 @@ fn main() {
     let out = |n: &str| -> PathBuf { tmp.join(n) };
 
     let mut inputs: Vec<(PathBuf, &str)> = vec![(root.join("fixtures/noisy_sphere.ply"), "16M")];
-    let ct = root.join("../shared/meshes/large/cthead_skin_native.ply");
-    if ct.exists() {
-        inputs.push((ct, "256M"));
-    } else {
-        println!("skipping {}: not found", ct.display());
+    for (mesh, budget) in [("scans/stanford_bun_zipper.ply", "16M"), ("large/cthead_skin_native.ply", "256M")] {
+        let path = root.join("../shared/meshes").join(mesh);
+        if path.exists() {
+            inputs.push((path, budget));
+        } else {
+            println!("skipping {}: not found", path.display());
+        }
     }
     for (input, budget) in &inputs {
         let mesh = strata::import::import(input, None).expect("import").mesh;

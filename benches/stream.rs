@@ -14,8 +14,11 @@ use strata::camera::Camera;
 use strata::format::Reader;
 use strata::render::{Image, Part};
 use strata::stream::budget::MIN_PIXELS;
-use strata::stream::retention::retention;
 use strata::stream::{Budgets, Priority, Streamer};
+
+#[path = "common/retention_views.rs"]
+mod retention_views;
+use retention_views::{Views, SIZE};
 
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 480;
@@ -136,63 +139,23 @@ fn memory(mesh: &Path, file: &Path) -> String {
 
 /// Shape retention over 8 views around the model, per face budget and refinement order.
 fn retention_table(file: &Path) -> strata::error::Result<()> {
-    let rd = Reader::open_path(file)?;
-    let h = rd.header().clone();
-    let (center, radius) = ((h.min + h.max) * 0.5, (h.max - h.min).length() * 0.5);
-    let full: Vec<_> = rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?;
-    let size = 512;
-    let views: Vec<Camera> = (0..8)
-        .map(|k| {
-            let a = k as f32 * std::f32::consts::TAU / 8.0;
-            Camera::framing(center, radius, Vec3::new(a.sin(), 0.3, a.cos()), FOV, size, size)
-        })
-        .collect();
-    let mut references = Vec::new();
-    for cam in &views {
-        let mut img = Image::new(size, size);
-        for g in &full {
-            img.draw(cam, &g.positions, &g.normals, &g.indices, [200, 200, 200, 255]);
-        }
-        references.push(img);
-    }
-    drop(full);
+    let views = Views::of(file)?;
+    let input_faces = Reader::open_path(file)?.header().input_faces;
     let orders = [("error", Priority::Error), ("silhouette", Priority::Silhouette), ("breadth", Priority::Breadth)];
-    println!("  shape retention at {size}x{size}, 8 views, pixel error 0; shaded (coverage), mean over views");
+    println!("  shape retention at {SIZE}x{SIZE}, 8 views, pixel error 0; shaded (coverage), mean over views");
     print!("  {:>8} {:>8}", "budget", "faces");
     for (name, _) in &orders {
         print!(" {name:>18}");
     }
     println!();
     for share in [0.10, 0.25, 0.50] {
-        let budget = (h.input_faces as f64 * share) as u64;
+        let budget = (input_faces as f64 * share) as u64;
         print!("  {:>7.0}% {budget:>8}", share * 100.0);
         for (_, priority) in orders {
-            let budgets = Budgets { faces: Some(budget), pixel_error: 0.0, priority, ..Budgets::default() };
-            let mut s = match Streamer::new(Reader::open_path(file)?, budgets) {
-                Ok(s) => s,
-                Err(_) => {
-                    print!(" {:>18}", "top too large");
-                    continue;
-                }
-            };
-            let (mut shaded, mut coverage) = (0.0, 0.0);
-            let mut img = Image::new(size, size);
-            for (cam, reference) in views.iter().zip(&references) {
-                let mut rep = s.update(cam, None)?;
-                while !rep.added.is_empty() {
-                    rep = s.update(cam, None)?;
-                }
-                img.clear();
-                for &i in &rep.front {
-                    if let Some(g) = s.geometry(i) {
-                        img.draw(cam, &g.positions, &g.normals, &g.indices, [200, 200, 200, 255]);
-                    }
-                }
-                let r = retention(&img, reference);
-                shaded += r.shaded / views.len() as f64;
-                coverage += r.coverage / views.len() as f64;
+            match views.retention(file, budget, priority)? {
+                Some((shaded, coverage)) => print!(" {:>18}", format!("{shaded:.3} ({coverage:.4})")),
+                None => print!(" {:>18}", "top too large"),
             }
-            print!(" {:>18}", format!("{shaded:.3} ({coverage:.4})"));
         }
         println!();
     }
