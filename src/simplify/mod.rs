@@ -1,5 +1,5 @@
 //! Quadric-error edge collapse, optionally keeping every group of a face partition a connected,
-//! non-empty patch (METHOD.md §4).
+//! non-empty patch (METHOD.md §4; with topology changes, non-empty only).
 //!
 //! Garland–Heckbert: each vertex carries a quadric (f64), the area-weighted sum of the squared
 //! distances to the planes of its input faces, plus planes perpendicular to the surface through open
@@ -105,15 +105,16 @@ pub struct SimplifyOptions {
     /// keep the mesh manifold wherever the link condition blocks a collapse: a handle or neck
     /// whose cross-section is a triangle of edges that is not a face is cut there and both sides
     /// capped, and a closed tetrahedron is dropped, each only if it moves the surface by less
-    /// than `max_error`; collapses may also remove a component's last faces. The copies of cut vertices come after the others in the output; they
+    /// than `max_error`; without groups, collapses may also remove a component's last faces. The copies of cut vertices come after the others in the output; they
     /// start where their originals are, and where no later collapse moves them, a reader that
-    /// welds vertices by position sees the two caps as one doubled face. Without it a mesh of many handles and components (a noisy scan)
+    /// welds vertices by position (the chunk file's writer does, by grid point) sees the two caps as
+    /// one doubled face and the cut's edges as edges of four faces. Without it a mesh of many handles and components (a noisy scan)
     /// stops at a few faces per handle and component. With groups, only where
     /// every group is made of whole components (no vertex has faces of two groups), so a cap
     /// joins no groups; there no group loses its last faces (a tetrahedron is dropped only from a
     /// group that keeps others), but a
-    /// cut through a neck leaves its group in two pieces, and the cap's move counts in the
-    /// group's error. Default false.
+    /// cut through a neck leaves its group in two pieces, and the cap's move and a dropped
+    /// tetrahedron (its spread and its vertices' errors) count in the group's error. Default false.
     pub topology: bool,
 }
 
@@ -152,7 +153,7 @@ pub struct Simplified {
 /// Simplify `mesh` by quadric-error edge collapses until `opts.target_faces` or `opts.max_error`.
 ///
 /// `groups`: optional face partition (a label per input face, labels `0..n_groups`). When given,
-/// every group stays a connected, non-empty patch.
+/// every group stays a connected, non-empty patch (non-empty only, with [`SimplifyOptions::topology`]).
 ///
 /// Error estimates are in model units. A collapse's error is the larger of its two ends'
 /// sqrt(quadric cost / accumulated weight): the weighted RMS distance of the new position to the

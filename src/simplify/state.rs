@@ -80,7 +80,7 @@ pub(super) struct State {
     pub(super) scratch_r: Vec<u32>,
     pub(super) scratch_k: Vec<u32>,
     /// Topology changes are made (see [`SimplifyOptions::topology`]); with groups only where
-    /// each group is a whole component.
+    /// each group is made of whole components.
     pub(super) topology: bool,
     /// Vertices that never move or go, and that no collapse joins by a new edge (empty: none;
     /// see [`super::simplify_pinned`]).
@@ -89,6 +89,9 @@ pub(super) struct State {
     /// Live faces per group (with topology changes and groups only, else empty): a tetrahedron
     /// is dropped only from a group that keeps other faces.
     pub(super) group_faces: Vec<u32>,
+    /// Per group (same sizing), the largest squared error of what it lost whole: a dropped
+    /// tetrahedron's spread and its vertices' errors, which no surviving vertex carries.
+    pub(super) group_lost_sq: Vec<f64>,
     /// Faces of the input; faces past them are caps.
     pub(super) input_faces: usize,
     /// Per cap, the input face whose attributes it took.
@@ -133,6 +136,7 @@ impl State {
             pinned: Vec::new(),
             grouped: groups.is_some(),
             group_faces: Vec::new(),
+            group_lost_sq: Vec::new(),
             input_faces: nf,
             cap_source: Vec::new(),
         }
@@ -186,6 +190,7 @@ impl State {
         if self.topology && self.grouped {
             let n = self.faces.iter().map(|f| f.group as usize + 1).max().unwrap_or(0);
             self.group_faces = vec![0; n];
+            self.group_lost_sq = vec![0.0; n];
             for f in &self.faces {
                 self.group_faces[f.group as usize] += 1;
             }
@@ -482,6 +487,15 @@ impl State {
         })
     }
 
+    /// A vertex's squared error estimate: its own mean squared distance to its planes, or the
+    /// largest of the collapses (and cuts) merged into it.
+    pub(super) fn vertex_error_sq(&self, v: u32) -> f64 {
+        let q = self.quadrics.get(v as usize).copied().unwrap_or_default();
+        let pos = self.verts[v as usize].pos;
+        let own = if q.w > 0.0 { q.eval(pos.as_dvec3()) / q.w } else { 0.0 };
+        own.max(q.err_sq)
+    }
+
     pub(super) fn finish(self, mesh: &Mesh, with_groups: bool) -> Simplified {
         let alive: Vec<usize> = (0..self.faces.len()).filter(|&f| self.faces[f].v[0] != DEAD).collect();
         let mut used = vec![false; self.verts.len()];
@@ -495,11 +509,9 @@ impl State {
         let mut vertex_error = Vec::new();
         for (v, x) in self.verts.iter().enumerate() {
             if used[v] {
-                let q = self.quadrics.get(v).copied().unwrap_or_default();
                 remap[v] = positions.len() as u32;
                 positions.push(x.pos);
-                let own = if q.w > 0.0 { q.eval(x.pos.as_dvec3()) / q.w } else { 0.0 };
-                vertex_error.push(own.max(q.err_sq).sqrt() as f32);
+                vertex_error.push(self.vertex_error_sq(v as u32).sqrt() as f32);
             }
         }
         fn corners<T: Copy>(a: &[T], alive: &[usize]) -> Vec<T> {
@@ -528,7 +540,7 @@ impl State {
         let (face_groups, group_error) = if with_groups {
             let face_groups: Vec<u32> = alive.iter().map(|&f| self.faces[f].group).collect();
             let n_groups = self.faces.iter().map(|f| f.group).max().map_or(0, |g| g as usize + 1);
-            let mut group_error = vec![0f32; n_groups];
+            let mut group_error: Vec<f32> = (0..n_groups).map(|g| self.group_lost_sq.get(g).map_or(0.0, |e| e.sqrt() as f32)).collect();
             for (t, &g) in out.triangles.iter().zip(&face_groups) {
                 for &v in t {
                     group_error[g as usize] = group_error[g as usize].max(vertex_error[v as usize]);

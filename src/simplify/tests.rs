@@ -408,6 +408,12 @@ fn topology_changes_reach_targets_that_handles_block() {
         assert_eq!(groups[whole.source_faces[f] as usize], g, "face {f} has its source's group");
     }
     assert!(whole.group_error.iter().all(|&e| e > 0.0));
+    // Every error lands in some group, dropped tetrahedra's too.
+    for target in [12, 0] {
+        let s = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(target) });
+        let most = s.group_error.iter().copied().fold(0.0f32, f32::max);
+        assert!(most >= s.error * 0.999, "target {target}: groups claim {most}, the simplification {}", s.error);
+    }
 }
 
 #[test]

@@ -49,6 +49,10 @@ impl State {
             return false;
         }
         self.error_sq = self.error_sq.max(spread_sq);
+        if let Some(lost) = self.group_lost_sq.get(group).copied() {
+            let worst = corners.iter().map(|&w| self.vertex_error_sq(w)).fold(spread_sq.max(lost), f64::max);
+            self.group_lost_sq[group] = worst;
+        }
         for &w in &corners {
             let x = &mut self.verts[w as usize];
             x.len = 0;
