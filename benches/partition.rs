@@ -131,8 +131,8 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
         assert!(strata::format::verify_path(file).is_sound(), "{} does not verify", file.display());
         let (ratio, top) = node_sizes(&rd);
         let peak = run.peak_kb.map_or("–".to_string(), |k| format!("{:.0}", k as f64 / 1024.0));
+        let views = retention_views::Views::of(file).expect("views");
         let retention = |share: f64| -> String {
-            let views = retention_views::Views::of(file).expect("views");
             let budget = (rd.header().input_faces as f64 * share) as u64;
             match views.retention(file, budget, strata::stream::Budgets::default().priority).expect("retention") {
                 Some((shaded, _)) => format!("{shaded:.3}"),

@@ -152,42 +152,12 @@ impl Hierarchy {
         self.levels.push(level);
     }
 
-    /// Remove the top level (never the last one); its children become the top.
-    pub fn pop_top(&mut self) {
-        if self.levels.len() > 1 {
-            self.levels.pop();
-            if let Some(top) = self.levels.last_mut() {
-                top.parent = vec![NO_PARENT; top.groups.len()];
-            }
-        }
-    }
-}
-
-impl GroupInfo {
-    /// Bounds, cone and counts that cover both groups.
-    pub fn union(&self, other: &GroupInfo) -> GroupInfo {
-        let (min, max) = (self.min.min(other.min), self.max.max(other.max));
-        let center = 0.5 * (min + max);
-        let radius = (center.distance(self.center) + self.radius).max(center.distance(other.center) + other.radius) * (1.0 + 1e-6);
-        GroupInfo {
-            cone: self.cone.merge(&other.cone),
-            center,
-            radius,
-            min,
-            max,
-            faces: self.faces + other.faces,
-            area: self.area + other.area,
-            area_normal: self.area_normal + other.area_normal,
-        }
-    }
-}
-
-impl Hierarchy {
     /// Move whole groups of level `l` into others: group `g` goes into `into[g]` (itself when it
-    /// stays), which must stay; `l ≥ 1`. A moved group has no neighbours (it shares no edge with another); its faces,
-    /// children and bounds become its absorber's, and the groups above it that held nothing else
-    /// go the same way, level by level up to the top. Groups are renumbered in order; returns, per
-    /// old group of level `l`, its new number (for a moved group, its absorber's).
+    /// stays), which must stay; `l ≥ 1`. A moved group has no neighbours (it shares no edge with
+    /// another); its faces, children and bounds become its absorber's, and the groups above it
+    /// that held nothing else go the same way, level by level up to the top. Groups are
+    /// renumbered in order; returns, per old group of level `l`, its new number (for a moved
+    /// group, its absorber's).
     pub fn absorb(&mut self, l: usize, into: &[u32]) -> Vec<u32> {
         assert!(l >= 1, "level 0's groups hold the clusters; they never move");
         debug_assert!((0..into.len()).all(|g| into[g] as usize == g || self.levels[l].neighbors.get(g).is_empty()));
@@ -229,13 +199,10 @@ impl Hierarchy {
             level.neighbors = Lists { offsets, items };
             let kept = kept as usize;
             // The level below points at the new numbers; children follow from it.
-            let below = if k == 0 { &mut self.clusters } else { &mut self.levels[k - 1] };
-            for p in &mut below.parent {
+            for p in &mut self.levels[k - 1].parent {
                 *p = renumber[*p as usize];
             }
-            if k > 0 {
-                self.levels[k].children = Lists::from_labels(&self.levels[k - 1].parent, kept);
-            }
+            self.levels[k].children = Lists::from_labels(&self.levels[k - 1].parent, kept);
             // Above: a group goes when all its children went, into the parent of their absorber.
             let parent: Vec<u32> = (0..n).filter(|&g| fate[g] as usize == g).map(|g| old_parent[g]).collect();
             if k + 1 < self.levels.len() {
@@ -263,6 +230,35 @@ impl Hierarchy {
             }
         }
         first_renumber
+    }
+
+    /// Remove the top level (never the last one); its children become the top.
+    pub fn pop_top(&mut self) {
+        if self.levels.len() > 1 {
+            self.levels.pop();
+            if let Some(top) = self.levels.last_mut() {
+                top.parent = vec![NO_PARENT; top.groups.len()];
+            }
+        }
+    }
+}
+
+impl GroupInfo {
+    /// Bounds, cone and counts that cover both groups.
+    pub fn union(&self, other: &GroupInfo) -> GroupInfo {
+        let (min, max) = (self.min.min(other.min), self.max.max(other.max));
+        let center = 0.5 * (min + max);
+        let radius = (center.distance(self.center) + self.radius).max(center.distance(other.center) + other.radius) * (1.0 + 1e-6);
+        GroupInfo {
+            cone: self.cone.merge(&other.cone),
+            center,
+            radius,
+            min,
+            max,
+            faces: self.faces + other.faces,
+            area: self.area + other.area,
+            area_normal: self.area_normal + other.area_normal,
+        }
     }
 }
 

@@ -1,7 +1,8 @@
 //! The level meshes M0 … ML: M0 is the input; Mℓ is Mℓ−1 simplified while every group of level ℓ
 //! stays a non-empty patch (METHOD.md §4), minus the small components that leave it
 //! ([`crate::small_components`]); connected too, except where coarse levels cut handles and
-//! necks (groups made of whole components, [`crate::simplify::SimplifyOptions::topology`]). A node — group g of level ℓ — owns the faces of Mℓ labelled g.
+//! necks (groups made of whole components, [`crate::simplify::SimplifyOptions::topology`]).
+//! A node — group g of level ℓ — owns the faces of Mℓ labelled g.
 //!
 //! A node's geometric error bounds, in model units, how far its surface may lie from the input:
 //! each level adds the simplifier's estimate for the group (an RMS distance to the planes the
@@ -85,8 +86,7 @@ pub fn build_from(
     let mut levels = vec![first];
     on_level(0);
     for l in 1..h.levels.len() {
-        let next = coarsen(&levels[l - 1], h, l);
-        levels.push(next);
+        levels.push(coarsen(&levels[l - 1], h, l));
         on_level(l);
     }
     // An added level costs a node per top group in the skeleton every reader loads (a record,
@@ -140,9 +140,9 @@ fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Optio
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
     let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
     // Topology changes apply where every group is whole components (coarse levels of a mesh of
-    // many parts), which is where handles stop the simplification.
-    // Not in a piece of a partitioned build, whose top is welded by position to its neighbours
-    // (which would join a cut's copies back to their originals).
+    // many parts), which is where handles stop the simplification; not in a piece of a
+    // partitioned build, whose top is welded by position to its neighbours (which would join a
+    // cut's copies back to their originals).
     let opts = SimplifyOptions { target_faces: target, topology: pinned.is_none(), ..SimplifyOptions::default() };
     let pins: Vec<bool> = pinned.map_or(Vec::new(), |set| below.mesh.positions.iter().map(|&p| set.contains(&position_key(p))).collect());
     let s = simplify_pinned(&below.mesh, Some(&labels), &pins, &opts);

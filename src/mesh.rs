@@ -202,9 +202,7 @@ impl Mesh {
         mesh.compute_face_geometry();
         Ok((mesh, report))
     }
-}
 
-impl Mesh {
     /// The faces `keep` (in that order) with their corners and per-face values and the vertices
     /// they use, renumbered in order of first use; materials and images are kept whole.
     pub fn subset(self, keep: &[usize]) -> Mesh {

@@ -5,10 +5,9 @@
 //!
 //! A whole component — a group of level ℓ that shares no edge with another: a component, or a
 //! piece joined to the rest only at vertices or non-manifold edges, whose removal opens no hole —
-//! leaves level ℓ when a group of that
-//! level near it already has an error of at least the component's size (the diagonal of its faces'
-//! box in Mℓ): its faces are dropped
-//! from Mℓ and that group takes it in (its bounds, cone and children, [`Hierarchy::absorb`]), so
+//! leaves level ℓ when a group of that level near it already has an error of at least the
+//! component's size (the diagonal of its faces' box in Mℓ): its faces are dropped from Mℓ and
+//! that group takes it in (its bounds, cone and children, [`Hierarchy::absorb`]), so
 //! the component's finer node is reached by refining the absorber. What the front loses by drawing
 //! the absorber instead is within the error the absorber already claims; its error is raised only
 //! where the component's own error is larger (its children's, which any parent covers). "Near"
@@ -63,7 +62,7 @@ pub fn leave(level: &mut LevelMesh, h: &mut Hierarchy, l: usize) -> usize {
             let widening = pi.cone.merge(&info.cone).half_angle - pi.cone.half_angle;
             let growth = (dist + info.radius).max(pi.radius) / pi.radius;
             let key = (growth, widening, p);
-            if best.is_none_or(|b| (key.0, key.1, key.2) < b) {
+            if best.is_none_or(|b| key < b) {
                 best = Some(key);
             }
             true
@@ -82,13 +81,11 @@ pub fn leave(level: &mut LevelMesh, h: &mut Hierarchy, l: usize) -> usize {
     for &c in left.iter().rev() {
         into[c as usize] = into[into[c as usize] as usize];
     }
-    let children_error: Vec<f32> = (0..n).map(|g| errors[g]).collect();
     let renumber = h.absorb(l, &into);
-    let kept = h.levels[l].groups.len();
-    let mut group_error = vec![0.0f32; kept];
+    let mut group_error = vec![0.0f32; h.levels[l].groups.len()];
     for g in 0..n {
         let r = renumber[g] as usize;
-        group_error[r] = group_error[r].max(children_error[g]).max(absorbed_size[g]);
+        group_error[r] = group_error[r].max(level.group_error[g]).max(absorbed_size[g]);
     }
     let keep: Vec<usize> = (0..level.face_group.len()).filter(|&f| into[level.face_group[f] as usize] == level.face_group[f]).collect();
     level.mesh = std::mem::take(&mut level.mesh).subset(&keep);

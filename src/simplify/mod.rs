@@ -32,8 +32,8 @@
 //! face is duplicated), turns a face normal by more than `max_normal_turn` from its input normal, or
 //! creates a degenerate or sliver face.
 //!
-//! Topology (opt-in; with groups only where each group is whole components): a noisy scan has many tiny handles and components, each of
-//! which keeps a dozen faces that no collapse may remove. When the target is not reached, the
+//! Topology (opt-in; with groups only where each group is whole components): a noisy scan has many
+//! tiny handles and components, each of which keeps a dozen faces that no collapse may remove. When the target is not reached, the
 //! simplification runs again, and where a collapse is blocked by the link condition alone the
 //! mesh is cut along the triangle of edges that blocks it (a handle or neck) and both sides are
 //! capped, or a closed tetrahedron is dropped: genus and components change, manifoldness not.
@@ -105,16 +105,17 @@ pub struct SimplifyOptions {
     /// keep the mesh manifold wherever the link condition blocks a collapse: a handle or neck
     /// whose cross-section is a triangle of edges that is not a face is cut there and both sides
     /// capped, and a closed tetrahedron is dropped, each only if it moves the surface by less
-    /// than `max_error`; without groups, collapses may also remove a component's last faces. The copies of cut vertices come after the others in the output; they
-    /// start where their originals are, and where no later collapse moves them, a reader that
-    /// welds vertices by position (the chunk file's writer does, by grid point) sees the two caps as
-    /// one doubled face and the cut's edges as edges of four faces. Without it a mesh of many handles and components (a noisy scan)
-    /// stops at a few faces per handle and component. With groups, only where
-    /// every group is made of whole components (no vertex has faces of two groups), so a cap
-    /// joins no groups; there no group loses its last faces (a tetrahedron is dropped only from a
-    /// group that keeps others), but a
-    /// cut through a neck leaves its group in two pieces, and the cap's move and a dropped
-    /// tetrahedron (its spread and its vertices' errors) count in the group's error. Default false.
+    /// than `max_error`; without groups, collapses may also remove a component's last faces. The
+    /// copies of cut vertices come after the others in the output; they start where their
+    /// originals are, and where no later collapse moves them, a reader that welds vertices by
+    /// position (the chunk file's writer does, by grid point) sees the two caps as one doubled
+    /// face and the cut's edges as edges of four faces. Without it a mesh of many handles and
+    /// components (a noisy scan) stops at a few faces per handle and component. With groups, only
+    /// where every group is made of whole components (no vertex has faces of two groups), so a
+    /// cap joins no groups; there no group loses its last faces (a tetrahedron is dropped only
+    /// from a group that keeps others), but a cut through a neck leaves its group in two pieces,
+    /// and the cap's move and a dropped tetrahedron (its spread and its vertices' errors) count in
+    /// the group's error. Default false.
     pub topology: bool,
 }
 

@@ -483,7 +483,8 @@ impl State {
     pub(super) fn groups_are_components(&self) -> bool {
         self.verts.iter().all(|x| {
             let faces = &self.face_lists[x.start as usize..(x.start + x.len) as usize];
-            faces.iter().all(|&f| self.faces[f as usize].group == faces.first().map_or(0, |&g| self.faces[g as usize].group))
+            let group = |f: &u32| self.faces[*f as usize].group;
+            faces.first().is_none_or(|first| faces.iter().all(|f| group(f) == group(first)))
         })
     }
 
