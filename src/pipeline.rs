@@ -33,8 +33,10 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a PLY or OBJ file that an in-core build would not fit in `memory`
-    /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in memory.
+    /// Partitioned when the input is a PLY or OBJ file of at least
+    /// [`crate::partition::PARALLEL_FACES`] faces (faster on several cores) or that an in-core
+    /// build would not fit in `memory` ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in
+    /// memory.
     Auto,
     /// Always in memory.
     InCore,
@@ -100,6 +102,8 @@ pub struct Converted {
     pub summary: WriteSummary,
     pub times: StageTimes,
     pub warnings: Vec<String>,
+    /// The cells of a partitioned build; `None` when built in memory.
+    pub cells: Option<usize>,
 }
 
 /// What the partitioned build needs when it is the one to run: its budget, the input's streaming
@@ -110,7 +114,7 @@ type Partitioned = (crate::partition::Budget, &'static crate::import::stream::St
 /// when that is chosen for a file the partitioned build cannot take and memory may not hold.
 fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warnings: &mut Vec<String>) -> Result<Option<Partitioned>> {
     use crate::error::Error;
-    use crate::partition::IN_CORE_BYTES_PER_FACE;
+    use crate::partition::{IN_CORE_BYTES_PER_FACE, PARALLEL_FACES};
     let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
     let budget = || {
         let mut b = crate::partition::Budget::new(memory);
@@ -124,11 +128,13 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
             let Some(reader) = reader.filter(|_| opts.encoding == Encoding::V2) else { return Ok(None) };
             // No format makes more than one triangle per byte: small files fit without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
-            if size.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory {
+            let fits = |faces: u64| faces.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
+            if size < PARALLEL_FACES && fits(size) {
                 return Ok(None);
             }
             Ok(match (reader.declared)(input) {
-                Ok(d) if d.triangles.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory => None,
+                Ok(d) if d.triangles < PARALLEL_FACES && fits(d.triangles) => None,
+                Ok(d) if d.refused.is_some() && fits(d.triangles) => None,
                 Ok(crate::import::stream::Declared { triangles, refused: Some(why) }) => {
                     warnings.push(format!(
                         "about {triangles} triangles need about {} MiB in memory, more than the {} MiB of --memory, but {why}; built in memory",
@@ -230,5 +236,5 @@ pub fn convert(
     lap(&mut times.write_ms);
 
     choice_warnings.extend(imported.warnings);
-    Ok(Converted { summary, times, warnings: choice_warnings })
+    Ok(Converted { summary, times, warnings: choice_warnings, cells: None })
 }

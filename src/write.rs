@@ -452,6 +452,10 @@ fn node_geometry(
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
     let mut index_of: FxHashMap<Key, u32> = FxHashMap::with_capacity_and_hasher(order.len(), Default::default());
+    // Corners repeat a vertex with the same attributes about six times: the index of a vertex and
+    // its attributes as the mesh holds them, so that each is quantized and encoded once.
+    type Raw = (u32, [u32; 3], [u32; 2], [u8; 4]);
+    let mut seen: FxHashMap<Raw, u32> = FxHashMap::with_capacity_and_hasher(order.len(), Default::default());
     let mut lattice = lattice;
     if lattice.uv_bits > 0 {
         lattice.uv_bits = uv_bits(mesh, &order, lattice.uv_bits);
@@ -461,7 +465,18 @@ fn node_geometry(
     for &f in &order {
         for k in 0..3 {
             let corner = 3 * f as usize + k;
-            let g = q.points[mesh.triangles[f as usize][k] as usize];
+            let v = mesh.triangles[f as usize][k];
+            let raw = (
+                v,
+                if attrs.normals { mesh.normals[corner].to_array().map(f32::to_bits) } else { [0; 3] },
+                if attrs.uvs { mesh.uvs[corner].to_array().map(f32::to_bits) } else { [0; 2] },
+                if attrs.colors { mesh.colors[corner] } else { [0; 4] },
+            );
+            if let Some(&i) = seen.get(&raw) {
+                out.indices.push(i);
+                continue;
+            }
+            let g = q.points[v as usize];
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
                 (true, 0) => octa::encode(mesh.normals[corner]),
@@ -487,6 +502,7 @@ fn node_geometry(
                 }
                 next
             });
+            seen.insert(raw, i);
             out.indices.push(i);
         }
     }

@@ -259,3 +259,19 @@ fn auto_builds_an_obj_partitioned_only_when_it_would_not_fit() {
     assert_eq!(Reader::open_path(&auto_large).unwrap().levels()[0].faces, 99_372);
     clean_up([obj, auto_small, forced, auto_large], &work);
 }
+
+#[test]
+fn auto_builds_a_mesh_of_a_million_faces_partitioned_even_when_it_fits() {
+    let work = work_dir("auto-parallel-work");
+    let (ply, out) = (temp("auto-parallel.ply"), temp("auto-parallel.strata"));
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&ply).unwrap());
+    let (faces, _) = strata::fixtures::write_bumpy_sphere_ply(&mut file, strata::partition::PARALLEL_FACES, 7, &mut |_| {}).unwrap();
+    drop(file);
+    assert!(faces >= strata::partition::PARALLEL_FACES, "{faces} faces");
+    let opts = ConvertOptions { memory: 4 << 30, temp: Some(work.clone()), ..ConvertOptions::default() };
+    let c = convert(&ply, &Default::default(), &out, &opts, &mut Silent).expect("auto");
+    let cells = c.cells.expect("built in memory");
+    assert!(cells >= 2, "{cells} cells: no parallel work");
+    assert_eq!(Reader::open_path(&out).unwrap().levels()[0].faces, faces);
+    clean_up([ply, out], &work);
+}

@@ -99,7 +99,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let s = &c.summary;
     if a.json {
-        println!("{}", serde_json::json!({ "summary": s, "times": c.times, "bytes_per_face": s.bytes_per_face() }));
+        println!("{}", serde_json::json!({ "summary": s, "times": c.times, "cells": c.cells, "bytes_per_face": s.bytes_per_face() }));
         return Ok(());
     }
     println!("wrote {} ({} bytes, {:.1} bytes per input face)", a.output.display(), s.file_bytes, s.bytes_per_face());
@@ -121,6 +121,9 @@ pub fn run(a: Args) -> Result<()> {
             s.image_bytes,
             100.0 * s.image_bytes as f64 / s.file_bytes.max(1) as f64
         );
+    }
+    if let Some(cells) = c.cells {
+        println!("built partitioned in {cells} cells");
     }
     let t = c.times;
     println!(

@@ -9,6 +9,7 @@
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh};
 use glam::Vec3;
+use rustc_hash::FxHashMap;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -165,8 +166,9 @@ impl Spool {
     }
 }
 
-/// A cell's faces as an uncleaned mesh (every corner its own vertex, welded by
-/// [`Mesh::clean`]), with the input vertex id of each vertex.
+/// A cell's faces as an uncleaned mesh, one vertex per input vertex it uses (corners of the same
+/// input vertex hold the same position; [`Mesh::clean`] welds by position), with the input vertex
+/// id of each vertex.
 pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u32>)> {
     let corner = layout.corner_bytes();
     let expect = faces * 3 * corner as u64;
@@ -177,19 +179,27 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u
     let mut r = BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
     let n = faces as usize * 3;
     let mut mesh = Mesh {
-        positions: Vec::with_capacity(n),
-        triangles: (0..faces as u32).map(|f| [3 * f, 3 * f + 1, 3 * f + 2]).collect(),
+        triangles: Vec::with_capacity(faces as usize),
         face_materials: vec![0; faces as usize],
         materials: vec![Material::default()],
         ..Mesh::default()
     };
-    let mut ids = Vec::with_capacity(n);
+    let mut ids = Vec::new();
+    let mut local: FxHashMap<u32, u32> = FxHashMap::default();
     let mut rec = vec![0u8; corner];
     let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
-    for _ in 0..n {
+    let mut t = [0u32; 3];
+    for c in 0..n {
         r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
-        ids.push(u32::from_le_bytes(rec[0..4].try_into().unwrap()));
-        mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
+        let id = u32::from_le_bytes(rec[0..4].try_into().unwrap());
+        t[c % 3] = *local.entry(id).or_insert_with(|| {
+            ids.push(id);
+            mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
+            ids.len() as u32 - 1
+        });
+        if c % 3 == 2 {
+            mesh.triangles.push(t);
+        }
         let mut at = 16;
         if layout.normals {
             mesh.normals.push(Vec3::new(f32_at(&rec, at), f32_at(&rec, at + 4), f32_at(&rec, at + 8)));

@@ -34,6 +34,15 @@ pub const IN_CORE_BYTES_PER_FACE: u64 = 450;
 const MIN_CELL_FACES: u64 = 4096;
 const MAX_CELL_FACES: u64 = 2_000_000;
 
+/// Most faces per cell when memory allows more: larger cells are no faster to build per face,
+/// and fewer of them keep cores idle while the last ones finish (notes/partition.md).
+pub const FAST_CELL_FACES: u64 = 500_000;
+
+/// Fewest input faces for which the automatic choice builds partitioned even when the in-core
+/// build would fit: from there, cells built on every core at once beat one in-core build
+/// (notes/partition.md).
+pub const PARALLEL_FACES: u64 = 1_000_000;
+
 /// What the partitioned build may use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Budget {
@@ -72,13 +81,15 @@ pub const HELD_BYTES_PER_FACE: u64 = 16;
 
 /// Faces per cell for a budget and an input of `faces` faces: the cells in flight at once take
 /// 60 % of what the held state ([`HELD_BYTES_PER_FACE`]) leaves, the rest is for the merge and
-/// the allocator. So the peak stays near the budget whatever the input's size.
+/// the allocator. So the peak stays near the budget whatever the input's size. Cells hold at most
+/// [`FAST_CELL_FACES`] unless [`MAX_CELLS`] cells need more.
 pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
     if b.cell_faces > 0 {
         return b.cell_faces;
     }
     let free = b.memory.saturating_sub(faces.saturating_mul(HELD_BYTES_PER_FACE));
-    (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES)
+    let fits = (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES);
+    fits.min(FAST_CELL_FACES.max(faces.div_ceil(MAX_CELLS)))
 }
 
 /// The streaming reader for `input`: its `format`'s, else its extension's, if that has one.
@@ -202,7 +213,7 @@ pub fn convert(
     lap(&mut times.simplify_ms);
     file.commit()?;
     lap(&mut times.write_ms);
-    Ok(Converted { summary, times, warnings })
+    Ok(Converted { summary, times, warnings, cells: Some(spooled.iter().filter(|(_, faces)| *faces > 0).count()) })
 }
 
 /// What the distribution pass leaves: the file's grid, the cell files' layout, computed vertex

@@ -276,9 +276,10 @@ fn cell<W: Write>(
     if let Some(vn) = job.vertex_normals {
         mesh.compute_face_geometry();
         let cos = job.crease.cos();
-        mesh.normals = (0..ids.len())
+        let smooth: Vec<Vec3> = ids.iter().map(|&id| octa::decode(vn[id as usize])).collect();
+        mesh.normals = (0..3 * mesh.triangles.len())
             .map(|i| {
-                let n = octa::decode(vn[ids[i] as usize]);
+                let n = smooth[mesh.triangles[i / 3][i % 3] as usize];
                 let f = mesh.face_normals[i / 3];
                 if f == Vec3::ZERO || n.dot(f) >= cos {
                     n
