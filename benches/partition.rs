@@ -209,12 +209,14 @@ fn main() {
         let (faces, _) = strata::fixtures::write_bumpy_sphere_ply(&mut w, n, 1, &mut |_| {}).unwrap();
         drop(w);
         let b = convert(&ply, &out("large.strata"), &["--partitioned", "--memory", &memory]);
-        report(
-            &format!("generated bumpy sphere (partitioned at --memory {memory})"),
-            faces,
-            None,
-            &[("partitioned", &out("large.strata"), b)],
-        );
+        let name = format!("generated bumpy sphere (partitioned at --memory {memory})");
+        if faces.saturating_mul(strata::partition::IN_CORE_BYTES_PER_FACE) <= strata::partition::default_memory() {
+            let a = convert(&ply, &out("large-incore.strata"), &["--in-core"]);
+            let mesh = strata::import::import(&ply, None).expect("import").mesh;
+            report(&name, faces, Some(&mesh), &[("in-core", &out("large-incore.strata"), a), ("partitioned", &out("large.strata"), b)]);
+        } else {
+            report(&name, faces, None, &[("partitioned", &out("large.strata"), b)]);
+        }
         let _ = std::fs::remove_file(&ply);
     }
     let _ = std::fs::remove_dir_all(&tmp);

@@ -33,10 +33,11 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a PLY or OBJ file of at least
-    /// [`crate::partition::PARALLEL_FACES`] faces (faster on several cores) or that an in-core
-    /// build would not fit in `memory` ([`crate::partition::IN_CORE_BYTES_PER_FACE`]), else in
-    /// memory.
+    /// Partitioned when the input is a PLY or OBJ file the partitioned build takes (format 2, no
+    /// textures) and either an in-core build would not fit in `memory`
+    /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]) or, on a machine of several cores, it has at
+    /// least [`crate::partition::PARALLEL_FACES`] faces (there the partitioned build is faster);
+    /// else in memory.
     Auto,
     /// Always in memory.
     InCore,
@@ -126,15 +127,21 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
         Build::InCore => Ok(None),
         Build::Auto => {
             let Some(reader) = reader.filter(|_| opts.encoding == Encoding::V2) else { return Ok(None) };
-            // No format makes more than one triangle per byte: small files fit without a look.
+            // No format makes more than one triangle per byte: a file of fewer bytes than the
+            // faces that would decide has fewer faces too, and is built in memory without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
             let fits = |faces: u64| faces.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
-            if size < PARALLEL_FACES && fits(size) {
+            let parallel = |faces: u64| faces >= PARALLEL_FACES && budget().threads > 1;
+            if !parallel(size) && fits(size) {
                 return Ok(None);
             }
             Ok(match (reader.declared)(input) {
-                Ok(d) if d.triangles < PARALLEL_FACES && fits(d.triangles) => None,
-                Ok(d) if d.refused.is_some() && fits(d.triangles) => None,
+                Ok(d) if fits(d.triangles) && (d.refused.is_some() || !parallel(d.triangles)) => None,
+                Ok(d) if fits(d.triangles) => {
+                    let mut b = crate::partition::Budget::for_speed(memory, d.triangles);
+                    b.temp = opts.temp.clone();
+                    Some((b, reader, d))
+                }
                 Ok(crate::import::stream::Declared { triangles, refused: Some(why) }) => {
                     warnings.push(format!(
                         "about {triangles} triangles need about {} MiB in memory, more than the {} MiB of --memory, but {why}; built in memory",

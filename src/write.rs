@@ -452,8 +452,8 @@ fn node_geometry(
 
     type Key = ([u32; 3], [i16; 2], [u32; 2], [u8; 4]);
     let mut index_of: FxHashMap<Key, u32> = FxHashMap::with_capacity_and_hasher(order.len(), Default::default());
-    // Corners repeat a vertex with the same attributes about six times: the index of a vertex and
-    // its attributes as the mesh holds them, so that each is quantized and encoded once.
+    // Corners of a mesh vertex often repeat its attributes: the output index per vertex and raw
+    // attributes, so that each is quantized and encoded once.
     type Raw = (u32, [u32; 3], [u32; 2], [u8; 4]);
     let mut seen: FxHashMap<Raw, u32> = FxHashMap::with_capacity_and_hasher(order.len(), Default::default());
     let mut lattice = lattice;

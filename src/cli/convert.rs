@@ -44,7 +44,8 @@ pub struct Args {
     #[arg(long, default_value_t = 60.0)]
     pub crease_angle: f32,
     /// Memory to stay within (bytes, or with K, M, G: 512M, 1G): a PLY or OBJ file whose in-core build
-    /// would need more is built partitioned, in cells on disk. Default: half of this machine's.
+    /// would need more is built partitioned, in cells on disk (as is one of 1M faces or more, where
+    /// that is faster). Default: half of this machine's.
     #[arg(long, value_parser = parse_size)]
     pub memory: Option<u64>,
     /// Folder for the partitioned build's cell files (default: the system's temporary folder).
@@ -123,7 +124,7 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     if let Some(cells) = c.cells {
-        println!("built partitioned in {cells} cells");
+        println!("built partitioned in {cells} cell{}", if cells == 1 { "" } else { "s" });
     }
     let t = c.times;
     println!(

@@ -166,9 +166,9 @@ impl Spool {
     }
 }
 
-/// A cell's faces as an uncleaned mesh, one vertex per input vertex it uses (corners of the same
-/// input vertex hold the same position; [`Mesh::clean`] welds by position), with the input vertex
-/// id of each vertex.
+/// A cell's faces as an uncleaned mesh, one vertex per welded input vertex it uses (the first
+/// corner's position: corners of a vertex differ at most in the sign of a zero; [`Mesh::clean`]
+/// welds by position), with the input vertex id of each vertex.
 pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u32>)> {
     let corner = layout.corner_bytes();
     let expect = faces * 3 * corner as u64;
@@ -184,8 +184,10 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u
         materials: vec![Material::default()],
         ..Mesh::default()
     };
-    let mut ids = Vec::new();
-    let mut local: FxHashMap<u32, u32> = FxHashMap::default();
+    // About half a vertex per face on a closed surface.
+    let mut ids = Vec::with_capacity(faces as usize / 2);
+    mesh.positions.reserve(faces as usize / 2);
+    let mut local: FxHashMap<u32, u32> = FxHashMap::with_capacity_and_hasher(faces as usize / 2, Default::default());
     let mut rec = vec![0u8; corner];
     let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
     let mut t = [0u32; 3];

@@ -1,4 +1,5 @@
-//! The partitioned build, for meshes larger than memory, top-down: stream the input into spatial
+//! The partitioned build, for meshes larger than memory (and for large ones that fit, where it is
+//! faster on several cores), top-down: stream the input into spatial
 //! cells on disk → build each cell's finest levels alone, several at once, with the cell's border
 //! locked → merge the cells' tops into one mesh, where the old cell borders are interior, and build
 //! the coarse levels there → write. The file is the same format as the in-core build's; only how
@@ -36,7 +37,7 @@ const MAX_CELL_FACES: u64 = 2_000_000;
 
 /// Most faces per cell when memory allows more: larger cells are no faster to build per face,
 /// and fewer of them keep cores idle while the last ones finish (notes/partition.md).
-pub const FAST_CELL_FACES: u64 = 500_000;
+const FAST_CELL_FACES: u64 = 500_000;
 
 /// Fewest input faces for which the automatic choice builds partitioned even when the in-core
 /// build would fit: from there, cells built on every core at once beat one in-core build
@@ -61,6 +62,18 @@ impl Budget {
     pub fn new(memory: u64) -> Budget {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         Budget { memory, temp: None, threads, cell_faces: 0 }
+    }
+
+    /// A budget for an input of `faces` faces that the in-core build would fit in `memory`,
+    /// partitioned for speed: cells of a size that depends on the input alone, so that every
+    /// machine writes the same file, and no more of them at once than `memory` holds.
+    pub fn for_speed(memory: u64, faces: u64) -> Budget {
+        let cell_faces = FAST_CELL_FACES.max(faces.div_ceil(MAX_CELLS));
+        let per_cell = cell_faces.saturating_mul(IN_CORE_BYTES_PER_FACE) * 10 / 6;
+        let room = memory.saturating_sub(faces.saturating_mul(HELD_BYTES_PER_FACE));
+        let b = Budget::new(memory);
+        let threads = b.threads.min((room / per_cell.max(1)) as usize).max(1);
+        Budget { threads, cell_faces, ..b }
     }
 }
 
@@ -88,7 +101,7 @@ pub fn cell_faces(b: &Budget, faces: u64) -> u64 {
         return b.cell_faces;
     }
     let free = b.memory.saturating_sub(faces.saturating_mul(HELD_BYTES_PER_FACE));
-    let fits = (free * 6 / 10 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES);
+    let fits = (free / 10 * 6 / b.threads.max(1) as u64 / IN_CORE_BYTES_PER_FACE).clamp(MIN_CELL_FACES, MAX_CELL_FACES);
     fits.min(FAST_CELL_FACES.max(faces.div_ceil(MAX_CELLS)))
 }
 
@@ -346,5 +359,29 @@ pub(crate) fn release_memory() {
     // SAFETY: malloc_trim only returns free pages of the allocator's own heap to the system.
     unsafe {
         libc::malloc_trim(0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_are_capped_for_speed_unless_there_would_be_too_many() {
+        let b = Budget { memory: 64 << 30, temp: None, threads: 2, cell_faces: 0 };
+        assert_eq!(cell_faces(&b, 5_000_000), FAST_CELL_FACES);
+        assert_eq!(cell_faces(&b, 1_000_000_000), 1_000_000_000u64.div_ceil(MAX_CELLS));
+        let tight = Budget { memory: 256 << 20, ..b.clone() };
+        assert!(cell_faces(&tight, 5_000_000) < FAST_CELL_FACES);
+    }
+
+    #[test]
+    fn a_budget_for_speed_depends_on_the_input_alone_and_fits_its_cells_in_memory() {
+        let (a, b) = (Budget::for_speed(2 << 30, 3_000_000), Budget::for_speed(64 << 30, 3_000_000));
+        assert_eq!(a.cell_faces, FAST_CELL_FACES);
+        assert_eq!(a.cell_faces, b.cell_faces);
+        let per_cell = FAST_CELL_FACES * IN_CORE_BYTES_PER_FACE * 10 / 6;
+        assert!(a.threads as u64 * per_cell + 3_000_000 * HELD_BYTES_PER_FACE <= 2 << 30 || a.threads == 1);
+        assert_eq!(Budget::for_speed(512 << 20, 1_000_000).threads, 1);
     }
 }
