@@ -129,12 +129,12 @@ pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
     n
 }
 
-/// Level `l` made from the level mesh `below` of level `l − 1`.
 /// A position as the key welding compares: its coordinates' bits, −0 as +0.
 pub fn position_key(p: glam::Vec3) -> [u32; 3] {
     (p + glam::Vec3::ZERO).to_array().map(f32::to_bits)
 }
 
+/// Level `l` made from the level mesh `below` of level `l − 1`.
 fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Option<&FxHashSet<[u32; 3]>>) -> LevelMesh {
     let parent = &h.levels[l - 1].parent;
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
