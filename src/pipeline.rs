@@ -36,8 +36,8 @@ pub enum Build {
     /// Partitioned when the input is a PLY or OBJ file the partitioned build takes (format 2, no
     /// textures) and either an in-core build would not fit in `memory`
     /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]) or, on a machine of several cores, it has at
-    /// least [`crate::partition::PARALLEL_FACES`] faces (there the partitioned build is faster);
-    /// else in memory.
+    /// least [`crate::partition::PARALLEL_FACES`] faces and memory for two cells at once (there
+    /// the partitioned build is faster); else in memory.
     Auto,
     /// Always in memory.
     InCore,
@@ -115,10 +115,10 @@ type Partitioned = (crate::partition::Budget, &'static crate::import::stream::St
 /// when that is chosen for a file the partitioned build cannot take and memory may not hold.
 fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warnings: &mut Vec<String>) -> Result<Option<Partitioned>> {
     use crate::error::Error;
-    use crate::partition::{IN_CORE_BYTES_PER_FACE, PARALLEL_FACES};
+    use crate::partition::{Budget, IN_CORE_BYTES_PER_FACE, PARALLEL_FACES};
     let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
     let budget = || {
-        let mut b = crate::partition::Budget::new(memory);
+        let mut b = Budget::new(memory);
         b.temp = opts.temp.clone();
         b
     };
@@ -131,14 +131,15 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
             // faces that would decide has fewer faces too, and is built in memory without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
             let fits = |faces: u64| faces.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
-            let parallel = |faces: u64| faces >= PARALLEL_FACES && budget().threads > 1;
+            // Cells built for speed must run at least two at once to beat the in-core build.
+            let parallel = |faces: u64| faces >= PARALLEL_FACES && Budget::for_speed(memory, faces).threads > 1;
             if !parallel(size) && fits(size) {
                 return Ok(None);
             }
             Ok(match (reader.declared)(input) {
                 Ok(d) if fits(d.triangles) && (d.refused.is_some() || !parallel(d.triangles)) => None,
                 Ok(d) if fits(d.triangles) => {
-                    let mut b = crate::partition::Budget::for_speed(memory, d.triangles);
+                    let mut b = Budget::for_speed(memory, d.triangles);
                     b.temp = opts.temp.clone();
                     Some((b, reader, d))
                 }

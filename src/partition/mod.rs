@@ -1,9 +1,9 @@
 //! The partitioned build, for meshes larger than memory (and for large ones that fit, where it is
-//! faster on several cores), top-down: stream the input into spatial
-//! cells on disk → build each cell's finest levels alone, several at once, with the cell's border
-//! locked → merge the cells' tops into one mesh, where the old cell borders are interior, and build
-//! the coarse levels there → write. The file is the same format as the in-core build's; only how
-//! its levels were made differs (notes/partition.md says what that costs).
+//! faster on several cores), top-down: stream the input into spatial cells on disk → build each
+//! cell's finest levels alone, several at once, with the cell's border locked → merge the cells'
+//! tops into one mesh, where the old cell borders are interior, and build the coarse levels there
+//! → write. The file is the same format as the in-core build's; only how its levels were made
+//! differs (notes/partition.md says what that costs).
 //!
 //! Memory: the cells in flight (each an in-core build of [`cell_faces`] faces), the vertex arrays
 //! while streaming (positions, and colors and normals when the input has them), and what is held
