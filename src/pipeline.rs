@@ -117,8 +117,7 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
     use crate::error::Error;
     use crate::partition::{Budget, IN_CORE_BYTES_PER_FACE, PARALLEL_FACES};
     let memory = if opts.memory > 0 { opts.memory } else { crate::partition::default_memory() };
-    let budget = || {
-        let mut b = Budget::new(memory);
+    let with_temp = |mut b: Budget| {
         b.temp = opts.temp.clone();
         b
     };
@@ -127,21 +126,20 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
         Build::InCore => Ok(None),
         Build::Auto => {
             let Some(reader) = reader.filter(|_| opts.encoding == Encoding::V2) else { return Ok(None) };
-            // No format makes more than one triangle per byte: a file of fewer bytes than the
-            // faces that would decide has fewer faces too, and is built in memory without a look.
+            // No format makes more than one triangle per byte: a file of fewer bytes than
+            // PARALLEL_FACES has fewer faces too, and when it fits is built in memory without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
             let fits = |faces: u64| faces.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
-            // Cells built for speed must run at least two at once to beat the in-core build.
-            let parallel = |faces: u64| faces >= PARALLEL_FACES && Budget::for_speed(memory, faces).threads > 1;
-            if !parallel(size) && fits(size) {
+            if size < PARALLEL_FACES && fits(size) {
                 return Ok(None);
             }
             Ok(match (reader.declared)(input) {
-                Ok(d) if fits(d.triangles) && (d.refused.is_some() || !parallel(d.triangles)) => None,
                 Ok(d) if fits(d.triangles) => {
-                    let mut b = Budget::for_speed(memory, d.triangles);
-                    b.temp = opts.temp.clone();
-                    Some((b, reader, d))
+                    // Cells built for speed must run at least two at once to beat the in-core build.
+                    let fast = (d.triangles >= PARALLEL_FACES && d.refused.is_none())
+                        .then(|| Budget::for_speed(memory, d.triangles))
+                        .filter(|b| b.threads > 1);
+                    fast.map(|b| (with_temp(b), reader, d))
                 }
                 Ok(crate::import::stream::Declared { triangles, refused: Some(why) }) => {
                     warnings.push(format!(
@@ -151,7 +149,7 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
                     ));
                     None
                 }
-                Ok(d) => Some((budget(), reader, d)),
+                Ok(d) => Some((with_temp(Budget::new(memory)), reader, d)),
                 Err(_) => None,
             })
         }
@@ -172,7 +170,7 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
             let d = (reader.declared)(input)?;
             match d.refused {
                 Some(why) => Err(Error::invalid(input, None, format!("{why}; convert it in memory (without --partitioned)"))),
-                None => Ok(Some((budget(), reader, d))),
+                None => Ok(Some((with_temp(Budget::new(memory)), reader, d))),
             }
         }
     }
