@@ -250,3 +250,167 @@ fn damaged_planes_cost_only_the_order_and_are_said() {
     assert!(warnings.iter().any(|w| w.contains("ORDR") && w.contains("nearest box")), "{warnings:?}");
     let _ = std::fs::remove_file(out);
 }
+
+/// §5 of selection.md read literally, one parent at a time: its live children, the edges its
+/// entries decide, then repeatedly the least key among the children whose predecessors are taken
+/// (among all left on a cycle).
+fn order_by_the_rule(
+    sk: &strata::format::skeleton::Skeleton,
+    planes: &strata::format::planes::Planes,
+    front: &[u32],
+    cam: &Camera,
+) -> Vec<u32> {
+    let n = sk.nodes.len();
+    let (mut shown, mut live) = (vec![false; n], vec![false; n]);
+    for &f in front {
+        shown[f as usize] = true;
+        let mut p = f;
+        while (p as usize) < n && !live[p as usize] {
+            live[p as usize] = true;
+            p = sk.nodes[p as usize].parent;
+        }
+    }
+    let (eye, key_eye) = match cam.projection {
+        Projection::Perspective { .. } => (Eye::At(grid_eye(&sk.header.grid, cam.eye)), Eye::At(cam.eye.as_dvec3())),
+        Projection::Orthographic { .. } => (Eye::Along(cam.forward().as_dvec3()), Eye::Along(cam.forward().as_dvec3())),
+    };
+    let key = |i: u32| -> f64 {
+        let (lo, hi) = sk.node_box(i);
+        let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+        match key_eye {
+            Eye::At(e) => {
+                let d = (lo - e).max(glam::DVec3::ZERO).max(e - hi);
+                0.0 + d.dot(d)
+            }
+            Eye::Along(d) => {
+                let corners = (0..8).map(|c| {
+                    let x = glam::DVec3::new(
+                        if c & 1 == 0 { lo.x } else { hi.x },
+                        if c & 2 == 0 { lo.y } else { hi.y },
+                        if c & 4 == 0 { lo.z } else { hi.z },
+                    );
+                    (d.x * x.x + d.y * x.y) + d.z * x.z
+                });
+                0.0 + corners.fold(f64::INFINITY, f64::min)
+            }
+        }
+    };
+    let mut out = Vec::new();
+    fn visit(
+        parent: Option<u32>,
+        sk: &strata::format::skeleton::Skeleton,
+        planes: &strata::format::planes::Planes,
+        eye: Eye,
+        key: &dyn Fn(u32) -> f64,
+        (shown, live): (&[bool], &[bool]),
+        out: &mut Vec<u32>,
+    ) {
+        let kids: Vec<u32> = match parent {
+            None => sk.level_nodes(sk.top()).collect(),
+            Some(p) => {
+                let r = &sk.nodes[p as usize];
+                (r.first_child..r.first_child + r.child_count).collect()
+            }
+        };
+        let first = kids.first().copied().unwrap_or(0);
+        let mut left: Vec<u32> = kids.iter().copied().filter(|&c| live[c as usize]).collect();
+        let edges: Vec<(u32, u32)> = planes
+            .of(parent)
+            .iter()
+            .filter_map(|e| {
+                let (a, b) = (first + e.first, first + e.second);
+                if !left.contains(&a) || !left.contains(&b) {
+                    return None;
+                }
+                match e.decide(eye) {
+                    Decision::FirstBeforeSecond => Some((a, b)),
+                    Decision::SecondBeforeFirst => Some((b, a)),
+                    Decision::Undecided => None,
+                }
+            })
+            .collect();
+        let least = |c: &[u32]| c.iter().copied().min_by(|&x, &y| key(x).total_cmp(&key(y)).then(x.cmp(&y)));
+        while !left.is_empty() {
+            let ready: Vec<u32> = left.iter().copied().filter(|&c| !edges.iter().any(|&(a, b)| b == c && left.contains(&a))).collect();
+            let next = least(&ready).or_else(|| least(&left)).unwrap();
+            left.retain(|&c| c != next);
+            if shown[next as usize] {
+                out.push(next);
+            } else {
+                visit(Some(next), sk, planes, eye, key, (shown, live), out);
+            }
+        }
+    }
+    visit(None, sk, planes, eye, &key, (&shown, &live), &mut out);
+    out
+}
+
+/// The orderer gives exactly §5's order on mixed fronts (random cuts of the hierarchy), for
+/// perspective and orthographic cameras all around, on files whose parents have few children and
+/// more than 32 (the orderer's two ways of taking them).
+#[test]
+fn the_orderer_follows_the_rule_on_mixed_fronts() {
+    let h = |x: u32| (x.wrapping_mul(2654435761) >> 8) as f32 / (1u32 << 24) as f32;
+    let (mut fronts, mut many) = (0, 0);
+    // A sphere with 400 separate specks above it: specks leave coarse levels into the groups that
+    // take them in, which then have many children.
+    let specked = std::env::temp_dir().join(format!("strata-order-specked-{}.ply", std::process::id()));
+    let mut mesh = strata::fixtures::noisy_sphere(48, 0.05, 3);
+    mesh.normals.clear();
+    let speck = strata::fixtures::icosphere(0);
+    for i in 0..400 {
+        let y = 1.0 - 2.0 * (i as f32 + 0.5) / 400.0;
+        let phi = i as f32 * 2.399_963;
+        let center = Vec3::new((1.0 - y * y).sqrt() * phi.cos(), y, (1.0 - y * y).sqrt() * phi.sin()) * 1.15;
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(speck.positions.iter().map(|&p| center + p * 0.004));
+        mesh.triangles.extend(speck.triangles.iter().map(|t| t.map(|v| v + base)));
+        mesh.face_materials.extend(std::iter::repeat_n(0, speck.face_count()));
+    }
+    mesh.compute_face_geometry();
+    let mut bytes = Vec::new();
+    strata::export::ply::write_ply(&mut bytes, &mesh).unwrap();
+    std::fs::write(&specked, bytes).unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for (mesh, leaf) in [
+        (fixtures.join("noisy_sphere.ply"), 96),
+        (fixtures.join("noisy_sphere.ply"), 16),
+        (fixtures.join("cad_part.obj"), 32),
+        (specked.clone(), 64),
+    ] {
+        let (out, rd) = converted("rule", &mesh, leaf);
+        let mesh = mesh.display();
+        let sk = rd.skeleton();
+        let planes = rd.read_planes().expect("planes");
+        let mut orderer = Orderer::new(sk, planes.clone());
+        let (min, max) = (rd.header().min, rd.header().max);
+        let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+        many += (sk.level_nodes(sk.top()).len() > 32) as u32 + sk.nodes.iter().filter(|n| n.child_count > 32).count() as u32;
+        eprintln!("{mesh}: most children {:?}", sk.nodes.iter().map(|n| n.child_count).max());
+        for k in 0..24u32 {
+            // A cut: each node opened into its children with a probability of its own.
+            let mut front = Vec::new();
+            let mut todo: Vec<u32> = sk.level_nodes(sk.top()).collect();
+            while let Some(n) = todo.pop() {
+                let r = &sk.nodes[n as usize];
+                if r.child_count > 0 && h(n * 31 + k * 7 + 1) < 0.75 {
+                    todo.extend(r.first_child..r.first_child + r.child_count);
+                } else {
+                    front.push(n);
+                }
+            }
+            let mut cam = camera(center, radius, k);
+            if k % 3 == 2 {
+                cam.projection = Projection::Orthographic { height: 2.5 * radius };
+            }
+            let mut order = Vec::new();
+            orderer.order(sk, &front, &cam, &mut order);
+            assert_eq!(order, order_by_the_rule(sk, &planes, &front, &cam), "{mesh} (leaves of {leaf}), front {k}");
+            fronts += 1;
+        }
+        let _ = std::fs::remove_file(out);
+    }
+    let _ = std::fs::remove_file(specked);
+    assert!(many > 0, "no parent of more than 32 children was ordered");
+    eprintln!("{fronts} mixed fronts ordered as §5 says");
+}

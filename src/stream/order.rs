@@ -4,29 +4,31 @@
 //! sorted; the cost is the front and its ancestors, plus each visited parent's plane entries.
 
 use crate::camera::{Camera, Projection};
+use crate::format::octa;
 use crate::format::planes::{grid_eye, Decision, Eye, Planes};
 use crate::format::skeleton::Skeleton;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
-
-const OFF: u8 = 0;
-const SHOWN: u8 = 1;
-const ABOVE: u8 = 2;
 
 /// Orders fronts of one file: its planes, their directions decoded once, and scratch space kept
 /// between frames, so that ordering a front allocates nothing once warm.
 #[derive(Clone, Debug, Default)]
 pub struct Orderer {
     planes: Planes,
-    normals: Vec<DVec3>,
-    boxes: Vec<(DVec3, DVec3)>,
+    /// Per entry, what the walk tests (the entries' order).
+    tests: Vec<Test>,
+    /// Per node, its box: low then high corner.
+    boxes: Vec<[f32; 6]>,
     /// Per node: parent, first child, child count (the skeleton's, packed for the walk).
     links: Vec<[u32; 3]>,
-    state: Vec<u8>,
-    touched: Vec<u32>,
-    /// The walk's stack, and the working set of a parent of more than [`SMALL`] children.
-    stack: Vec<u32>,
+    /// Per node, the mark of the walk that touched it last: `2·walks + 1` on the front, `2·walks`
+    /// above it, anything less neither (earlier walks' marks go stale without being cleared).
+    state: Vec<u32>,
+    walks: u32,
+    /// The walk's stack (nodes, and whether each is on the front), and the working set of a
+    /// parent of more than [`SMALL`] children.
+    stack: Vec<(u32, bool)>,
     big: Scratch,
 }
 
@@ -35,8 +37,6 @@ pub struct Orderer {
 struct Scratch {
     live: Vec<u32>,
     local: Vec<u32>,
-    /// Per child, the children that must come before it (at most [`SMALL`] children).
-    before: Vec<u32>,
     indegree: Vec<u32>,
     edges: Vec<(u32, u32)>,
     /// The edges' second children grouped by first child, and the groups' starts (and a cursor).
@@ -50,12 +50,24 @@ struct Scratch {
     done: Vec<bool>,
 }
 
+/// A plane entry as the walk reads it: its direction decoded (f32, as the writer measured along
+/// it), its bounds, and its two children's offsets modulo 32 (exact below [`SMALL`] children).
+#[derive(Clone, Copy, Debug)]
+struct Test {
+    normal: Vec3,
+    second_min: f32,
+    first_max: f32,
+    first: u8,
+    second: u8,
+}
+
 /// Children ordered by pairwise masks rather than a heap, up to this many.
 const SMALL: usize = 32;
 
 /// The key a child is ordered by where no plane decides: the squared distance from the eye to its
 /// box (0 inside), or for an orthographic camera the least depth of its box along the view.
-fn key((lo, hi): (DVec3, DVec3), eye: Eye) -> f64 {
+fn key(b: &[f32; 6], eye: Eye) -> f64 {
+    let (lo, hi) = (DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64), DVec3::new(b[3] as f64, b[4] as f64, b[5] as f64));
     // + 0.0 makes a −0 key +0, so that ties do not hang on zeros' signs.
     0.0 + match eye {
         Eye::At(e) => {
@@ -76,7 +88,7 @@ pub fn nearest_box_first(sk: &Skeleton, front: &[u32], camera: &Camera, out: &mu
         .filter(|&&n| (n as usize) < sk.nodes.len())
         .map(|&n| {
             let (lo, hi) = sk.node_box(n);
-            Key(key((lo.as_dvec3(), hi.as_dvec3()), eye), n)
+            Key(key(&[lo.x, lo.y, lo.z, hi.x, hi.y, hi.z], eye), n)
         })
         .collect();
     keyed.sort_unstable();
@@ -116,10 +128,12 @@ impl Ord for Key {
 /// eye for the planes and for the keys.
 struct View<'a> {
     planes: &'a Planes,
-    normals: &'a [DVec3],
-    boxes: &'a [(DVec3, DVec3)],
+    tests: &'a [Test],
+    boxes: &'a [[f32; 6]],
     links: &'a [[u32; 3]],
-    state: &'a [u8],
+    state: &'a [u32],
+    /// The mark of a node above the front this walk (one more: on the front).
+    above: u32,
     eye: Eye,
     key_eye: Eye,
 }
@@ -128,15 +142,25 @@ impl Orderer {
     /// An orderer for the file of `sk` by its `planes` (`Reader::read_planes`; without any, the
     /// nearest box goes first at every parent).
     pub fn new(sk: &Skeleton, planes: Planes) -> Orderer {
-        let normals = planes.entries.iter().map(|e| e.unit_normal()).collect();
+        let tests = planes
+            .entries
+            .iter()
+            .map(|e| Test {
+                normal: octa::decode(e.normal),
+                second_min: e.second_min,
+                first_max: e.first_max,
+                first: (e.first % 32) as u8,
+                second: (e.second % 32) as u8,
+            })
+            .collect();
         let boxes = (0..sk.nodes.len() as u32)
             .map(|i| {
                 let (lo, hi) = sk.node_box(i);
-                (lo.as_dvec3(), hi.as_dvec3())
+                [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z]
             })
             .collect();
         let links = sk.nodes.iter().map(|n| [n.parent, n.first_child, n.child_count]).collect();
-        Orderer { planes, normals, boxes, links, ..Orderer::default() }
+        Orderer { planes, tests, boxes, links, ..Orderer::default() }
     }
 
     pub fn planes(&self) -> &Planes {
@@ -146,9 +170,12 @@ impl Orderer {
     /// `front` (any order) from front to back for `camera`, into `out`.
     pub fn order(&mut self, sk: &Skeleton, front: &[u32], camera: &Camera, out: &mut Vec<u32>) {
         out.clear();
-        if self.state.len() != sk.nodes.len() {
-            self.state = vec![OFF; sk.nodes.len()];
+        if self.state.len() != sk.nodes.len() || self.walks >= u32::MAX / 2 - 1 {
+            self.state = vec![0; sk.nodes.len()];
+            self.walks = 0;
         }
+        self.walks += 1;
+        let (shown, above) = (2 * self.walks + 1, 2 * self.walks);
         // The grid eye serves the planes; keys are in model units.
         let key_eye = key_eye(camera);
         let eye = match key_eye {
@@ -157,29 +184,31 @@ impl Orderer {
         };
         for &n in front {
             if let Some(s) = self.state.get_mut(n as usize) {
-                *s = SHOWN;
-                self.touched.push(n);
+                *s = shown;
             }
         }
         for &n in front {
             let mut p = self.links.get(n as usize).map_or(u32::MAX, |l| l[0]);
             while let Some(s) = self.state.get_mut(p as usize) {
-                if *s != OFF {
+                if *s >= above {
                     break;
                 }
-                *s = ABOVE;
-                self.touched.push(p);
+                *s = above;
                 p = self.links.get(p as usize).map_or(u32::MAX, |l| l[0]);
             }
         }
         let top = sk.level_nodes(sk.top());
-        let view =
-            View { planes: &self.planes, normals: &self.normals, boxes: &self.boxes, links: &self.links, state: &self.state, eye, key_eye };
+        let view = View {
+            planes: &self.planes,
+            tests: &self.tests,
+            boxes: &self.boxes,
+            links: &self.links,
+            state: &self.state,
+            above,
+            eye,
+            key_eye,
+        };
         view.walk(top, &mut self.big, &mut self.stack, out);
-        for &n in &self.touched {
-            self.state[n as usize] = OFF;
-        }
-        self.touched.clear();
     }
 }
 
@@ -191,11 +220,11 @@ impl View<'_> {
 
     /// The walk, with an explicit stack of nodes (a file may have any number of levels): a parent's
     /// live children are pushed so that the first to take is on top.
-    fn walk(&self, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<u32>, out: &mut Vec<u32>) {
+    fn walk(&self, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<(u32, bool)>, out: &mut Vec<u32>) {
         stack.clear();
         self.push_children(None, kids, big, stack);
-        while let Some(c) = stack.pop() {
-            if self.state[c as usize] == SHOWN {
+        while let Some((c, shown)) = stack.pop() {
+            if shown {
                 out.push(c);
             } else {
                 self.push_children(Some(c), self.children(c), big, stack);
@@ -205,64 +234,85 @@ impl View<'_> {
 
     /// Push `parent`'s live children (shown, or above a shown node) onto `stack` in reverse drawing
     /// order.
-    fn push_children(&self, parent: Option<u32>, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<u32>) {
+    fn push_children(&self, parent: Option<u32>, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<(u32, bool)>) {
         if kids.len() <= SMALL {
             return self.push_few(parent, kids, stack);
         }
-        let state = self.state;
+        let (state, above) = (self.state, self.above);
         big.live.clear();
-        big.live.extend(kids.clone().filter(|&c| state[c as usize] != OFF));
+        big.live.extend(kids.clone().filter(|&c| state[c as usize] >= above));
         match big.live.len() {
             0 => {}
-            1 => stack.push(big.live[0]),
+            1 => stack.push((big.live[0], state[big.live[0] as usize] > above)),
             _ => {
                 self.arrange(parent, kids, big);
-                stack.extend(big.live.iter().rev());
+                stack.extend(big.live.iter().rev().map(|&c| (c, state[c as usize] > above)));
             }
         }
     }
 
-    /// [`View::push_children`] for at most [`SMALL`] children, on the stack: each taken child is
-    /// the least key among those whose predecessors are all taken (or among all left, on a cycle),
-    /// found by scanning masks of predecessors.
-    fn push_few(&self, parent: Option<u32>, kids: std::ops::Range<u32>, stack: &mut Vec<u32>) {
+    /// [`View::push_children`] for at most [`SMALL`] children, on the stack, in masks over the
+    /// children's offsets: live children, and per child those that must come before it.
+    fn push_few(&self, parent: Option<u32>, kids: std::ops::Range<u32>, stack: &mut Vec<(u32, bool)>) {
         let state = &self.state[kids.start as usize..kids.end as usize];
-        let mut found = state.iter().enumerate().filter(|(_, &s)| s != OFF);
-        match (found.next(), found.next()) {
-            (None, _) => return,
-            (Some((k, _)), None) => return stack.push(kids.start + k as u32),
-            _ => {}
-        }
-        let mut live = [0u32; SMALL];
-        let mut local = [u8::MAX; SMALL];
-        let mut n = 0;
+        let (mut live, mut shown) = (0u32, 0u32);
         for (k, &s) in state.iter().enumerate() {
-            if s != OFF {
-                local[k] = n as u8;
-                live[n] = kids.start + k as u32;
-                n += 1;
-            }
+            live |= ((s >= self.above) as u32) << k;
+            shown |= ((s > self.above) as u32) << k;
         }
+        if live & live.wrapping_sub(1) == 0 {
+            if live != 0 {
+                stack.push((kids.start + live.trailing_zeros(), shown != 0));
+            }
+            return;
+        }
+        // §5's test with one comparison per side: for an orthographic camera the eye is the
+        // reversed view direction and both bounds 0 (the same f64 products, negated exactly).
+        let (g, along) = match self.eye {
+            Eye::At(g) => (g, false),
+            Eye::Along(d) => (-d, true),
+        };
         let mut before = [0u32; SMALL];
         let range = self.planes.range(parent);
-        for (e, &normal) in self.planes.entries[range.clone()].iter().zip(&self.normals[range]) {
-            let (Some(&a), Some(&b)) = (local.get(e.first as usize), local.get(e.second as usize)) else { continue };
-            if a == u8::MAX || b == u8::MAX {
-                continue;
-            }
-            match e.decide_with(normal, self.eye) {
-                Decision::FirstBeforeSecond => before[b as usize] |= 1 << a,
-                Decision::SecondBeforeFirst => before[a as usize] |= 1 << b,
-                Decision::Undecided => {}
-            }
+        for e in &self.tests[range] {
+            let (a, b, n) = (e.first as u32, e.second as u32, e.normal);
+            let both = (live >> a) & (live >> b) & 1;
+            let s = (n.x as f64 * g.x + n.y as f64 * g.y) + n.z as f64 * g.z;
+            let (low, high) = if along { (0.0, 0.0) } else { (e.second_min as f64, e.first_max as f64) };
+            let first = (s < low) as u32 & both;
+            before[b as usize] |= first << a;
+            before[a as usize] |= ((s > high) as u32 & both & !first) << b;
         }
-        let mut keys = [Key(0.0, 0); SMALL];
-        for k in 0..n {
-            keys[k] = Key(key(self.boxes[live[k] as usize], self.key_eye), live[k]);
-        }
+        // While the planes leave one child ready at a time, keys cannot change the order.
         let mut order = [0u32; SMALL];
-        take_in_order(&keys[..n], &before[..n], &mut order);
-        stack.extend(order[..n].iter().rev().map(|&k| live[k as usize]));
+        let (mut taken, mut left) = (0, live);
+        let count = state.len();
+        while left != 0 {
+            let mut ready = 0u32;
+            for (k, &b) in before[..count].iter().enumerate() {
+                ready |= ((b & left == 0) as u32) << k;
+            }
+            ready &= left;
+            if ready == 0 || ready & (ready - 1) != 0 {
+                break;
+            }
+            order[taken] = ready.trailing_zeros();
+            taken += 1;
+            left &= !ready;
+        }
+        let mut sorted = [(0i64, 0u32); SMALL];
+        let mut m = 0;
+        let mut bits = left;
+        while bits != 0 {
+            let k = bits.trailing_zeros();
+            bits &= bits - 1;
+            sorted[m] = (ordered_bits(key(&self.boxes[(kids.start + k) as usize], self.key_eye)), k);
+            m += 1;
+        }
+        insertion_sort(&mut sorted[..m]);
+        take_in_order(&sorted[..m], &before, &mut order[taken..]);
+        let m = taken + m;
+        stack.extend(order[..m].iter().rev().map(|&k| (kids.start + k, shown >> k & 1 != 0)));
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
@@ -278,12 +328,12 @@ impl View<'_> {
         s.indegree.resize(n, 0);
         s.edges.clear();
         let range = self.planes.range(parent);
-        for (e, &normal) in self.planes.entries[range.clone()].iter().zip(&self.normals[range]) {
+        for (e, t) in self.planes.entries[range.clone()].iter().zip(&self.tests[range]) {
             let (Some(&a), Some(&b)) = (s.local.get(e.first as usize), s.local.get(e.second as usize)) else { continue };
             if a == u32::MAX || b == u32::MAX {
                 continue;
             }
-            let edge = match e.decide_with(normal, self.eye) {
+            let edge = match e.decide_with(t.normal.as_dvec3(), self.eye) {
                 Decision::FirstBeforeSecond => (a, b),
                 Decision::SecondBeforeFirst => (b, a),
                 Decision::Undecided => continue,
@@ -292,7 +342,7 @@ impl View<'_> {
             s.edges.push(edge);
         }
         s.keys.clear();
-        s.keys.extend(s.live.iter().map(|&c| Key(key(self.boxes[c as usize], self.key_eye), c)));
+        s.keys.extend(s.live.iter().map(|&c| Key(key(&self.boxes[c as usize], self.key_eye), c)));
         if n <= SMALL {
             return small(s);
         }
@@ -364,39 +414,65 @@ impl View<'_> {
 /// whose predecessors are all taken (or among all left, on a cycle), found by scanning masks.
 fn small(s: &mut Scratch) {
     let n = s.live.len();
-    s.before.clear();
-    s.before.resize(n, 0);
+    let mut before = [0u32; SMALL];
     for &(a, b) in &s.edges {
-        s.before[b as usize] |= 1 << a;
+        before[b as usize] |= 1 << a;
     }
-    take_in_order(&s.keys, &s.before, &mut s.local[..n]);
-    for k in 0..n {
-        s.local[k] = s.live[s.local[k] as usize];
+    let mut sorted = [(0i64, 0u32); SMALL];
+    for (k, key) in s.keys.iter().enumerate() {
+        sorted[k] = (ordered_bits(key.0), k as u32);
     }
-    s.live.clear();
-    s.live.extend_from_slice(&s.local[..n]);
+    insertion_sort(&mut sorted[..n]);
+    let mut order = [0u32; SMALL];
+    take_in_order(&sorted[..n], &before, &mut order);
+    s.local.clear();
+    s.local.extend(order[..n].iter().map(|&k| s.live[k as usize]));
+    std::mem::swap(&mut s.live, &mut s.local);
 }
 
-/// §5's choice among at most [`SMALL`] children with keys `keys` and predecessors `before` (a
-/// mask each): repeatedly the least key among those whose predecessors are all taken, or among all
-/// left on a cycle. Their local indices in drawing order go to `order`.
-fn take_in_order(keys: &[Key], before: &[u32], order: &mut [u32]) {
-    let mut done = 0u32;
-    for slot in order.iter_mut().take(keys.len()) {
-        let (mut ready, mut any) = (None::<usize>, None::<usize>);
-        for k in (0..keys.len()).filter(|&k| done & (1 << k) == 0) {
-            let less = |best: Option<usize>| best.is_none_or(|b| keys[k] < keys[b]);
-            if less(any) {
-                any = Some(k);
+/// §5's choice among at most [`SMALL`] children, `sorted` by key (then offset) and with
+/// predecessors `before` (a mask over offsets each): repeatedly the least key among those whose
+/// predecessors are all taken, or among all left on a cycle. Their offsets in drawing order go to
+/// `order`.
+fn take_in_order(sorted: &[(i64, u32)], before: &[u32; SMALL], order: &mut [u32]) {
+    let mut left = sorted.iter().fold(0u32, |m, &(_, k)| m | 1 << k);
+    // Positions in `sorted` not yet taken.
+    let mut rest = ((1u64 << sorted.len()) - 1) as u32;
+    for slot in order.iter_mut().take(sorted.len()) {
+        let mut bits = rest;
+        let mut at = rest.trailing_zeros();
+        while bits != 0 {
+            let p = bits.trailing_zeros();
+            if before[sorted[p as usize].1 as usize] & left == 0 {
+                at = p;
+                break;
             }
-            if before[k] & !done == 0 && less(ready) {
-                ready = Some(k);
-            }
+            bits &= bits - 1;
         }
-        let k = ready.or(any).unwrap_or(0);
-        done |= 1 << k;
-        *slot = k as u32;
+        let k = sorted[at as usize].1;
+        rest &= !(1 << at);
+        left &= !(1 << k);
+        *slot = k;
     }
+}
+
+/// Sort a few keyed children (faster than the library's sort at this size).
+fn insertion_sort(v: &mut [(i64, u32)]) {
+    for i in 1..v.len() {
+        let x = v[i];
+        let mut j = i;
+        while j > 0 && v[j - 1] > x {
+            v[j] = v[j - 1];
+            j -= 1;
+        }
+        v[j] = x;
+    }
+}
+
+/// `x`'s bits as an integer that orders like `f64::total_cmp`.
+fn ordered_bits(x: f64) -> i64 {
+    let b = x.to_bits() as i64;
+    b ^ (((b >> 63) as u64) >> 1) as i64
 }
 
 #[cfg(test)]
