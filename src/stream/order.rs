@@ -222,21 +222,28 @@ impl View<'_> {
     /// live children are pushed so that the first to take is on top.
     fn walk(&self, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<(u32, bool)>, out: &mut Vec<u32>) {
         stack.clear();
-        self.push_children(None, kids, big, stack);
+        self.push_children(None, kids, big, stack, out);
         while let Some((c, shown)) = stack.pop() {
             if shown {
                 out.push(c);
             } else {
-                self.push_children(Some(c), self.children(c), big, stack);
+                self.push_children(Some(c), self.children(c), big, stack, out);
             }
         }
     }
 
     /// Push `parent`'s live children (shown, or above a shown node) onto `stack` in reverse drawing
-    /// order.
-    fn push_children(&self, parent: Option<u32>, kids: std::ops::Range<u32>, big: &mut Scratch, stack: &mut Vec<(u32, bool)>) {
+    /// order; where all of them are shown, append them to `out` instead (they would be popped next).
+    fn push_children(
+        &self,
+        parent: Option<u32>,
+        kids: std::ops::Range<u32>,
+        big: &mut Scratch,
+        stack: &mut Vec<(u32, bool)>,
+        out: &mut Vec<u32>,
+    ) {
         if kids.len() <= SMALL {
-            return self.push_few(parent, kids, stack);
+            return self.push_few(parent, kids, stack, out);
         }
         let (state, above) = (self.state, self.above);
         big.live.clear();
@@ -253,7 +260,7 @@ impl View<'_> {
 
     /// [`View::push_children`] for at most [`SMALL`] children, on the stack, in masks over the
     /// children's offsets: live children, and per child those that must come before it.
-    fn push_few(&self, parent: Option<u32>, kids: std::ops::Range<u32>, stack: &mut Vec<(u32, bool)>) {
+    fn push_few(&self, parent: Option<u32>, kids: std::ops::Range<u32>, stack: &mut Vec<(u32, bool)>, out: &mut Vec<u32>) {
         let state = &self.state[kids.start as usize..kids.end as usize];
         let (mut live, mut shown) = (0u32, 0u32);
         for (k, &s) in state.iter().enumerate() {
@@ -261,8 +268,10 @@ impl View<'_> {
             shown |= ((s > self.above) as u32) << k;
         }
         if live & live.wrapping_sub(1) == 0 {
-            if live != 0 {
-                stack.push((kids.start + live.trailing_zeros(), shown != 0));
+            match (live, shown) {
+                (0, _) => {}
+                (_, 0) => stack.push((kids.start + live.trailing_zeros(), false)),
+                _ => out.push(kids.start + live.trailing_zeros()),
             }
             return;
         }
@@ -312,7 +321,11 @@ impl View<'_> {
         insertion_sort(&mut sorted[..m]);
         take_in_order(&sorted[..m], &before, &mut order[taken..]);
         let m = taken + m;
-        stack.extend(order[..m].iter().rev().map(|&k| (kids.start + k, shown >> k & 1 != 0)));
+        if shown == live {
+            out.extend(order[..m].iter().map(|&k| kids.start + k));
+        } else {
+            stack.extend(order[..m].iter().rev().map(|&k| (kids.start + k, shown >> k & 1 != 0)));
+        }
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
