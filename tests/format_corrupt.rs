@@ -56,8 +56,28 @@ fn damage_targets() -> Vec<(&'static str, Vec<u8>)> {
     vec![("small", small_file()), ("terrain", vector("terrain.strata")), ("textured", vector("textured.strata"))]
 }
 
+/// Open with the skeleton decoded in part (`Reader::open_top`), read the top level's nodes and
+/// try the others (refused where their records or their children's are not decoded yet), then
+/// complete it and read every node.
+fn read_top_first(bytes: &[u8]) -> strata::error::Result<()> {
+    let mut rd = Reader::open_top(Cursor::new(bytes), Path::new("top first"))?;
+    let top = rd.level_nodes(rd.levels().len() as u32 - 1);
+    for i in 0..rd.skeleton().header.nodes {
+        let read = rd.read_node(i);
+        let decoded = (i as usize) < rd.nodes().len() && rd.skeleton().children(i).end as usize <= rd.nodes().len();
+        if top.contains(&i) {
+            read?;
+        } else if !decoded {
+            assert!(read.is_err(), "node {i} read before its records were decoded");
+        }
+    }
+    rd.complete()?;
+    (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ()))
+}
+
 /// Exercise every reading path; results are ignored, panics are not.
 fn read_everything(bytes: &[u8]) {
+    let _ = read_top_first(bytes);
     if let Ok(rd) = Reader::open(Cursor::new(bytes)) {
         for i in 0..rd.nodes().len() as u32 {
             let _ = rd.read_node(i);
@@ -101,6 +121,7 @@ fn every_truncation_is_an_error() {
         for len in 0..good.len() {
             let cut = &good[..len];
             assert!(Reader::open(Cursor::new(cut)).is_err(), "{name}: truncated to {len} bytes and still opened");
+            assert!(Reader::open_top(Cursor::new(cut), Path::new("cut")).is_err(), "{name}: truncated to {len} bytes, opened top first");
             assert!(!format::verify(Cursor::new(cut), Path::new("cut")).is_sound(), "{name}");
             read_everything(cut);
         }
@@ -272,6 +293,8 @@ fn readers_refuse_what_verify_refuses_node_by_node() {
             let node_rules: Vec<String> = v.problems.iter().map(|e| e.to_string()).filter(|p| !whole_file_only(p)).collect();
             let strict =
                 Reader::open(Cursor::new(&bytes)).and_then(|r| (0..r.nodes().len() as u32).try_for_each(|i| r.read_node(i).map(|_| ())));
+            let top_first = read_top_first(&bytes);
+            assert_eq!(top_first.is_ok(), strict.is_ok(), "byte {at} ^ {mask:#x}: top first {top_first:?}, whole {strict:?}");
             match (&strict, node_rules.is_empty()) {
                 (Ok(()), false) => panic!("byte {at} ^ {mask:#x}: verify found {node_rules:?} but the reader accepted the file"),
                 (Err(e), true) => panic!("byte {at} ^ {mask:#x}: the reader refused ({e}) what verify accepts ({:?})", v.problems),

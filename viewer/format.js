@@ -9,7 +9,9 @@
 // only such field Rust accepts). A viewer opens a file in two steps, then reads nodes on demand:
 //
 //   openingRange(prefix, fileLength)  how many bytes the skeleton needs (a few short reads);
-//   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials;
+//   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials
+//                                     (with { topFirst: true } the top two levels' records only,
+//                                     completeSkeleton(skeleton) the rest);
 //   decodeNode(skeleton, i, bytes)    one node's GEOM chunk, checked and decoded;
 //   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
 //                                     file inside, for the browser to decode.
@@ -361,6 +363,22 @@ export function openingRange(prefix, fileLength) {
 // ---------------------------------------------------------------------------------------------
 // The skeleton (§5, §7, §10 "To open").
 
+const onGrid = (g, last) => g[0] <= last && g[1] <= last && g[2] <= last;
+
+/** Check and decode the node records `decodeSkeleton(…, { topFirst: true })` left; throws a FormatError as it would have. */
+export function completeSkeleton(sk) {
+  if (sk.decoded === sk.nodeCount) return;
+  if (sk._failed) throw sk._failed;
+  try {
+    sk._rest();
+  } catch (e) {
+    Object.defineProperty(sk, '_failed', { value: e });
+    throw e;
+  }
+  delete sk._rest;
+  sk.decoded = sk.nodeCount;
+}
+
 class Skeleton {
   /** Nodes of level l as [start, end); [0, 0] past the top. */
   levelNodes(l) {
@@ -494,8 +512,11 @@ function decodeGeoref(b, dv, pos, size, minor) {
 /**
  * Decode and check the skeleton from `bytes`, which hold at least [0, skeletonEnd) of a file of
  * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL, every check of spec §10 "To open".
+ * With `opts.topFirst`, only the top two levels' node records are checked and decoded (nodes
+ * [0, sk.decoded)); `completeSkeleton` does the rest before any other node is used, so a first
+ * frame of the top level waits for none of it (selection.md §6).
  */
-export function decodeSkeleton(bytes, fileLength) {
+export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const b = bytes;
   if (!(Number.isSafeInteger(fileLength) && fileLength >= 0)) throw fail(undefined, `file length ${fileLength} is not a byte count`);
   const have = (end) => {
@@ -621,9 +642,12 @@ export function decodeSkeleton(bytes, fileLength) {
   const faces = new Uint32Array(N), vertices = new Uint32Array(N);
   const offset = new Float64Array(N), size = new Uint32Array(N), crc = new Uint32Array(N);
   const totals = new Float64Array(3 * L);
+  const neighborList = new Uint32Array(nbEntries);
   const gl = [0, 0, 0], gh = [0, 0, 0], gc = [0, 0, 0];
-  let nbFirst = 0, geo = skeletonEnd, nextChild = 0;
-  for (let l = L - 1; l >= 0; l--) {
+  let nbFirst = 0, geo = skeletonEnd, nextChild = 0, l = L - 1;
+  // Check and decode level l's records and neighbour lists (levels from the top down), then step
+  // to the level below.
+  const decodeLevel = () => {
     const lev = levels[l];
     const end = lev.firstNode + lev.nodes;
     if (l + 1 < L && nextChild !== end) {
@@ -638,8 +662,7 @@ export function decodeSkeleton(bytes, fileLength) {
       nextChild += cc;
       if (l > 0 && nextChild > end + levels[l - 1].nodes) throw nerr(at, `children ${first}..+${cc} run past level ${l - 1}`, i);
       if (nbFirst + nc > nbEntries) throw nerr(at, `neighbours run past the ${nbEntries} of NBRS`, i);
-      const onGrid = (g) => g[0] <= last && g[1] <= last && g[2] <= last;
-      if (!(unpack(b, at + 12, gl) && unpack(b, at + 20, gh) && unpack(b, at + 28, gc) && onGrid(gl) && onGrid(gh) && onGrid(gc))) {
+      if (!(unpack(b, at + 12, gl) && unpack(b, at + 20, gh) && unpack(b, at + 28, gc) && onGrid(gl, last) && onGrid(gh, last) && onGrid(gc, last))) {
         throw nerr(at, `box or sphere center off the ${gbits}-bit grid`, i);
       }
       if (gl[0] > gh[0] || gl[1] > gh[1] || gl[2] > gh[2]) throw nerr(at, `box min [${gl}] lies above its max [${gh}]`, i);
@@ -660,6 +683,7 @@ export function decodeSkeleton(bytes, fileLength) {
       level[i] = l;
       firstChild[i] = first;
       childCount[i] = cc;
+      for (let c = first; c < first + cc; c++) parent[c] = i;
       neighborFirst[i] = nbFirst;
       neighborCount[i] = nc;
       octaDecode(i16(b, at + 4), i16(b, at + 6), coneAxis, 3 * i);
@@ -679,33 +703,37 @@ export function decodeSkeleton(bytes, fileLength) {
       nbFirst += nc;
       geo += padded;
     }
-  }
-  for (let i = 0; i < N; i++) {
-    for (let c = firstChild[i], e = c + childCount[i]; c < e; c++) parent[c] = i;
-  }
-  if (geo > fileLength) throw nerr(node.ps, `geometry chunks end at ${geo}, past the end of the ${fileLength}-byte file`);
-  for (let l = 0; l < L; l++) {
-    const rec = levels[l];
-    const [tf, tv, tb] = [totals[3 * l], totals[3 * l + 1], totals[3 * l + 2]];
-    if (rec.faces !== tf || rec.vertices !== tv || rec.bytes !== tb) {
-      throw lerr(
-        levl.ps + l * LEVEL_BYTES,
-        `level ${l}: LEVL says ${rec.faces} faces, ${rec.vertices} vertices, ${rec.bytes} bytes; the nodes hold ${tf}, ${tv}, ${tb}`,
-      );
+    for (let i = lev.firstNode; i < end; i++) {
+      for (let k = neighborFirst[i], e = k + neighborCount[i]; k < e; k++) {
+        const o = nbrs.ps + width * k;
+        const x = width === 2 ? u16(b, o) : u32(b, o);
+        if (x >= lev.nodes) throw chunkFail(o, 'NBRS', nbrs.at, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${l}`, i);
+        neighborList[k] = x + lev.firstNode;
+      }
     }
-  }
-  if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
-  if (nbFirst !== nbEntries) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `holds ${nbEntries} neighbours, the nodes use ${nbFirst}`);
-  const neighborList = new Uint32Array(nbEntries);
-  for (let i = 0; i < N; i++) {
-    const lev = levels[level[i]];
-    for (let k = neighborFirst[i], e = k + neighborCount[i]; k < e; k++) {
-      const o = nbrs.ps + width * k;
-      const x = width === 2 ? u16(b, o) : u32(b, o);
-      if (x >= lev.nodes) throw chunkFail(o, 'NBRS', nbrs.at, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${level[i]}`, i);
-      neighborList[k] = x + lev.firstNode;
+    l--;
+  };
+  // With every level decoded: the totals LEVL states.
+  const finish = () => {
+    if (geo > fileLength) throw nerr(node.ps, `geometry chunks end at ${geo}, past the end of the ${fileLength}-byte file`);
+    for (let l = 0; l < L; l++) {
+      const rec = levels[l];
+      const [tf, tv, tb] = [totals[3 * l], totals[3 * l + 1], totals[3 * l + 2]];
+      if (rec.faces !== tf || rec.vertices !== tv || rec.bytes !== tb) {
+        throw lerr(
+          levl.ps + l * LEVEL_BYTES,
+          `level ${l}: LEVL says ${rec.faces} faces, ${rec.vertices} vertices, ${rec.bytes} bytes; the nodes hold ${tf}, ${tv}, ${tb}`,
+        );
+      }
     }
-  }
+    if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
+    if (nbFirst !== nbEntries) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `holds ${nbEntries} neighbours, the nodes use ${nbFirst}`);
+  };
+  // The top level, and the level below that its nodes' rules are checked against.
+  for (let k = opts.topFirst ? Math.min(L, 2) : L; k > 0; k--) decodeLevel();
+  if (l < 0) finish();
+  // Where the image levels start (§2): checked against the node table by finish().
+  const levelsStart = levels.reduce((sum, rec) => sum + rec.bytes, skeletonEnd);
 
   // MATL
   const merr = (at, msg) => chunkFail(at, 'MATL', matl.at, msg);
@@ -734,7 +762,7 @@ export function decodeSkeleton(bytes, fileLength) {
   // TEXR (2.2), optional: images, their levels after the geometry, material maps, node densities.
   const texrs = subs.filter((x) => x.id === 'TEXR');
   if (texrs.length > 1) throw chunkFail(texrs[1].at, 'SKEL', skelAt, 'has a second TEXR chunk');
-  const textures = texrs.length ? decodeTexr(b, texrs[0], N, materials, geo, fileLength) : { images: [], levels: [], uvDensity: new Float32Array(N) };
+  const textures = texrs.length ? decodeTexr(b, texrs[0], N, materials, levelsStart, fileLength) : { images: [], levels: [], uvDensity: new Float32Array(N) };
 
   Object.assign(sk, {
     materials,
@@ -761,6 +789,17 @@ export function decodeSkeleton(bytes, fileLength) {
   });
   // Where the node table lies, for errors naming a node's record.
   Object.defineProperty(sk, '_nodeTable', { value: { at: node.at, ps: node.ps }, enumerable: false });
+  sk.decoded = l < 0 ? N : levels[l].firstNode;
+  if (l >= 0) {
+    // Holds the skeleton's bytes until the rest is decoded.
+    Object.defineProperty(sk, '_rest', {
+      value: () => {
+        while (l >= 0) decodeLevel();
+        finish();
+      },
+      configurable: true,
+    });
+  }
   return sk;
 }
 
@@ -1361,6 +1400,9 @@ export function decodeNode(skeleton, i, bytes, opts = {}) {
   const s = skeleton;
   const N = s.nodeCount;
   if (!(Number.isInteger(i) && i >= 0 && i < N)) throw fail(undefined, `node ${i}: no such node; the file has ${N}`);
+  if (s.decoded < N && !(i < s.decoded && s.firstChild[i] + s.childCount[i] <= s.decoded)) {
+    throw fail(undefined, `node ${i}: its record or its children's are not decoded yet (completeSkeleton)`);
+  }
   const b = bytes;
   const at = s.offset[i], size = s.size[i];
   if (b.length !== size || b.length < FRAME + TRAILER) {

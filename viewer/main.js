@@ -472,9 +472,10 @@ window.strata = {
     colorMode = mode;
     dirty = true;
   },
-  /** The front `strata stream --print-front` would print for this camera and limits (no loading). */
-  select(json, limits) {
-    const cut = new Selector(streamer.skeleton).select(new Camera(json), limits);
+  /** The front `strata stream --print-front` would print for this camera and limits (no loading);
+   * `held`: node ids not refined (its first frame holds the top level, selection.md §6). */
+  select(json, limits, held = []) {
+    const cut = new Selector(streamer.skeleton).select(new Camera(json), limits, new Set(held));
     return { shown: cut.shown, culled: cut.culled, faces: cut.faces };
   },
   state() {

@@ -107,7 +107,9 @@ export class Selector {
         this.set(i, CULLED);
       }
     }
-    for (let level = s.top(); level >= 1; level--) {
+    // A skeleton decoded in part (decodeSkeleton's topFirst) shows its top level alone.
+    const complete = !(s.decoded < s.nodeCount);
+    for (let level = s.top(); level >= 1 && complete; level--) {
       const candidates = [];
       for (const i of shown) {
         if (s.childCount[i] === 0 || held.has(i)) continue;

@@ -20,7 +20,7 @@
 // level that fits). Decoded levels count 4·w·h bytes against the same budget as the geometry and
 // are evicted with it, least recently used first.
 
-import { FormatError, IMAGE_MIME, MAP_KINDS, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
+import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
 import { Orderer } from './order.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
@@ -112,7 +112,9 @@ export class Streamer {
     }
     const want = Math.max(range.topEnd ?? 0, range.skeletonEnd);
     if (bytes.length < want) bytes = concat(bytes, await source.read(bytes.length, want));
-    const skeleton = decodeSkeleton(bytes, source.length);
+    // The first frame shows the top level: the rest of the node table is checked and decoded by
+    // the second update (selection.md §6).
+    const skeleton = decodeSkeleton(bytes, source.length, { topFirst: true });
     const s = new Streamer(source, skeleton, options);
     const [top0, top1] = skeleton.levelNodes(skeleton.top());
     const topEnd = skeleton.offset[top1 - 1] + skeleton.size[top1 - 1];
@@ -247,6 +249,18 @@ export class Streamer {
   update(camera) {
     const s = this.skeleton;
     this.frame++;
+    if (s.decoded < s.nodeCount) {
+      if (this.frame > 1) {
+        try {
+          completeSkeleton(s);
+        } catch (e) {
+          this.error = e;
+          return this.drawn;
+        }
+      } else {
+        setTimeout(() => !this.closed && this.onChange(), 0);
+      }
+    }
     const limits = this.limits();
     // The top level and the images' coarsest levels stay resident (they stand in for everything):
     // the front gets what they leave.
@@ -284,7 +298,7 @@ export class Streamer {
     this.requestImages(false);
     this.evict();
     // The planes only reorder what is drawn: they are read once nothing else is wanted.
-    if (this.planes === 'unread' && this.idle()) this.readPlanes();
+    if (this.planes === 'unread' && this.idle() && s.decoded === s.nodeCount) this.readPlanes();
     return this.drawn;
   }
 
@@ -543,7 +557,8 @@ export class Streamer {
 
   /** Nothing missing and nothing in flight: the drawn nodes are the selected front, with the image levels it wants. */
   idle() {
-    return this.missing.length === 0 && this.imageMissing.length === 0 && this.inFlight === 0;
+    const s = this.skeleton;
+    return this.missing.length === 0 && this.imageMissing.length === 0 && this.inFlight === 0 && s.decoded === s.nodeCount;
   }
 
   /** The renderer's handle of the level of `image` to draw this frame, or null (drawn untextured). */

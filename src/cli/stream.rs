@@ -81,7 +81,10 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     use strata::stream::{play, session, Budgets, Streamer};
     let opened = Instant::now();
-    let reader = open_chunk_file(&a.file)?;
+    strata::atomic::protect(&a.file);
+    // The first frame shows the top level: the rest of the node table is decoded for the second.
+    let file = std::fs::File::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    let reader = format::Reader::open_top(file, &a.file)?;
     if let Some(out) = &a.export_cut {
         strata::atomic::check_output(out)?;
     }

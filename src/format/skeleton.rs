@@ -196,8 +196,11 @@ pub fn decode_head(ctx: &Context, payload: &[u8], pos: u64) -> Result<Header> {
 }
 
 /// Decode the `SKEL` payload of the chunk at `pos`, checking every table against `header` and the
-/// file (spec §10, steps 4 and 5); also the sub-chunks found, for listings.
-pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> Result<(Skeleton, Vec<ChunkInfo>)> {
+/// file (spec §10, steps 4 and 5); also the sub-chunks found, for listings. With `top_only`, every
+/// record is still checked, but only the top two levels' nodes are decoded into the [`Skeleton`]
+/// with their boxes and neighbour lists: a viewer that shows the top level first need not touch
+/// the memory of the rest (104 bytes a node and the lists) before its first frame.
+pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top_only: bool) -> Result<(Skeleton, Vec<ChunkInfo>)> {
     let base = pos + HEADER_BYTES;
     let subs = chunk::subs(ctx.path, &id::SKEL, pos, payload, base)?;
     let infos = subs.iter().map(|s| ChunkInfo::new(&s.frame, s.offset, 1)).collect();
@@ -248,11 +251,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
         return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
     }
     let entries = &payload[nbrs.start..nbrs.end];
-    let mut neighbors: Vec<u32> = if width == 2 {
-        entries.chunks_exact(2).map(|c| LE::read_u16(c) as u32).collect()
-    } else {
-        entries.chunks_exact(4).map(LE::read_u32).collect()
-    };
+    let entry = |k: usize| if width == 2 { LE::read_u16(&entries[2 * k..]) as u32 } else { LE::read_u32(&entries[4 * k..]) };
+    let entry_count = entries.len() as u64 / width;
 
     // NODE
     let f = fields(node);
@@ -263,8 +263,12 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     // The size is checked: records are read from fixed 56-byte slices.
     let mut records = payload[node.start..node.end].chunks_exact(NODE_RECORD_BYTES as usize);
     let grid = h.grid;
-    let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(h.nodes as usize);
-    let mut nodes: Vec<NodeRecord> = Vec::with_capacity(h.nodes as usize);
+    // The top level, and the level below, which the top nodes' rules are checked against.
+    let keep = if top_only { levels.iter().rev().take(2).map(|l| l.nodes).sum() } else { h.nodes };
+    let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(keep as usize);
+    let mut nodes: Vec<NodeRecord> = Vec::with_capacity(keep as usize);
+    // The neighbour entries of each level's nodes, which are consecutive.
+    let mut level_entries = vec![0..0u64; levels.len()];
     let mut neighbor_first = 0u64;
     let mut offset = ctx.geometry_start;
     // Children of the levels above are consecutive: node i's are those after its predecessors'.
@@ -277,6 +281,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
             return Err(f.error(format!("the children of level {} cover nodes up to {next_child}, level {l} ends at {end}", l + 1)));
         }
         next_child = end;
+        let level_first_entry = neighbor_first;
         for i in lev.first_node..lev.first_node + lev.nodes {
             let at = node.payload_offset() + i as u64 * NODE_RECORD_BYTES;
             let r = records.next().ok_or_else(|| f.error_at(at, format!("node {i}: past the end of the chunk")))?;
@@ -297,8 +302,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
             if l > 0 && next_child > (lev.first_node + lev.nodes) as u64 + levels[l - 1].nodes as u64 {
                 return Err(bad(format!("children {first_child}..+{child_count} run past level {}", l - 1)));
             }
-            if neighbor_first + neighbor_count as u64 > neighbors.len() as u64 {
-                return Err(bad(format!("neighbours run past the {} of NBRS", neighbors.len())));
+            if neighbor_first + neighbor_count as u64 > entry_count {
+                return Err(bad(format!("neighbours run past the {entry_count} of NBRS")));
             }
             let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
             let (Some(lo), Some(hi), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
@@ -319,6 +324,11 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
                 size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
             if !in_file {
                 return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
+            }
+            if i >= keep {
+                neighbor_first += neighbor_count as u64;
+                offset += padded;
+                continue;
             }
             boxes.push([lo_bits, hi_bits]);
             nodes.push(NodeRecord {
@@ -341,10 +351,11 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
             neighbor_first += neighbor_count as u64;
             offset += padded;
         }
+        level_entries[l] = level_first_entry..neighbor_first;
     }
     for i in 0..nodes.len() {
         let n = nodes[i];
-        for c in n.first_child..n.first_child + n.child_count {
+        for c in n.first_child..(n.first_child + n.child_count).min(keep) {
             nodes[c as usize].parent = i as u32;
         }
     }
@@ -366,20 +377,31 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64) -> 
     if totals[0].0 != h.input_faces {
         return Err(fields(levl).error(format!("level 0's nodes hold {} faces, HEAD says the input has {}", totals[0].0, h.input_faces)));
     }
-    if neighbor_first != neighbors.len() as u64 {
-        return Err(nf.error(format!("holds {} neighbours, the nodes use {neighbor_first}", neighbors.len())));
+    if neighbor_first != entry_count {
+        return Err(nf.error(format!("holds {entry_count} neighbours, the nodes use {neighbor_first}")));
     }
-    for (i, n) in nodes.iter().enumerate() {
-        let lev = &levels[n.level as usize];
-        for k in n.neighbor_first..n.neighbor_first + n.neighbor_count {
-            let x = &mut neighbors[k as usize];
-            if *x >= lev.nodes {
-                let at = nbrs.payload_offset() + width * k as u64;
-                return Err(nf.error_at(at, format!("node {i}: neighbour {} of the {} nodes of level {}", *x, lev.nodes, n.level)));
-            }
-            *x += lev.first_node;
+    // Levels from the top, so that the first bad entry in node order is the one named.
+    for (l, (lev, range)) in levels.iter().zip(&level_entries).enumerate().rev() {
+        if let Some(k) = range.clone().find(|&k| entry(k as usize) >= lev.nodes) {
+            let at = nbrs.payload_offset() + width * k;
+            // The node whose list holds entry k, for the message.
+            let mut end = range.start;
+            let lister = (lev.first_node..lev.first_node + lev.nodes)
+                .find(|&i| {
+                    end += LE::read_u16(&payload[node.start + i as usize * NODE_RECORD_BYTES as usize + 2..]) as u64;
+                    k < end
+                })
+                .unwrap_or(lev.first_node);
+            return Err(nf.error_at(at, format!("node {lister}: neighbour {} of the {} nodes of level {l}", entry(k as usize), lev.nodes)));
         }
     }
+    let neighbors: Vec<u32> = nodes
+        .iter()
+        .flat_map(|n| {
+            let base = levels[n.level as usize].first_node;
+            (n.neighbor_first..n.neighbor_first + n.neighbor_count).map(move |k| entry(k as usize) + base)
+        })
+        .collect();
 
     // MATL
     let mut f = fields(matl);

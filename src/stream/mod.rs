@@ -132,7 +132,9 @@ impl<S: ByteSource> Streamer<S> {
     /// Start a session. Budgets must admit the whole top level, which the first frame shows. The
     /// separating planes (`ORDR`, a file's last chunk) are read for the drawing order by the second
     /// [`Streamer::update`], or by the first when its front shows more than the top level; when they
-    /// are damaged, fronts are ordered without them and [`Streamer::take_warnings`] says so.
+    /// are damaged, fronts are ordered without them and [`Streamer::take_warnings`] says so. A
+    /// reader opened with [`Reader::open_top`] shows the top level in the first frame and is
+    /// completed by the second update.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
@@ -203,6 +205,9 @@ impl<S: ByteSource> Streamer<S> {
     /// the previous frame took, fed to the frame-time controller when there is one.
     pub fn update(&mut self, camera: &Camera, frame_ms: Option<f32>) -> Result<FrameReport> {
         let start = Instant::now();
+        if self.frame > 0 {
+            self.reader.complete()?;
+        }
         if let (Some(c), Some(ms)) = (self.controller.as_mut(), frame_ms) {
             c.measured(ms, self.faces);
         }

@@ -95,6 +95,8 @@ impl Refiner {
 
         let mut cut = Cut::default();
         let top = skeleton.top();
+        // A skeleton decoded in part (Reader::open_top) shows its top level alone.
+        let complete = nodes.len() == skeleton.header.nodes as usize;
         let mut level_shown = Vec::new();
         for i in skeleton.level_nodes(top) {
             if self.classify(i, &nodes[i as usize], camera) {
@@ -109,7 +111,7 @@ impl Refiner {
                 .filter_map(|&i| {
                     let n = &nodes[i as usize];
                     let pixels = camera.projected_error(n.error, n.center, n.radius);
-                    let refinable = n.child_count > 0 && pixels >= limits.pixel_error && held.binary_search(&i).is_err();
+                    let refinable = n.child_count > 0 && complete && pixels >= limits.pixel_error && held.binary_search(&i).is_err();
                     refinable.then(|| match limits.priority {
                         Priority::Error => (pixels, i),
                         Priority::Silhouette => (priority(n, camera), i),

@@ -419,3 +419,36 @@ fn faces_mapped_without_uv_extent_want_the_full_image() {
     assert_eq!(st.texture_levels, vec![[0, 0, 0]], "from far too, the full image");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_skeleton_decoded_top_first_streams_the_same_from_the_second_frame() {
+    let full = open();
+    let top = Reader::open_top(File::open(fixture()).unwrap(), fixture()).unwrap();
+    assert!(!top.is_complete());
+    let kept: usize = full.levels().iter().rev().take(2).map(|l| l.nodes as usize).sum();
+    assert!(kept < full.nodes().len());
+    assert_eq!(top.nodes(), &full.nodes()[..kept]);
+    assert_eq!(top.skeleton().neighbors[..], full.skeleton().neighbors[..top.skeleton().neighbors.len()]);
+    assert_eq!(top.node_box(kept as u32 - 1), full.node_box(kept as u32 - 1));
+
+    // Close up first, where a whole skeleton refines at once.
+    let (c, rad) = sphere(&full);
+    let frames = 12;
+    let cameras: Vec<Camera> = (0..frames).map(|i| orbit(c, rad, (frames - 1 + i) % frames, frames, 256, 256)).collect();
+    let mut whole = Streamer::new(full, Budgets::default()).unwrap();
+    let mut lazy = Streamer::new(top, Budgets::default()).unwrap();
+    let top_level = whole.reader().levels().len() as u32 - 1;
+    for (k, cam) in cameras.iter().enumerate() {
+        let (a, b) = (whole.update(cam, None).unwrap(), lazy.update(cam, None).unwrap());
+        if k == 0 {
+            assert!(a.front.iter().any(|&i| whole.reader().nodes()[i as usize].level < top_level), "the close-up refines");
+            assert!(b.front.iter().chain(&b.culled).all(|&i| lazy.reader().nodes()[i as usize].level == top_level));
+            assert!(!b.front.is_empty());
+        } else {
+            assert_eq!((&a.front, &a.culled, &a.order), (&b.front, &b.culled, &b.order), "frame {k}");
+            check(&lazy, &b, cam, &Budgets::default());
+        }
+    }
+    assert!(lazy.reader().is_complete());
+    assert_eq!(lazy.reader().skeleton(), whole.reader().skeleton());
+}

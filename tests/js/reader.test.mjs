@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, FormatError, crc32, openingRange, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
+import { MAJOR, MINOR, FormatError, crc32, openingRange, completeSkeleton, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -32,17 +32,37 @@ function decodeAll(bytes, opts) {
   return { sk, geoms, images, planes };
 }
 
-/** Whether the file is refused (true) or read (false); anything but a FormatError fails the test. */
+/** decodeAll with the skeleton decoded top first, as the viewer opens a file: the top level's
+ * nodes, then completeSkeleton and every other node. */
+function decodeTopFirst(bytes, opts) {
+  const sk = decodeSkeleton(bytes, bytes.length, { topFirst: true });
+  const top = sk.levelNodes(sk.top())[1];
+  const geoms = [];
+  for (let i = 0; i < top; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
+  completeSkeleton(sk);
+  for (let i = top; i < sk.nodeCount; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
+  const images = sk.textures.levels.map((l, e) => decodeImageLevel(sk, e, bytes.subarray(l.offset, l.offset + l.size)));
+  const planes = decodePlanes(sk, bytes.subarray(Math.min(planesOffset(sk), bytes.length)));
+  return { sk, geoms, images, planes };
+}
+
+/** Whether the file is refused (true) or read (false), whole and top first alike; anything but a
+ * FormatError fails the test. */
 function refused(bytes, what) {
-  try {
-    decodeAll(bytes);
-    return false;
-  } catch (e) {
-    if (!(e instanceof FormatError)) {
-      assert.fail(`${what}: threw ${e && e.name}: ${e && e.message}\n${e && e.stack}`);
+  const outcome = (decode) => {
+    try {
+      decode(bytes);
+      return null;
+    } catch (e) {
+      if (!(e instanceof FormatError)) {
+        assert.fail(`${what}: threw ${e && e.name}: ${e && e.message}\n${e && e.stack}`);
+      }
+      return e;
     }
-    return true;
-  }
+  };
+  const whole = outcome(decodeAll), topFirst = outcome(decodeTopFirst);
+  assert.equal(topFirst === null, whole === null, `${what}: whole ${whole?.message}; top first ${topFirst?.message}`);
+  return whole !== null;
 }
 
 /** The JSON `strata::format::inspect::dump` makes of a file (src/format/inspect.rs); `images` are
@@ -328,6 +348,9 @@ test('every valid golden vector decodes to its JSON, bit for bit', () => {
     const { sk, geoms, images, planes } = decodeAll(bytes);
     const d = difference(expected, dump(sk, geoms, images, planes));
     assert.equal(d, null, `${name}: ${d}`);
+    const t = decodeTopFirst(bytes);
+    const dt = difference(expected, dump(t.sk, t.geoms, t.images, t.planes));
+    assert.equal(dt, null, `${name}, top first: ${dt}`);
     // The struct of arrays is typed as promised.
     assert.ok(sk.level instanceof Uint16Array && sk.parent instanceof Uint32Array && sk.offset instanceof Float64Array);
     assert.ok(sk.coneAxis instanceof Float32Array && sk.coneAxis.length === 3 * sk.nodeCount && sk.neighborList instanceof Uint32Array);
