@@ -11,7 +11,7 @@
 //   openingRange(prefix, fileLength)  how many bytes the skeleton needs (a few short reads);
 //   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials
 //                                     (with { topFirst: true } the top two levels' records only,
-//                                     completeSkeleton(skeleton) the rest);
+//                                     completeSkeleton(skeleton) the rest, isComplete(skeleton));
 //   decodeNode(skeleton, i, bytes)    one node's GEOM chunk, checked and decoded;
 //   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
 //                                     file inside, for the browser to decode.
@@ -365,10 +365,16 @@ export function openingRange(prefix, fileLength) {
 
 const onGrid = (g, last) => g[0] <= last && g[1] <= last && g[2] <= last;
 
+/** Whether every node record of `sk` is decoded (a skeleton without `decoded` counts as whole). */
+export function isComplete(sk) {
+  return !(sk.decoded < sk.nodeCount);
+}
+
 /** Check and decode the node records `decodeSkeleton(…, { topFirst: true })` left; throws a FormatError as it would have. */
 export function completeSkeleton(sk) {
-  if (sk.decoded === sk.nodeCount) return;
+  if (isComplete(sk)) return;
   if (sk._failed) throw sk._failed;
+  if (typeof sk._rest !== 'function') throw new Error('completeSkeleton: not a skeleton decodeSkeleton returned (a copy?)');
   try {
     sk._rest();
   } catch (e) {
@@ -703,15 +709,19 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
       nbFirst += nc;
       geo += padded;
     }
-    for (let i = lev.firstNode; i < end; i++) {
+    l--;
+  };
+  // Check level m's neighbour entries (its records decoded) and make them absolute node ids.
+  const decodeEntries = (m) => {
+    const lev = levels[m];
+    for (let i = lev.firstNode, end = lev.firstNode + lev.nodes; i < end; i++) {
       for (let k = neighborFirst[i], e = k + neighborCount[i]; k < e; k++) {
         const o = nbrs.ps + width * k;
         const x = width === 2 ? u16(b, o) : u32(b, o);
-        if (x >= lev.nodes) throw chunkFail(o, 'NBRS', nbrs.at, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${l}`, i);
+        if (x >= lev.nodes) throw chunkFail(o, 'NBRS', nbrs.at, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${m}`, i);
         neighborList[k] = x + lev.firstNode;
       }
     }
-    l--;
   };
   // With every level decoded: the totals LEVL states.
   const finish = () => {
@@ -729,9 +739,13 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
     if (nbFirst !== nbEntries) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `holds ${nbEntries} neighbours, the nodes use ${nbFirst}`);
   };
-  // The top level, and the level below that its nodes' rules are checked against.
-  for (let k = opts.topFirst ? Math.min(L, 2) : L; k > 0; k--) decodeLevel();
+  // The records of every level, the totals, then the neighbour entries (the order of the checks,
+  // as in strata's reader); top first, the top level and the level below that its nodes' rules
+  // are checked against, with their entries.
+  const kept = opts.topFirst ? Math.min(L, 2) : L;
+  for (let k = kept; k > 0; k--) decodeLevel();
   if (l < 0) finish();
+  for (let m = L - 1; m >= L - kept; m--) decodeEntries(m);
   // Where the image levels start (§2): checked against the node table by finish().
   const levelsStart = levels.reduce((sum, rec) => sum + rec.bytes, skeletonEnd);
 
@@ -796,6 +810,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
       value: () => {
         while (l >= 0) decodeLevel();
         finish();
+        for (let m = L - kept - 1; m >= 0; m--) decodeEntries(m);
       },
       configurable: true,
     });
@@ -1400,7 +1415,7 @@ export function decodeNode(skeleton, i, bytes, opts = {}) {
   const s = skeleton;
   const N = s.nodeCount;
   if (!(Number.isInteger(i) && i >= 0 && i < N)) throw fail(undefined, `node ${i}: no such node; the file has ${N}`);
-  if (s.decoded < N && !(i < s.decoded && s.firstChild[i] + s.childCount[i] <= s.decoded)) {
+  if (!isComplete(s) && !(i < s.decoded && s.firstChild[i] + s.childCount[i] <= s.decoded)) {
     throw fail(undefined, `node ${i}: its record or its children's are not decoded yet (completeSkeleton)`);
   }
   const b = bytes;

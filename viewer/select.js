@@ -4,6 +4,7 @@
 // which agree wherever no decision lies within f32 rounding of its threshold.
 
 import { angle, dot, length, sub, unit } from './camera.js';
+import { isComplete } from './format.js';
 
 export const OFF = 0, SHOWN = 1, CULLED = 2, REFINED = 3;
 const NO_PARENT = 0xffffffff;
@@ -108,7 +109,7 @@ export class Selector {
       }
     }
     // A skeleton decoded in part (decodeSkeleton's topFirst) shows its top level alone.
-    const complete = !(s.decoded < s.nodeCount);
+    const complete = isComplete(s);
     for (let level = s.top(); level >= 1 && complete; level--) {
       const candidates = [];
       for (const i of shown) {

@@ -20,7 +20,7 @@
 // level that fits). Decoded levels count 4·w·h bytes against the same budget as the geometry and
 // are evicted with it, least recently used first.
 
-import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
+import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, isComplete, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
 import { Orderer } from './order.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
@@ -93,7 +93,8 @@ export function usedImages(skeleton, kinds = MAP_KINDS) {
 
 export class Streamer {
   /**
-   * Open `source` (source.js): read the skeleton and the top level, decode and check them.
+   * Open `source` (source.js): read the skeleton and the top level, check and decode the top two
+   * levels' records and the top level's geometry (the rest of the node table by the second update).
    * `options`: `prefix` (first read, bytes), `budget` (resident bytes), `maxInFlight`,
    * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
    * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`; for images, `maps` (the map kinds
@@ -249,7 +250,7 @@ export class Streamer {
   update(camera) {
     const s = this.skeleton;
     this.frame++;
-    if (s.decoded < s.nodeCount) {
+    if (!isComplete(s)) {
       if (this.frame > 1) {
         try {
           completeSkeleton(s);
@@ -292,13 +293,14 @@ export class Streamer {
       for (let k = chain.length - 1; k >= 0; k--) this.touch(chain[k]);
       this.touch(i);
     }
-    this.planImages(camera);
+    // Image levels lie after the geometry, where the level totals say: read once they are checked.
+    if (isComplete(s)) this.planImages(camera);
     this.requestImages(true);
     this.request();
     this.requestImages(false);
     this.evict();
     // The planes only reorder what is drawn: they are read once nothing else is wanted.
-    if (this.planes === 'unread' && this.idle() && s.decoded === s.nodeCount) this.readPlanes();
+    if (this.planes === 'unread' && this.idle()) this.readPlanes();
     return this.drawn;
   }
 
@@ -555,10 +557,10 @@ export class Streamer {
     this.textureResidentBytes = 0;
   }
 
-  /** Nothing missing and nothing in flight: the drawn nodes are the selected front, with the image levels it wants. */
+  /** The node table decoded, nothing missing and nothing in flight: the drawn nodes are the selected front, with the image levels it wants. */
   idle() {
     const s = this.skeleton;
-    return this.missing.length === 0 && this.imageMissing.length === 0 && this.inFlight === 0 && s.decoded === s.nodeCount;
+    return this.missing.length === 0 && this.imageMissing.length === 0 && this.inFlight === 0 && isComplete(s);
   }
 
   /** The renderer's handle of the level of `image` to draw this frame, or null (drawn untextured). */

@@ -193,7 +193,9 @@ impl<S: ByteSource> Reader<S> {
         self.georef.as_ref()
     }
 
-    /// The node table, in file order (top level first).
+    /// The node table, in file order (top level first); opened with [`Reader::open_top`], the
+    /// top two levels until [`Reader::complete`] (the level ranges and child ranges still
+    /// count every node).
     pub fn nodes(&self) -> &[NodeRecord] {
         &self.skeleton.nodes
     }
@@ -264,6 +266,9 @@ impl<S: ByteSource> Reader<S> {
     /// Read and check the separating planes (`ORDR`, spec §7.6), not read at open: a viewer needs
     /// them only to order what it draws. Empty for a file without them.
     pub fn read_planes(&self) -> Result<Planes> {
+        if !self.is_complete() {
+            return Err(Error::invalid(&self.path, None, "the separating planes need the whole node table (Reader::complete)"));
+        }
         let at = self.planes_offset();
         if at >= self.len {
             return Ok(Planes::default());
