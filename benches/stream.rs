@@ -74,8 +74,7 @@ fn whole_vs_streamed(mesh: &Path, file: &Path) -> strata::error::Result<()> {
 
     let start = Instant::now();
     // As strata stream opens: the top level first, the rest of the node table for the second frame.
-    let top_first = Reader::open_top(std::fs::File::open(file).map_err(|e| strata::error::Error::io(file, e))?, file)?;
-    let mut s = Streamer::new(top_first, Budgets { bytes: Some(4_000_000), ..Budgets::default() })?;
+    let mut s = Streamer::new(Reader::open_top_path(file)?, Budgets { bytes: Some(4_000_000), ..Budgets::default() })?;
     let mut image = Image::new(WIDTH, HEIGHT);
     let rep = s.update(&camera, None)?;
     draw_front(&s, &rep.front, &camera, &mut image);

@@ -83,8 +83,7 @@ pub fn run(a: Args) -> Result<()> {
     let opened = Instant::now();
     strata::atomic::protect(&a.file);
     // The first frame shows the top level: the rest of the node table is decoded for the second.
-    let file = std::fs::File::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
-    let reader = format::Reader::open_top(file, &a.file)?;
+    let reader = format::Reader::open_top_path(&a.file)?;
     if let Some(out) = &a.export_cut {
         strata::atomic::check_output(out)?;
     }

@@ -52,6 +52,12 @@ impl Reader<File> {
         let f = File::open(path).map_err(|e| Error::io(path, e))?;
         Reader::open_named(f, path)
     }
+
+    /// Open the file at `path` with [`Reader::open_top`].
+    pub fn open_top_path(path: &Path) -> Result<Reader<File>> {
+        let f = File::open(path).map_err(|e| Error::io(path, e))?;
+        Reader::open_top(f, path)
+    }
 }
 
 impl<S: ByteSource> Reader<S> {
@@ -91,7 +97,7 @@ impl<S: ByteSource> Reader<S> {
 
     /// Whether every node record is decoded (see [`Reader::open_top`]).
     pub fn is_complete(&self) -> bool {
-        self.pending.is_none()
+        self.skeleton.is_complete()
     }
 
     /// Open checking the skeleton only; nodes are decoded without their rules.

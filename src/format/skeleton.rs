@@ -56,6 +56,11 @@ impl Skeleton {
         self.levels.get(level as usize).map_or(0..0, |l| l.first_node..l.first_node + l.nodes)
     }
 
+    /// Whether every node record is decoded (see `decode_skel`'s `top_only`).
+    pub fn is_complete(&self) -> bool {
+        self.nodes.len() == self.header.nodes as usize
+    }
+
     /// The top level, the one shown first.
     pub fn top(&self) -> u32 {
         self.levels.len().saturating_sub(1) as u32

@@ -96,7 +96,7 @@ impl Refiner {
         let mut cut = Cut::default();
         let top = skeleton.top();
         // A skeleton decoded in part (Reader::open_top) shows its top level alone.
-        let complete = nodes.len() == skeleton.header.nodes as usize;
+        let complete = skeleton.is_complete();
         let mut level_shown = Vec::new();
         for i in skeleton.level_nodes(top) {
             if self.classify(i, &nodes[i as usize], camera) {
