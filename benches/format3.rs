@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use strata::format::geom::{self, v2::GeometryCodes, v3, NodeContext};
+use strata::format::geom::{self, v3};
 use strata::format::Reader;
 use strata::pipeline::{convert, ConvertOptions, Silent};
 use strata::write::{Encoding, Precision};
@@ -30,17 +30,19 @@ fn decode_rate(path: &Path, rounds: usize) -> f64 {
     let start = Instant::now();
     for _ in 0..rounds {
         for (i, bytes) in chunks.iter().enumerate() {
-            let ctx = NodeContext { path, index: i as u32, record: &rd.nodes()[i], header: rd.header() };
+            let ctx = rd.node_context(i as u32, &rd.nodes()[i]);
             std::hint::black_box(geom::decode(&ctx, bytes).expect("decode"));
         }
     }
     (faces * rounds as u64) as f64 / start.elapsed().as_secs_f64()
 }
 
-/// Level 0 of a file drawn at `size`² from the default view of `strata render`.
-fn level0_image(path: &Path, size: u32) -> strata::render::Image {
+/// Level 0 of a file drawn at `size`² from the default view of `strata render` for the bounds of
+/// `frame` (the same camera for both formats: coarse lattices widen format 3's bounds).
+fn level0_image(path: &Path, frame: &Path, size: u32) -> strata::render::Image {
     let rd = Reader::open_path(path).expect("open");
-    let (min, max) = (rd.header().min, rd.header().max);
+    let h = Reader::open_path(frame).expect("open").header().clone();
+    let (min, max) = (h.min, h.max);
     let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
     let camera = strata::camera::Camera::framing(center, radius, glam::Vec3::new(0.3, 0.4, 1.0), 45f32.to_radians(), size, size);
     let mut image = strata::render::Image::new(size, size);
@@ -51,54 +53,20 @@ fn level0_image(path: &Path, size: u32) -> strata::render::Image {
     image
 }
 
-/// Symbol counts of every node re-encoded from its decoded codes, level 0 and the others apart.
-fn symbols(path: &Path) -> [v3::Stats; 2] {
+/// The symbols of the connectivity alphabets, from the file's tables: each symbol's share.
+fn connectivity(path: &Path) -> Vec<(String, f64)> {
     let rd = Reader::open_path(path).expect("open");
-    let h = rd.header();
-    let mut out = [v3::Stats::default(), v3::Stats::default()];
-    for (i, n) in rd.nodes().iter().enumerate() {
-        let bytes = rd.read_at(n.offset, n.size as u64).expect("read");
-        let x = v3::Expect {
-            faces: n.faces,
-            vertices: n.vertices,
-            bits: h.grid.bits,
-            materials: h.materials,
-            normals: h.attributes.normals,
-            uvs: h.attributes.uvs,
-            colors: h.attributes.colors,
-            clusters: n.level == 0,
-        };
-        let d = v3::decode_codes(&bytes[16..bytes.len() - 4], x).unwrap_or_else(|e| panic!("node {i}: {e:?}"));
-        let lat = d.lattice;
-        let s = (1u64 << lat.uv_bits) as f64;
-        let g = GeometryCodes {
-            points: d.points,
-            normals: d.normals.iter().map(|q| q.map(|c| c as i16)).collect(),
-            uvs: d.uvs.iter().map(|q| q.map(|c| ((c as f64 / s) as f32).to_bits())).collect(),
-            colors: d.colors,
-            indices: d.indices,
-            material_ranges: d.material_ranges,
-            clusters: (n.level == 0).then_some((d.cluster_shift, d.clusters)),
-            lattice: lat,
-        };
-        let (_, _, st) = v3::encode_with_stats(&g, lat, h.grid.bits).expect("re-encode");
-        let t = &mut out[(n.level > 0) as usize];
-        for (a, b) in t.triangle_symbols.iter_mut().zip(st.triangle_symbols) {
-            *a += b;
-        }
-        for (a, b) in t.corner_symbols.iter_mut().zip(st.corner_symbols) {
-            *a += b;
-        }
-        for (a, b) in t.bits.iter_mut().zip(st.bits) {
-            *a += b;
+    let Some(code) = &rd.skeleton().code else { return Vec::new() };
+    let mut shares = [0f64; v3::sym::COUNT];
+    for c in 0..8 {
+        for (s, &f) in code.tables.freqs[v3::alphabet::CONN + c].0.iter().enumerate() {
+            if s < shares.len() {
+                shares[s] += f as f64;
+            }
         }
     }
-    out
-}
-
-fn entropy(counts: &[u64]) -> f64 {
-    let n: u64 = counts.iter().sum();
-    counts.iter().filter(|&&c| c > 0).map(|&c| -(c as f64 / n as f64) * (c as f64 / n as f64).log2()).sum()
+    let total: f64 = shares.iter().sum();
+    v3::sym::NAMES.iter().zip(shares).map(|(n, x)| (n.to_string(), x / total)).collect()
 }
 
 fn main() {
@@ -143,15 +111,11 @@ fn main() {
             s3.skeleton_bytes as f64 / faces
         );
         if let Some(bits) = s3.geometry_bits {
-            let parts: Vec<String> = v3::STAT_NAMES
-                .iter()
-                .zip(bits)
-                .filter(|(_, b)| *b > 0)
-                .map(|(n, b)| format!("{n} {:.2}", b as f64 / 8.0 / faces))
-                .collect();
+            let parts: Vec<String> =
+                v3::STAT_NAMES.iter().zip(bits).filter(|(_, b)| *b > 0.0).map(|(n, b)| format!("{n} {:.2}", b / 8.0 / faces)).collect();
             println!("  format 3 geometry, bytes per input face: {}", parts.join(", "));
         }
-        let (i2, i3) = (level0_image(&f2, 1024), level0_image(&f3, 1024));
+        let (i2, i3) = (level0_image(&f2, &f2, 1024), level0_image(&f3, &f2, 1024));
         println!(
             "  level 0 drawn at 1024²: covered pixels changed by more than 2, 8, 32 of 255: {:.3} %, {:.3} %, {:.3} %",
             100.0 * strata::render::changed_share(&i2, &i3, 2),
@@ -161,24 +125,8 @@ fn main() {
         let rounds = (2_000_000.0 / faces).ceil().max(1.0) as usize;
         let (r2, r3) = (decode_rate(&f2, rounds), decode_rate(&f3, rounds));
         println!("  decode, M faces/s (one core): format 2 {:.1}, format 3 {:.1}", r2 / 1e6, r3 / 1e6);
-        for (k, st) in symbols(&f3).iter().enumerate() {
-            let tri: u64 = st.triangle_symbols.iter().sum();
-            let parts: Vec<String> = v3::STAT_NAMES
-                .iter()
-                .zip(st.bits)
-                .filter(|(_, b)| *b > 0)
-                .map(|(n, b)| format!("{n} {:.2}", b as f64 / tri.max(1) as f64))
-                .collect();
-            println!("  {}: bits per stored face: {}", if k == 0 { "level 0" } else { "levels 1+" }, parts.join(", "));
-            println!(
-                "  {} triangles {tri}: edge slots {:?} (entropy {:.2} bits); corners {:?} (entropy {:.2} bits)",
-                if k == 0 { "level 0" } else { "levels 1+" },
-                st.triangle_symbols,
-                entropy(&st.triangle_symbols),
-                st.corner_symbols,
-                entropy(&st.corner_symbols)
-            );
-        }
+        let shares: Vec<String> = connectivity(&f3).iter().map(|(n, x)| format!("{n} {:.1} %", 100.0 * x)).collect();
+        println!("  connectivity symbols (table shares, all contexts summed): {}", shares.join(", "));
         let _ = (std::fs::remove_file(&f2), std::fs::remove_file(&f3));
     }
 }

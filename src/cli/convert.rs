@@ -6,6 +6,7 @@ use anyhow::Result;
 use clap::ValueEnum;
 use std::path::PathBuf;
 use strata::pipeline::{Build, Normals};
+use strata::write::{Encoding, Precision};
 
 /// A size in bytes: a number with an optional K, M, G or T (powers of 1024, an optional trailing
 /// `B` or `iB`).
@@ -57,6 +58,21 @@ pub struct Args {
     /// Build in memory whatever the input's size.
     #[arg(long)]
     pub in_core: bool,
+    /// Format version to write: 3 compresses node geometry (positions quantized as --grid-bits,
+    /// --lattice and --normal-bits say); 2 stores fixed-width arrays on a 20-bit grid.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(2..=3))]
+    pub format_version: u16,
+    /// Format 3: bits of the position grid over the model's largest side (level 0's precision),
+    /// 1..=21; 0 picks them from the mesh (a step of at most a 64th of its median edge).
+    #[arg(long, default_value_t = 0)]
+    pub grid_bits: u32,
+    /// Format 3: vertices inside a coarser level's node lie on a lattice of at most this fraction
+    /// of its geometric error (0 keeps them on the grid).
+    #[arg(long, default_value_t = 0.25)]
+    pub lattice: f32,
+    /// Format 3: bits of each octahedral normal coordinate, 2..=16.
+    #[arg(long, default_value_t = 10)]
+    pub normal_bits: u32,
     /// No progress bars.
     #[arg(long, short)]
     pub quiet: bool,
@@ -90,7 +106,10 @@ pub fn run(a: Args) -> Result<()> {
         },
         memory: a.memory.unwrap_or(0),
         temp: a.temp.clone(),
-        ..Default::default()
+        encoding: match a.format_version {
+            3 => Encoding::V3(Precision { grid_bits: a.grid_bits, lattice: a.lattice, normal_bits: a.normal_bits, ..Precision::default() }),
+            _ => Encoding::V2,
+        },
     };
     let mut bars = Bars::new(a.quiet || a.json);
     let c = strata::pipeline::convert(&a.input.mesh, &a.input.options()?, &a.output, &opts, &mut bars)?;

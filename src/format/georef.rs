@@ -52,13 +52,13 @@ pub fn encode(g: &Georef) -> Vec<u8> {
     out
 }
 
-/// Decode the `GEOR` payload of the chunk at `pos` in a file of minor version `minor`.
-pub fn decode(path: &Path, minor: u16, payload: &[u8], pos: u64) -> Result<Georef> {
+/// Decode the `GEOR` payload of the chunk at `pos` in a file of version `major.minor`.
+pub fn decode(path: &Path, major: u16, minor: u16, payload: &[u8], pos: u64) -> Result<Georef> {
     let mut f = Fields::new(path, &id::GEOR, pos, payload, pos + HEADER_BYTES);
     if payload.len() < GEOR_FIXED_BYTES {
         return Err(f.error(format!("{} bytes, fewer than the {GEOR_FIXED_BYTES} of its fixed fields", payload.len())));
     }
-    let newer = minor > MINOR;
+    let newer = minor > super::known_minor(major);
     let at = f.offset();
     let frame = match f.u32()? {
         0 => GeoFrame::Unplaced,
@@ -122,9 +122,9 @@ mod tests {
         };
         let p = payload(&g);
         assert_eq!(p.len(), GEOR_FIXED_BYTES + 9);
-        assert_eq!(decode(Path::new("t"), 1, &p, 0).unwrap(), g);
+        assert_eq!(decode(Path::new("t"), 2, 1, &p, 0).unwrap(), g);
         let refuse = |p: &[u8], minor: u16, words: &str| {
-            let e = decode(Path::new("t"), minor, p, 0).unwrap_err().to_string();
+            let e = decode(Path::new("t"), 2, minor, p, 0).unwrap_err().to_string();
             assert!(e.contains(words), "{e}");
         };
         let mut bad = p.clone();
@@ -140,7 +140,7 @@ mod tests {
         let mut longer = p.clone();
         longer.push(0);
         refuse(&longer, 1, "1 bytes after the CRS string");
-        assert_eq!(decode(Path::new("t"), MINOR + 1, &longer, 0).unwrap(), g);
+        assert_eq!(decode(Path::new("t"), 2, MINOR + 1, &longer, 0).unwrap(), g);
         refuse(&p[..GEOR_FIXED_BYTES - 1], 1, "fewer than");
         refuse(&p[..p.len() - 1], 1, "needs 9 more bytes");
     }

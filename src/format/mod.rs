@@ -65,6 +65,20 @@ pub const NEWEST_MAJOR: u16 = 3;
 pub const MINOR: u16 = 3;
 /// The format version as the spec writes it.
 pub const VERSION: &str = "2.3";
+/// Minor version of format 3 this reader knows, and writers write.
+pub const MINOR3: u16 = 0;
+/// Format 3's version as its spec writes it.
+pub const VERSION3: &str = "3.0";
+
+/// The newest minor version of `major` this reader knows: a file of a newer minor may carry
+/// fields and chunks it skips.
+pub fn known_minor(major: u16) -> u16 {
+    if major >= 3 {
+        MINOR3
+    } else {
+        MINOR
+    }
+}
 
 /// The first 8 bytes of every strata file.
 pub const MAGIC: [u8; 8] = *b"\x89STRATA\n";
@@ -107,4 +121,6 @@ pub mod id {
     pub const TEXR: [u8; 4] = *b"TEXR";
     pub const TEXL: [u8; 4] = *b"TEXL";
     pub const ORDR: [u8; 4] = *b"ORDR";
+    pub const GEOS: [u8; 4] = *b"GEOS";
+    pub const CODE: [u8; 4] = *b"CODE";
 }

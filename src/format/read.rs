@@ -121,6 +121,7 @@ impl<S: ByteSource> Reader<S> {
                 materials: Vec::new(),
                 boxes: Vec::new(),
                 textures: Default::default(),
+                code: None,
             },
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
@@ -155,7 +156,7 @@ impl<S: ByteSource> Reader<S> {
             if f.id == id::SKEL {
                 break f;
             }
-            if f.id == id::HEAD || f.id == id::GEOM {
+            if f.id == id::HEAD || f.id == id::GEOM || f.id == id::GEOS {
                 return Err(rd.err(pos, &f.id, pos, "expected the SKEL chunk before any other known chunk"));
             }
             if f.id == id::GEOR {
@@ -166,7 +167,7 @@ impl<S: ByteSource> Reader<S> {
                     return Err(rd.err(pos + 8, &f.id, pos, format!("size {} exceeds the {MAX_HEAD_BYTES}-byte limit", f.size)));
                 }
                 let payload = rd.payload_at(pos, &f)?;
-                rd.georef = Some(georef::decode(path, minor, &payload, pos)?);
+                rd.georef = Some(georef::decode(path, major, minor, &payload, pos)?);
             }
             rd.skeleton_chunks.push(ChunkInfo::new(&f, pos, 0));
             pos = rd.next(pos, &f)?;
@@ -260,7 +261,8 @@ impl<S: ByteSource> Reader<S> {
     /// Where the `ORDR` chunk (2.3) starts if the file has one: right after the last `GEOM` or
     /// `TEXL` chunk and its padding (spec §2).
     pub fn planes_offset(&self) -> u64 {
-        let geometry = self.skeleton_end + self.skeleton.levels.iter().map(|l| l.bytes).sum::<u64>();
+        let bytes = self.skeleton.levels.iter().map(|l| l.bytes).sum::<u64>();
+        let geometry = skeleton::geometry_layout(self.header().major, self.skeleton_end, bytes).1;
         self.skeleton
             .textures
             .levels
@@ -279,7 +281,7 @@ impl<S: ByteSource> Reader<S> {
         if at >= self.len {
             return Ok(Planes::default());
         }
-        if self.header().minor < 3 {
+        if !self.header().has_planes_version() {
             return Ok(Planes::default());
         }
         // The frame, then the chunk alone (chunks of a newer minor may follow it). Anything but
@@ -352,7 +354,7 @@ impl<S: ByteSource> Reader<S> {
             return Err(Error::invalid(&self.path, None, format!("node {i}: its children are not decoded yet (Reader::complete)")));
         }
         let (rec, bytes) = self.node_bytes(i)?;
-        let ctx = NodeContext { path: &self.path, index: i, record: &rec, header: self.header() };
+        let ctx = self.node_context(i, &rec);
         let g = geom::decode(&ctx, &bytes)?;
         if self.strict {
             let mut sink = Sink::new(1);
@@ -368,7 +370,19 @@ impl<S: ByteSource> Reader<S> {
     /// The sub-chunks of node `i`'s `GEOM` chunk (read and checked).
     pub fn node_chunks(&self, i: u32) -> Result<Vec<ChunkInfo>> {
         let (rec, bytes) = self.node_bytes(i)?;
-        geom::chunks(&NodeContext { path: &self.path, index: i, record: &rec, header: self.header() }, &bytes)
+        geom::chunks(&self.node_context(i, &rec), &bytes)
+    }
+
+    /// What decoding node `i` (record `rec`) needs besides its bytes.
+    pub fn node_context<'a>(&'a self, i: u32, rec: &'a NodeRecord) -> NodeContext<'a> {
+        NodeContext {
+            path: &self.path,
+            index: i,
+            record: rec,
+            header: self.header(),
+            bounds: self.skeleton.node_box_points(i),
+            code: self.skeleton.code.as_deref(),
+        }
     }
 
     /// Node `i`'s record and the bytes of its `GEOM` chunk.

@@ -286,6 +286,18 @@ pub struct Header {
     pub tool: String,
 }
 
+impl Header {
+    /// Whether this reader knows every field and chunk of the file's version.
+    pub fn minor_known(&self) -> bool {
+        self.minor <= super::known_minor(self.major)
+    }
+
+    /// Whether the file's version carries separating planes (`ORDR`): 2.3 and format 3.
+    pub fn has_planes_version(&self) -> bool {
+        self.major >= 3 || self.minor >= 3
+    }
+}
+
 /// One entry of the `LEVL` chunk: level ℓ's nodes are `first_node .. first_node + nodes`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LevelRecord {

@@ -2,10 +2,11 @@
 //! [`Skeleton`], everything a viewer needs before reading any geometry, and encoded back.
 
 use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
+use super::geom::v3;
 use super::texture;
 use super::{
     angle_decode, id, octa, pack, radius_decode, unpack, Attributes, Cone, Grid, Header, HierarchyParams, LevelRecord, Material,
-    NodeRecord, Textures, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, MINOR, NODE_RECORD_BYTES, NO_PARENT,
+    NodeRecord, Textures, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, NODE_RECORD_BYTES, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use byteorder::{ByteOrder, LittleEndian as LE};
@@ -48,6 +49,8 @@ pub struct Skeleton {
     pub boxes: Vec<[u64; 2]>,
     /// The images the materials use and each node's UV density (`TEXR`); empty without images.
     pub textures: Textures,
+    /// Format 3: the coding tables of node geometry (`CODE`).
+    pub code: Option<std::sync::Arc<v3::Code>>,
 }
 
 impl Skeleton {
@@ -78,11 +81,29 @@ impl Skeleton {
             .map_or(&[], |n| &self.neighbors[n.neighbor_first as usize..(n.neighbor_first + n.neighbor_count) as usize])
     }
 
+    /// Node `i`'s bounding box as grid points (min, max).
+    pub fn node_box_points(&self, i: u32) -> [[u32; 3]; 2] {
+        self.boxes.get(i as usize).map_or([[0; 3]; 2], |b| [unpack(b[0]).unwrap_or_default(), unpack(b[1]).unwrap_or_default()])
+    }
+
     /// Node `i`'s bounding box (min, max).
     pub fn node_box(&self, i: u32) -> (Vec3, Vec3) {
         let grid = self.header.grid;
         let corner = |v: u64| unpack(v).map_or(Vec3::NAN, |g| grid.decode(g));
         self.boxes.get(i as usize).map_or((Vec3::NAN, Vec3::NAN), |b| (corner(b[0]), corner(b[1])))
+    }
+}
+
+/// Where node geometry lies, given where it starts (right after `SKEL` and its padding) and the
+/// bytes the levels' geometry takes (`LEVL`): the first node's offset and the end of the geometry,
+/// padding included. Format 2 stores a `GEOM` chunk per node, back to back; format 3 one `GEOS`
+/// chunk whose payload is every node's payload back to back.
+pub fn geometry_layout(major: u16, start: u64, bytes: u64) -> (u64, u64) {
+    if major >= 3 {
+        let end = start + HEADER_BYTES + bytes + TRAILER_BYTES;
+        (start + HEADER_BYTES, end + chunk::padding(end))
+    } else {
+        (start, start + bytes)
     }
 }
 
@@ -123,7 +144,7 @@ pub fn decode_head(ctx: &Context, payload: &[u8], pos: u64) -> Result<Header> {
     if (payload.len() as u64) < HEAD_FIXED_BYTES {
         return Err(f.error(format!("{} bytes, fewer than the {HEAD_FIXED_BYTES} of its fixed fields", payload.len())));
     }
-    let newer = ctx.minor > MINOR;
+    let newer = ctx.minor > super::known_minor(ctx.major);
     let file_size = f.u64()?;
     let at = f.offset();
     let metres_per_unit = f.f64()?;
@@ -275,7 +296,8 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
     // The neighbour entries of each level's nodes, which are consecutive.
     let mut level_entries = vec![0..0u64; levels.len()];
     let mut neighbor_first = 0u64;
-    let mut offset = ctx.geometry_start;
+    let v3 = ctx.major >= 3;
+    let mut offset = geometry_layout(ctx.major, ctx.geometry_start, 0).0;
     // Children of the levels above are consecutive: node i's are those after its predecessors'.
     let mut next_child = 0u64;
     // Faces, vertices and bytes per level, to check LEVL against.
@@ -322,11 +344,11 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
                 return Err(bad(format!("geometric error {error} and radius {radius} must be finite, the error not negative")));
             }
             let end = offset + size as u64;
-            let padded = size as u64 + chunk::padding(end);
+            let padded = if v3 { size as u64 } else { size as u64 + chunk::padding(end) };
             let total = &mut totals[l];
             *total = (total.0 + faces as u64, total.1 + vertices as u64, total.2 + padded);
-            let in_file =
-                size as u64 >= HEADER_BYTES + TRAILER_BYTES && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
+            let least = if v3 { 1 } else { HEADER_BYTES + TRAILER_BYTES };
+            let in_file = size as u64 >= least && offset.checked_add(size as u64).is_some_and(|e| e <= ctx.file_size);
             if !in_file {
                 return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
             }
@@ -424,7 +446,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
             .map_err(|_| f.error_at(at, format!("material {m}: texture of {len} bytes runs past the chunk or is not UTF-8")))?;
         materials.push(Material { name, base_color, texture: (!tex.is_empty()).then_some(tex), ..Material::default() });
     }
-    if f.remaining() > 0 && h.minor.cmp(&MINOR).is_le() {
+    if f.remaining() > 0 && h.minor_known() {
         return Err(f.error(format!("{} bytes after {} materials", f.remaining(), h.materials)));
     }
 
@@ -434,13 +456,26 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
         (_, Some(dup)) => return Err(ctx.err(dup.offset, &id::SKEL, pos, "has a second TEXR chunk")),
         (None, None) => Textures::default(),
         (Some(texr), None) => {
-            let levels_start = ctx.geometry_start + levels.iter().map(|l| l.bytes).sum::<u64>();
+            let levels_start = geometry_layout(ctx.major, ctx.geometry_start, levels.iter().map(|l| l.bytes).sum::<u64>()).1;
             let cx = texture::TexrContext { nodes: h.nodes, levels_start, file_size: ctx.file_size };
             texture::decode_texr(&mut fields(texr), &cx, &mut materials)?
         }
     };
 
-    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures }, infos))
+    // CODE (format 3): the coding tables, required.
+    let mut found = subs.iter().filter(|s| s.frame.id == id::CODE);
+    let code = match (found.next(), found.next(), ctx.major >= 3) {
+        (_, Some(dup), _) => return Err(ctx.err(dup.offset, &id::SKEL, pos, "has a second CODE chunk")),
+        (None, None, true) => return Err(ctx.err(pos, &id::SKEL, pos, "has no CODE chunk: format 3 needs its coding tables")),
+        (Some(c), None, true) => {
+            let tables = v3::CodeTables::decode(&payload[c.start..c.end], h.attributes.normals)
+                .map_err(|(at, m)| fields(c).error_at(c.payload_offset() + at as u64, m))?;
+            Some(std::sync::Arc::new(v3::Code::new(tables)))
+        }
+        (_, None, false) => None,
+    };
+
+    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures, code }, infos))
 }
 
 /// The `HEAD` chunk.
@@ -488,6 +523,7 @@ pub fn encode_skel(
     neighbors: &[u32],
     materials: &[Material],
     texr: Option<&[u8]>,
+    code: Option<&[u8]>,
 ) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
@@ -542,6 +578,9 @@ pub fn encode_skel(
     chunk::put(&mut payload, id::MATL, 0, &p);
     if let Some(t) = texr {
         chunk::put(&mut payload, id::TEXR, 0, t);
+    }
+    if let Some(c) = code {
+        chunk::put(&mut payload, id::CODE, 0, c);
     }
 
     let mut out = Vec::with_capacity(payload.len() + 24);

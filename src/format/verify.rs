@@ -5,7 +5,7 @@
 
 use super::chunk::{self, HEADER_BYTES, TRAILER_BYTES};
 use super::rules::{self, Sink};
-use super::{id, ByteSource, Reader, MINOR};
+use super::{id, ByteSource, Reader};
 use crate::error::{Error, Result};
 use std::collections::HashSet;
 use std::fs::File;
@@ -70,14 +70,15 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
         Err(e) => return v.push(e),
     };
     v.chunks = chunks.len();
-    let strict = rd.header().minor.cmp(&MINOR).is_le();
+    let strict = rd.header().minor_known();
     let mut geoms = Vec::new();
+    let mut geos = Vec::new();
     let mut texls = Vec::new();
     let mut seen_skel = false;
     for (k, c) in chunks.iter().enumerate() {
         let here = |msg: String| Error::at_byte(&path, c.offset, format!("chunk {} at offset {}: {msg}", c.id, c.offset));
         let end = c.offset + HEADER_BYTES + c.size + TRAILER_BYTES;
-        let known = [id::HEAD, id::GEOR, id::SKEL, id::GEOM, id::TEXL, id::ORDR].iter().any(|i| chunk::id_str(i) == c.id);
+        let known = [id::HEAD, id::GEOR, id::SKEL, id::GEOM, id::GEOS, id::TEXL, id::ORDR].iter().any(|i| chunk::id_str(i) == c.id);
         if known && c.id != "ORDR" && c.flags != 0 && strict {
             v.push(here(format!("flags {:#x} should be 0", c.flags)));
         }
@@ -103,6 +104,14 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
                 v.push(here("a GEOM chunk after TEXL chunks: images follow the geometry".into()));
             }
             geoms.push((c.offset, HEADER_BYTES + c.size + TRAILER_BYTES));
+        } else if c.id == "GEOS" {
+            if !texls.is_empty() {
+                v.push(here("GEOS after TEXL chunks: images follow the geometry".into()));
+            }
+            geos.push((c.offset, c.size));
+            if let Err(e) = crc_of(rd, &c.id, c.offset, c.size) {
+                v.push(e);
+            }
         } else if c.id == "TEXL" {
             texls.push((c.offset, HEADER_BYTES + c.size + TRAILER_BYTES));
         } else if c.id == "ORDR" {
@@ -122,8 +131,8 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
             // From 2.3 a file of a version this reader knows holds only the chunks of spec §2: a
             // GEOR whose ID was damaged must not pass as an unknown chunk (2.3 does not say, as
             // 2.1 did, that the file has one).
-            if strict && rd.header().major == 2 && rd.header().minor >= 3 {
-                v.push(here("an unknown chunk in a format 2.3 file (spec §4.3)".into()));
+            if strict && rd.header().has_planes_version() {
+                v.push(here(format!("an unknown chunk in a format {}.{} file (spec §4.3)", rd.header().major, rd.header().minor)));
             }
         }
     }
@@ -167,6 +176,23 @@ fn walk<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
         if end + chunk::padding(end) != rd.file_size() {
             v.push(Error::at_byte(&path, end, format!("the last chunk's padding does not end the {}-byte file", rd.file_size())));
         }
+    }
+    if rd.header().major >= 3 {
+        // Format 3: one GEOS chunk right after SKEL, its payload every node's, back to back.
+        let bytes = rd.levels().iter().map(|l| l.bytes).sum::<u64>();
+        let want = [(rd.skeleton_end(), bytes)];
+        if geos != want || !geoms.is_empty() {
+            v.push(Error::at_byte(
+                &path,
+                rd.skeleton_end(),
+                format!(
+                    "format 3 holds one GEOS chunk of {bytes} bytes at offset {} and no GEOM; the file has {geos:?} and {} GEOM",
+                    rd.skeleton_end(),
+                    geoms.len()
+                ),
+            ));
+        }
+        return;
     }
     let table: Vec<(u64, u64)> = rd.nodes().iter().map(|n| (n.offset, n.size as u64)).collect();
     if geoms != table {

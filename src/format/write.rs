@@ -10,15 +10,16 @@
 //! them as given.
 
 use super::chunk;
+use super::geom::rans::EncodeTable;
 use super::geom::v2::{self, GeometryCodes};
 use super::geom::v3;
 use super::georef::{self, Georef};
 use super::planes::{self, PlaneEntry, Planes, Support};
-use super::skeleton::{encode_head, encode_skel, NodeCodes};
+use super::skeleton::{encode_head, encode_skel, geometry_layout, NodeCodes};
 use super::texture::{self, ImageIn};
 use super::{
     angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC,
-    MAX_TOOL_BYTES, MINOR, NO_PARENT,
+    MAX_TOOL_BYTES, MINOR, MINOR3, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -100,7 +101,7 @@ pub struct WriteSummary {
     pub levels: Vec<LevelSummary>,
     /// Format 3: bits of node geometry by kind ([`v3::STAT_NAMES`]), over all nodes.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub geometry_bits: Option<[u64; 8]>,
+    pub geometry_bits: Option<[f64; 7]>,
     /// Bytes of the images' `TEXL` chunks, padding included.
     pub image_bytes: u64,
 }
@@ -173,7 +174,9 @@ pub struct Writer<W> {
     levels: Vec<Vec<Pending>>,
     clusters: u64,
     buf: Vec<u8>,
-    geometry_bits: Option<[u64; 8]>,
+    /// Format 3: symbols per alphabet over every node added, and the normals' bits.
+    counts: Vec<Vec<u64>>,
+    normal_bits: Option<u32>,
     /// Neighbour pairs `(level, key, key)` added after their nodes ([`Writer::link`]).
     links: Vec<(u32, u32, u32)>,
     spill_dir: Option<PathBuf>,
@@ -194,9 +197,6 @@ impl<W: Write> Writer<W> {
         if opts.levels == 0 || opts.levels == u32::MAX {
             return Err(bad(format!("{} levels", opts.levels)));
         }
-        if opts.major != 2 && !opts.images.is_empty() {
-            return Err(bad("format 3 does not store images yet: write format 2".into()));
-        }
         check_images(&opts).map_err(bad)?;
         let mut spills = Vec::with_capacity(opts.levels as usize);
         for _ in 0..opts.levels {
@@ -214,7 +214,8 @@ impl<W: Write> Writer<W> {
             levels,
             clusters: 0,
             buf: Vec::new(),
-            geometry_bits: None,
+            counts: vec![Vec::new(); v3::alphabet::ALPHABETS],
+            normal_bits: None,
             links: Vec::new(),
             spill_dir: spill_dir.map(Path::to_path_buf),
         })
@@ -245,22 +246,31 @@ impl<W: Write> Writer<W> {
             return Err(bad(format!("level {l} node {}: {faces} faces in one node", node.key)));
         }
         let mut vertices = vertices;
-        let payload = if self.opts.major == 3 {
-            let (payload, order, stats) =
-                v3::encode_with_stats(g, g.lattice, self.opts.grid.bits).map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
+        self.buf.clear();
+        if self.opts.major == 3 {
+            // Modelled now, coded at `finish` once every node's symbols are counted.
+            let normal_bits = if a.normals { g.lattice.normal_bits } else { 0 };
+            if *self.normal_bits.get_or_insert(normal_bits) != normal_bits {
+                return Err(bad(format!(
+                    "level {l} node {}: normals at {normal_bits} bits, other nodes at {:?}",
+                    node.key, self.normal_bits
+                )));
+            }
+            let (model, order) = v3::model(g, self.opts.grid.bits, [node.codes.min, node.codes.max], normal_bits)
+                .map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
             // Format 3 stores the vertices its faces use.
             vertices = order.vertices.len();
-            let sum = self.geometry_bits.get_or_insert([0; 8]);
-            for (s, b) in sum.iter_mut().zip(stats.bits) {
-                *s += b;
-            }
-            payload
+            model.count(&mut self.counts);
+            model.to_bytes(&mut self.buf);
+        }
+        let (span, crc) = if self.opts.major == 2 {
+            let payload = v2::encode(g);
+            chunk::put(&mut self.buf, id::GEOM, 0, &payload);
+            (payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, chunk::crc32(&payload))
         } else {
-            v2::encode(g)
+            // Known once coded (`finish`).
+            (self.buf.len() as u64, 0)
         };
-        self.buf.clear();
-        chunk::put(&mut self.buf, id::GEOM, 0, &payload);
-        let span = payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES;
         let span = u32::try_from(span).map_err(|_| bad(format!("level {l} node {}: geometry of {span} bytes exceeds 4 GiB", node.key)))?;
         let spill_at = self.spills[l].append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
         self.clusters += g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
@@ -276,10 +286,42 @@ impl<W: Write> Writer<W> {
             spill_at,
             padded: self.buf.len() as u32,
             span,
-            crc: chunk::crc32(&payload),
+            crc,
             support: Support::of(&g.points),
         });
         Ok(())
+    }
+
+    /// Format 3: fit the file's coding tables to every node's symbols and code each node's model
+    /// into its payload (in a new spill per level); the tables and the bits by kind.
+    fn code_models(&mut self) -> Result<(v3::CodeTables, [f64; 7])> {
+        let path = self.path.clone();
+        let bad = |msg: String| Error::invalid(&path, None, msg);
+        let io = |e: std::io::Error| Error::io(&path, e);
+        let tables = v3::CodeTables::fit(self.normal_bits.unwrap_or(0), &self.counts);
+        let enc: Vec<EncodeTable> = tables.freqs.iter().map(EncodeTable::new).collect();
+        let mut bits = [0f64; 7];
+        let mut buf = Vec::new();
+        for l in 0..self.levels.len() {
+            let mut coded = match &self.spill_dir {
+                Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
+                None => Spill::Memory(Vec::new()),
+            };
+            for p in &mut self.levels[l] {
+                buf.resize(p.padded as usize, 0);
+                self.spills[l].read(p.spill_at, &mut buf).map_err(io)?;
+                let (model, _) = v3::Model::from_bytes(&buf).ok_or_else(|| bad(format!("level {l} node {}: a damaged spill", p.key)))?;
+                for (b, x) in bits.iter_mut().zip(model.bits(&tables.freqs)) {
+                    *b += x;
+                }
+                let payload = model.payload(&enc).map_err(|m| bad(format!("level {l} node {}: {m}", p.key)))?;
+                let size = u32::try_from(payload.len()).map_err(|_| bad(format!("level {l} node {}: {} bytes", p.key, payload.len())))?;
+                p.spill_at = coded.append(&payload).map_err(io)?;
+                (p.padded, p.span, p.crc) = (size, size, chunk::crc32(&payload));
+            }
+            self.spills[l] = coded;
+        }
+        Ok((tables, bits))
     }
 
     /// Set the input's vertex count the summary reports (the partitioned build knows it last).
@@ -312,12 +354,13 @@ impl<W: Write> Writer<W> {
 
     /// Number the nodes, write the whole file and return what it holds.
     pub fn finish(mut self) -> Result<WriteSummary> {
+        if self.levels[0].is_empty() {
+            return Err(Error::invalid(&self.path, None, "nothing to write: level 0 has no nodes"));
+        }
+        let code = if self.opts.major >= 3 { Some(self.code_models()?) } else { None };
         let bad = |msg: String| Error::invalid(&self.path, None, msg);
         let io = |e: std::io::Error| Error::io(&self.path, e);
         let nl = self.levels.len();
-        if self.levels[0].is_empty() {
-            return Err(bad("nothing to write: level 0 has no nodes".into()));
-        }
         if !self.links.is_empty() {
             let mut links = std::mem::take(&mut self.links);
             links.sort_unstable();
@@ -459,14 +502,14 @@ impl<W: Write> Writer<W> {
         let images = &self.opts.images;
         let supports: Vec<&Support> =
             (0..nl).rev().flat_map(|l| order[l].iter().map(move |&k| (l, k))).map(|(l, k)| &self.levels[l][k].support).collect();
-        // Format 3 is a draft without a spec of its own: it carries no ORDR yet.
-        let planes = if self.opts.major == 2 { order_planes(&records, &codes, &supports, levels[nl - 1].nodes) } else { Planes::default() };
+        let planes = order_planes(&records, &codes, &supports, levels[nl - 1].nodes);
         let minor =
             match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some())
             {
                 (2, true, _, _) => MINOR,
                 (2, false, true, _) => 2,
                 (2, false, false, true) => 1,
+                (3, ..) => MINOR3,
                 _ => 0,
             };
         let mut header = Header {
@@ -490,7 +533,8 @@ impl<W: Write> Writer<W> {
         };
         let image_order = texture::layout_order(images);
         let texr = (!images.is_empty()).then(|| texture::encode_texr(images, &image_order, &self.opts.materials, &density));
-        let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref());
+        let code_payload = code.as_ref().map(|(t, _)| t.encode());
+        let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref(), code_payload.as_deref());
         let geor = self.opts.georef.as_ref().map(georef::encode).unwrap_or_default();
         let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + geor.len() as u64 + skel.len() as u64;
         let image_bytes: u64 = image_order
@@ -507,7 +551,9 @@ impl<W: Write> Writer<W> {
             out
         });
         let ordr = ordr.unwrap_or_default();
-        header.file_size = skeleton_bytes + levels.iter().map(|l| l.bytes).sum::<u64>() + image_bytes + ordr.len() as u64;
+        let geometry_bytes = levels.iter().map(|l| l.bytes).sum::<u64>();
+        let (first, geometry_end) = geometry_layout(self.opts.major, skeleton_bytes, geometry_bytes);
+        header.file_size = geometry_end + image_bytes + ordr.len() as u64;
 
         let mut prologue = Vec::with_capacity(16);
         prologue.extend_from_slice(&MAGIC);
@@ -520,14 +566,26 @@ impl<W: Write> Writer<W> {
         self.out.write_all(&geor).map_err(io)?;
         self.out.write_all(&skel).map_err(io)?;
         let mut buf = Vec::new();
+        let mut crc = crc32fast::Hasher::new();
+        if first > skeleton_bytes {
+            // Format 3: one GEOS chunk holds every node's payload.
+            self.out.write_all(&chunk::Frame { id: id::GEOS, flags: 0, size: geometry_bytes }.bytes()).map_err(io)?;
+        }
         for l in (0..nl).rev() {
             for &k in &order[l] {
                 let p = &self.levels[l][k];
                 buf.resize(p.padded as usize, 0);
                 self.spills[l].read(p.spill_at, &mut buf).map_err(io)?;
                 self.out.write_all(&buf).map_err(io)?;
+                crc.update(&buf);
             }
             self.spills[l] = Spill::Memory(Vec::new());
+        }
+        if first > skeleton_bytes {
+            let end = first + geometry_bytes;
+            let mut trailer = crc.finalize().to_le_bytes().to_vec();
+            trailer.resize(4 + chunk::padding(end + 4) as usize, 0);
+            self.out.write_all(&trailer).map_err(io)?;
         }
         for &(i, l) in &image_order {
             buf.clear();
@@ -548,7 +606,7 @@ impl<W: Write> Writer<W> {
                 .enumerate()
                 .map(|(l, r)| LevelSummary { level: l as u32, nodes: r.nodes, faces: r.faces, vertices: r.vertices, bytes: r.bytes })
                 .collect(),
-            geometry_bits: self.geometry_bits,
+            geometry_bits: code.map(|(_, bits)| bits),
             image_bytes,
         })
     }

@@ -4,7 +4,10 @@
 //! the tools of [`bits`].
 
 pub mod bits;
+pub mod rans;
 pub mod v2;
+// Parallel arrays indexed by vertex and corner read most clearly as index loops.
+#[allow(clippy::needless_range_loop)]
 pub mod v3;
 
 use super::chunk::{self, Frame, Sub, HEADER_BYTES};
@@ -21,6 +24,10 @@ pub struct NodeContext<'a> {
     pub index: u32,
     pub record: &'a NodeRecord,
     pub header: &'a Header,
+    /// The node's box, grid points (format 3 predicts its first vertex from the middle).
+    pub bounds: [[u32; 3]; 2],
+    /// Format 3: the file's coding tables.
+    pub code: Option<&'a v3::Code>,
 }
 
 impl NodeContext<'_> {
@@ -31,7 +38,8 @@ impl NodeContext<'_> {
 
 /// Check the `GEOM` chunk `bytes` (its `size` bytes from ID through CRC, at the record's offset):
 /// its ID, its size against the node table, its CRC against the trailer and the table; return its
-/// frame and, in format 2, its sub-chunks (offsets within `bytes[16..]`; format 3 has none).
+/// frame and sub-chunks (offsets within `bytes[16..]`). Format 2 only: format 3's node payloads
+/// have no frame ([`check_payload`]).
 pub fn split(ctx: &NodeContext, bytes: &[u8]) -> Result<(Frame, Vec<Sub>)> {
     let (i, rec) = (ctx.index, ctx.record);
     let at = rec.offset;
@@ -53,26 +61,45 @@ pub fn split(ctx: &NodeContext, bytes: &[u8]) -> Result<(Frame, Vec<Sub>)> {
     if stored != actual || stored != rec.crc {
         return Err(ctx.err(at + end as u64, &frame.id, format!("CRC {actual:08x}, stored {stored:08x}, node table {:08x}", rec.crc)));
     }
-    if ctx.header.major >= 3 {
-        return Ok((frame, Vec::new()));
-    }
     let subs = chunk::subs(ctx.path, &id::GEOM, at, &bytes[16..end], at + HEADER_BYTES)?;
     Ok((frame, subs))
 }
 
-/// Check and decode the `GEOM` chunk `bytes` of a node, by the codec of the file's major version.
-pub fn decode(ctx: &NodeContext, bytes: &[u8]) -> Result<NodeGeometry> {
-    let (_, subs) = split(ctx, bytes)?;
-    let payload = &bytes[16..bytes.len() - 4];
-    if ctx.header.major >= 3 {
-        v3::decode(ctx, payload)
-    } else {
-        v2::decode(ctx, payload, &subs)
+/// Format 3: check a node's payload (its record's `size` bytes) against the record's size and CRC.
+pub fn check_payload(ctx: &NodeContext, bytes: &[u8]) -> Result<()> {
+    let (i, rec) = (ctx.index, ctx.record);
+    if bytes.len() as u64 != rec.size as u64 {
+        return Err(Error::at_byte(
+            ctx.path,
+            rec.offset,
+            format!("node {i}'s geometry is {} bytes, its record says {}", bytes.len(), rec.size),
+        ));
     }
+    let actual = chunk::crc32(bytes);
+    if actual != rec.crc {
+        return Err(Error::at_byte(ctx.path, rec.offset, format!("node {i}'s geometry: CRC {actual:08x}, node table {:08x}", rec.crc)));
+    }
+    Ok(())
+}
+
+/// Check and decode node geometry `bytes` (format 2: the `GEOM` chunk; format 3: the payload), by
+/// the codec of the file's major version.
+pub fn decode(ctx: &NodeContext, bytes: &[u8]) -> Result<NodeGeometry> {
+    if ctx.header.major >= 3 {
+        check_payload(ctx, bytes)?;
+        let code = ctx.code.ok_or_else(|| Error::invalid(ctx.path, None, "format 3 without coding tables"))?;
+        return v3::decode(ctx, bytes, &code.decoder);
+    }
+    let (_, subs) = split(ctx, bytes)?;
+    v2::decode(ctx, &bytes[16..bytes.len() - 4], &subs)
 }
 
 /// The chunk and its sub-chunks, for listings.
 pub fn chunks(ctx: &NodeContext, bytes: &[u8]) -> Result<Vec<ChunkInfo>> {
+    if ctx.header.major >= 3 {
+        check_payload(ctx, bytes)?;
+        return Ok(Vec::new());
+    }
     let (frame, subs) = split(ctx, bytes)?;
     let mut out = vec![ChunkInfo::new(&frame, ctx.record.offset, 0)];
     out.extend(subs.iter().map(|s| ChunkInfo::new(&s.frame, s.offset, 1)));

@@ -1,64 +1,441 @@
-//! Node geometry of format 3 (spec §8 of strata-v3.md): one bit stream per node.
+//! Node geometry of format 3 (strata-v3.md §5): connectivity by traversal, vertex attributes
+//! predicted from it, everything entropy-coded with the file's tables ([`super::rans`]).
 //!
-//! Triangles are coded in order, each against a ring of the 16 edges most recently made
-//! ([`EDGE_RING`]): a triangle that shares one of them names it and its third vertex; the third
-//! vertex is new, one of the 16 vertices most recently named ([`VERTEX_RING`]), or an index. A new
-//! vertex's grid point is predicted by the parallelogram across the shared edge and the residual
-//! is Rice-coded; vertices inside the node (no border edge) lie on a coarser lattice of `2^shift`
-//! grid steps (the writer snaps them), so their residuals are counted in lattice steps, while
-//! border vertices keep the grid and are flagged as such, so that a border vertex two nodes share
-//! decodes identically in both whatever their lattices. Normals, after every triangle, are coded against the normal of the decoded surface
-//! (area-weighted, in exact integer arithmetic). Material ranges and culling clusters come first.
+//! **Connectivity.** Triangles are decoded by growing a region over the node: its border is a set
+//! of loops of directed *open edges*, each remembering the third corner of the triangle that made
+//! it. An open edge taken from a queue (the newest edge first, then the others in the order they
+//! were made) is a *gate*; one symbol says what lies across it: a new vertex (`VERTEX`), the vertex
+//! before or after it along its loop (`LEFT`, `RIGHT`, both: `END`), another decoded vertex by
+//! index (`SPLIT`), nothing (`BOUNDARY`), or a triangle of a later run (`SKIP`). Faces must stay
+//! in runs (a material range, a culling cluster), so the queue is emptied at each run's start; a
+//! run begins from an open edge it skipped earlier or from a new triangle (`START`).
 //!
-//! The encoder reorders faces within runs that must stay contiguous (a material range, a cluster)
-//! so that each triangle shares an edge with a recent one, and numbers vertices in order of first
-//! use; [`encode`] returns the payload and the order it chose.
+//! **Attributes**, after all connectivity, in vertex order: a vertex made across a gate is
+//! predicted by the parallelogram `a + b − c` of the gate's ends and far corner, the others from
+//! the vertex before. Vertices on no open edge at the end (inside the node) of a coarse level lie
+//! on a lattice of `2^shift` grid steps, and their residuals count lattice steps; the others keep
+//! the grid, so that a vertex two nodes share decodes the same in both. Normals are predicted from
+//! the decoded surface (face normals summed in f64, in face order) as octahedral codes.
+//!
+//! [`model`] turns a node into symbols and raw bits (a [`Model`]); the writer counts the symbols
+//! of every node, makes the file's tables and codes each model with [`Model::payload`].
 
-use super::bits::{BitReader, BitWriter, PrefixCode, Rice};
-use super::v2::{base_and_span, ClusterCodes, GeometryCodes};
+use super::bits::{BitReader, BitWriter};
+use super::rans::{self, bucket, unbucket, unzigzag, zigzag, DecodeTable, EncodeTable, Freqs, RansReader};
+use super::v2::GeometryCodes;
 use super::NodeContext;
 use crate::error::{Error, Result};
-use crate::format::chunk;
-use crate::format::{angle_decode, id, octa, radius_decode, Cluster, Cone, MaterialRange, NodeGeometry};
-use glam::Vec2;
-use std::sync::OnceLock;
+use crate::format::{octa, Cluster, Cone, MaterialRange, NodeGeometry};
+use glam::{DVec3, Vec2, Vec3};
+use rustc_hash::FxHashMap;
 
-/// Edges a triangle can name.
-pub const EDGE_RING: usize = 16;
-/// Vertices a triangle's third corner can name.
-pub const VERTEX_RING: usize = 16;
-/// Bytes before the bit stream: lattice shift, normal bits, UV bits, reserved.
-pub const PAYLOAD_HEADER_BYTES: usize = 4;
-
-/// Triangle symbols: `0..16` names an edge of the ring (0 the newest), [`MISS`] none, [`FAR`] an
-/// open edge older than the ring, by how many edges back it was made.
-const MISS: usize = EDGE_RING;
-const FAR: usize = EDGE_RING + 1;
-/// How many of the newest edges the encoder searches for a `FAR` one (bounding its cost per
-/// triangle); older open edges are left to `MISS`.
-const FAR_SCAN: u32 = 1024;
-/// Corner symbols: a new vertex inside the node, a new border vertex, the vertex after the shared
-/// edge's end along the decoded region's border, the vertex before its start, a ring vertex
-/// (`RING..RING+16`, 0 the newest), an index.
-const NEW: usize = 0;
-const NEW_BORDER: usize = 1;
-const RIGHT: usize = 2;
-const LEFT: usize = 3;
-const RING: usize = 4;
-const INDEX: usize = RING + VERTEX_RING;
-
-/// Code lengths of the triangle symbols: Huffman lengths of their frequencies over the bunny, the
-/// gargoyle and the CT head (`cargo bench --bench format3` prints them), each mesh weighted alike.
-pub const TRIANGLE_CODE: [u8; EDGE_RING + 2] = [1, 2, 5, 4, 6, 6, 7, 6, 8, 7, 8, 7, 8, 8, 8, 8, 5, 5];
-/// Code lengths of the corner symbols, made as [`TRIANGLE_CODE`]'s.
-pub const CORNER_CODE: [u8; INDEX + 1] = [1, 4, 5, 3, 12, 12, 11, 10, 10, 10, 10, 10, 9, 9, 9, 8, 8, 8, 8, 8, 2];
-
-fn codes() -> &'static (PrefixCode, PrefixCode) {
-    static CODES: OnceLock<(PrefixCode, PrefixCode)> = OnceLock::new();
-    CODES.get_or_init(|| (PrefixCode::new(&TRIANGLE_CODE), PrefixCode::new(&CORNER_CODE)))
+/// Connectivity symbols.
+pub mod sym {
+    pub const VERTEX: u32 = 0;
+    pub const LEFT: u32 = 1;
+    pub const RIGHT: u32 = 2;
+    pub const END: u32 = 3;
+    pub const SPLIT: u32 = 4;
+    pub const BOUNDARY: u32 = 5;
+    pub const SKIP: u32 = 6;
+    /// Symbols of the connectivity alphabets.
+    pub const COUNT: usize = 7;
+    pub const NAMES: [&str; COUNT] = ["vertex", "left", "right", "end", "split", "boundary", "skip"];
 }
 
-/// How a node's codes are quantized beyond the grid: what the writer chose and the payload records.
+/// The file's alphabets (strata-v3.md §4.2), in the order `CODE` stores them.
+pub mod alphabet {
+    /// Connectivity symbols after each previous symbol (`CONN + s`), and at a node's start
+    /// (`CONN + 7`).
+    pub const CONN: usize = 0;
+    pub const START: usize = 8;
+    pub const CORNER: usize = 9;
+    pub const SPLIT: usize = 10;
+    pub const COUNT: usize = 11;
+    pub const SHIFT: usize = 12;
+    pub const POS_LATTICE: usize = 13;
+    pub const POS_GRID: usize = 14;
+    pub const POS_JUMP: usize = 15;
+    pub const NORMAL: usize = 16;
+    pub const NORMAL_BORDER: usize = 17;
+    pub const COLOR: usize = 18;
+    pub const UV: usize = 19;
+    pub const ALPHABETS: usize = 20;
+    pub const NAMES: [&str; ALPHABETS] = [
+        "conn/vertex",
+        "conn/left",
+        "conn/right",
+        "conn/end",
+        "conn/split",
+        "conn/boundary",
+        "conn/skip",
+        "conn/first",
+        "start",
+        "corner",
+        "split",
+        "count",
+        "shift",
+        "pos/lattice",
+        "pos/grid",
+        "pos/jump",
+        "normal",
+        "normal/border",
+        "color",
+        "uv",
+    ];
+}
+use alphabet as a;
+
+/// Categories of [`Stats::bits`].
+pub const STAT_NAMES: [&str; 7] = ["connectivity", "indices", "positions", "normals", "colors", "uvs", "meta"];
+
+fn category(alphabet: usize) -> usize {
+    match alphabet {
+        0..=7 => 0,
+        a::START | a::CORNER | a::SPLIT => 1,
+        a::POS_LATTICE | a::POS_GRID | a::POS_JUMP => 2,
+        a::NORMAL | a::NORMAL_BORDER => 3,
+        a::COLOR => 4,
+        a::UV => 5,
+        _ => 6,
+    }
+}
+
+/// Quantized UVs lie strictly within ±2^30 steps.
+const UV_LIMIT: i64 = 1 << 30;
+/// How far back the encoder looks among skipped edges for one to start a run from.
+const START_SCAN: usize = 4096;
+const NONE: u32 = u32::MAX;
+
+/// The file's coding tables (`CODE`, strata-v3.md §4.3): bits per normal coordinate and the
+/// frequencies of every alphabet.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CodeTables {
+    /// Bits of each octahedral normal coordinate (2..=16), 0 without normals.
+    pub normal_bits: u32,
+    pub freqs: Vec<Freqs>,
+}
+
+/// [`CodeTables`] ready to decode with.
+pub struct Decoder {
+    pub normal_bits: u32,
+    tables: Vec<DecodeTable>,
+}
+
+impl Decoder {
+    pub fn new(t: &CodeTables) -> Decoder {
+        let mut tables: Vec<DecodeTable> = t.freqs.iter().map(DecodeTable::new).collect();
+        tables.resize_with(a::ALPHABETS, || DecodeTable::new(&Freqs::default()));
+        Decoder { normal_bits: t.normal_bits, tables }
+    }
+}
+
+/// The file's tables as stored, and ready to decode with.
+pub struct Code {
+    pub tables: CodeTables,
+    pub decoder: Decoder,
+}
+
+impl Code {
+    pub fn new(tables: CodeTables) -> Code {
+        Code { decoder: Decoder::new(&tables), tables }
+    }
+}
+
+impl PartialEq for Code {
+    fn eq(&self, other: &Code) -> bool {
+        self.tables == other.tables
+    }
+}
+
+impl std::fmt::Debug for Code {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.tables.fmt(f)
+    }
+}
+
+impl CodeTables {
+    /// Tables fitted to `counts` (per alphabet, per symbol), as the writer makes them.
+    pub fn fit(normal_bits: u32, counts: &[Vec<u64>]) -> CodeTables {
+        CodeTables { normal_bits, freqs: (0..a::ALPHABETS).map(|k| Freqs::from_counts(counts.get(k).map_or(&[][..], |c| c))).collect() }
+    }
+
+    /// The `CODE` payload: normal bits, three reserved bytes, the alphabet count, then each
+    /// alphabet's symbol count (u16) and frequencies (u16 each).
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = vec![self.normal_bits as u8, 0, 0, 0];
+        out.extend_from_slice(&(self.freqs.len() as u32).to_le_bytes());
+        for f in &self.freqs {
+            out.extend_from_slice(&(f.0.len() as u16).to_le_bytes());
+            for &x in &f.0 {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    /// Decode and check a `CODE` payload; an error says what and at which byte.
+    pub fn decode(p: &[u8], normals: bool) -> std::result::Result<CodeTables, (usize, String)> {
+        if p.len() < 8 {
+            return Err((0, format!("{} bytes; at least 8", p.len())));
+        }
+        let normal_bits = p[0] as u32;
+        if normals != (normal_bits != 0) || (normals && !(2..=16).contains(&normal_bits)) {
+            return Err((
+                0,
+                format!("normal bits {normal_bits}; the file {} normals (2..=16 bits)", if normals { "has" } else { "has no" }),
+            ));
+        }
+        if p[1..4] != [0, 0, 0] {
+            return Err((1, "reserved bytes are not zero".into()));
+        }
+        let n = u32::from_le_bytes(p[4..8].try_into().expect("4 bytes")) as usize;
+        if n != a::ALPHABETS {
+            return Err((4, format!("{n} alphabets; format 3.0 has {}", a::ALPHABETS)));
+        }
+        let mut at = 8usize;
+        let mut freqs = Vec::with_capacity(n);
+        for k in 0..n {
+            let start = at;
+            let count = p.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).ok_or((at, "ends early".to_string()))?;
+            at += 2;
+            if count > rans::MAX_SYMBOLS {
+                return Err((start, format!("alphabet {k} ({}): {count} symbols, at most {}", a::NAMES[k], rans::MAX_SYMBOLS)));
+            }
+            let bytes = p.get(at..at + 2 * count).ok_or((at, format!("alphabet {k} ({}) ends early", a::NAMES[k])))?;
+            let f = Freqs(bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect());
+            f.check().map_err(|m| (start, format!("alphabet {k} ({}): {m}", a::NAMES[k])))?;
+            at += 2 * count;
+            freqs.push(f);
+        }
+        if at != p.len() {
+            return Err((at, format!("{} bytes after the last alphabet", p.len() - at)));
+        }
+        Ok(CodeTables { normal_bits, freqs })
+    }
+}
+
+/// A node as symbols and raw bits, before the file's tables code it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Model {
+    /// (alphabet, symbol), in the order a reader decodes them.
+    pub symbols: Vec<(u8, u8)>,
+    /// The raw bits, most significant first, and how many.
+    pub raw: Vec<u8>,
+    pub raw_bits: u64,
+    /// Raw bits by [`STAT_NAMES`] category.
+    pub raw_by_category: [u64; 7],
+}
+
+impl Model {
+    /// Add this model's symbols to `counts` (per alphabet, per symbol).
+    pub fn count(&self, counts: &mut [Vec<u64>]) {
+        for &(al, s) in &self.symbols {
+            let c = &mut counts[al as usize];
+            if c.len() <= s as usize {
+                c.resize(s as usize + 1, 0);
+            }
+            c[s as usize] += 1;
+        }
+    }
+
+    /// The node's payload: the symbol stream's length (LEB128), the symbol stream, the raw bits.
+    pub fn payload(&self, tables: &[EncodeTable]) -> std::result::Result<Vec<u8>, String> {
+        let stream = rans::encode(&self.symbols, tables)?;
+        let mut out = Vec::with_capacity(stream.len() + self.raw.len() + 5);
+        let mut n = stream.len() as u64;
+        loop {
+            let byte = (n & 0x7F) as u8;
+            n >>= 7;
+            out.push(if n > 0 { byte | 0x80 } else { byte });
+            if n == 0 {
+                break;
+            }
+        }
+        out.extend_from_slice(&stream);
+        out.extend_from_slice(&self.raw);
+        Ok(out)
+    }
+
+    /// Bits by [`STAT_NAMES`] category under `freqs`: each symbol costs `log2(4096 / f)`.
+    pub fn bits(&self, freqs: &[Freqs]) -> [f64; 7] {
+        let mut out = self.raw_by_category.map(|b| b as f64);
+        for &(al, s) in &self.symbols {
+            let f = freqs[al as usize].0.get(s as usize).copied().unwrap_or(1).max(1);
+            out[category(al as usize)] += (rans::PROB_SCALE as f64 / f as f64).log2();
+        }
+        out
+    }
+
+    /// Serialized for a spill file: symbol count, raw bit count, categories, symbols, raw bytes.
+    pub fn to_bytes(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&(self.symbols.len() as u64).to_le_bytes());
+        out.extend_from_slice(&self.raw_bits.to_le_bytes());
+        for c in self.raw_by_category {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+        for &(al, s) in &self.symbols {
+            out.extend_from_slice(&[al, s]);
+        }
+        out.extend_from_slice(&self.raw);
+    }
+
+    /// Read back what [`Model::to_bytes`] wrote at the start of `b`; the bytes it took.
+    pub fn from_bytes(b: &[u8]) -> Option<(Model, usize)> {
+        let u = |at: usize| b.get(at..at + 8).map(|x| u64::from_le_bytes(x.try_into().expect("8 bytes")));
+        let n = u(0)? as usize;
+        let raw_bits = u(8)?;
+        let mut raw_by_category = [0u64; 7];
+        for (k, c) in raw_by_category.iter_mut().enumerate() {
+            *c = u(16 + 8 * k)?;
+        }
+        let at = 16 + 56;
+        let symbols = b.get(at..at + 2 * n)?.chunks_exact(2).map(|x| (x[0], x[1])).collect();
+        let raw_len = raw_bits.div_ceil(8) as usize;
+        let raw = b.get(at + 2 * n..at + 2 * n + raw_len)?.to_vec();
+        Some((Model { symbols, raw, raw_bits, raw_by_category }, at + 2 * n + raw_len))
+    }
+}
+
+/// Where the bits of many nodes went, for benches and tuning.
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    pub bits: [f64; 7],
+    pub connectivity: [u64; sym::COUNT],
+    pub starts: u64,
+    pub new_triangles: u64,
+}
+
+/// The order [`model`] chose: the input face stored k-th is `faces[k]`, its corners rotated left
+/// by `rotation[k]`; the input vertex stored k-th is `vertices[k]`.
+#[derive(Clone, Debug, Default)]
+pub struct Order {
+    pub faces: Vec<u32>,
+    pub rotation: Vec<u8>,
+    pub vertices: Vec<u32>,
+}
+
+/// How a vertex is predicted, in stored indices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Pred {
+    /// The parallelogram `a + b − c`.
+    Para(u32, u32, u32),
+    /// The vertex before, or the middle of the node's box for the first.
+    Jump(u32),
+}
+
+/// The traversal state both sides keep (strata-v3.md §5.3): open edges as loops, each with its
+/// ends, far corner and links; whether it is open, closed by a triangle across it, or closed by
+/// `BOUNDARY`.
+#[derive(Default)]
+struct Front {
+    v0: Vec<u32>,
+    v1: Vec<u32>,
+    opp: Vec<u32>,
+    prev: Vec<u32>,
+    next: Vec<u32>,
+    state: Vec<u8>,
+}
+
+const OPEN: u8 = 0;
+const ZIPPED: u8 = 1;
+const CLOSED: u8 = 2;
+
+impl Front {
+    fn with_capacity(n: usize) -> Front {
+        Front {
+            v0: Vec::with_capacity(n),
+            v1: Vec::with_capacity(n),
+            opp: Vec::with_capacity(n),
+            prev: Vec::with_capacity(n),
+            next: Vec::with_capacity(n),
+            state: Vec::with_capacity(n),
+        }
+    }
+
+    #[inline(always)]
+    fn make(&mut self, v0: u32, v1: u32, opp: u32, prev: u32, next: u32) -> u32 {
+        let e = self.v0.len() as u32;
+        self.v0.push(v0);
+        self.v1.push(v1);
+        self.opp.push(opp);
+        self.prev.push(prev);
+        self.next.push(next);
+        self.state.push(OPEN);
+        e
+    }
+
+    #[inline(always)]
+    fn link(&mut self, x: u32, y: u32) {
+        self.next[x as usize] = y;
+        self.prev[y as usize] = x;
+    }
+
+    /// A triangle `(a, b, c)` that shares no open edge: a loop of its three edges.
+    fn start(&mut self, t: [u32; 3]) -> u32 {
+        let e = self.v0.len() as u32;
+        self.make(t[0], t[1], t[2], e + 2, e + 1);
+        self.make(t[1], t[2], t[0], e, e + 2);
+        self.make(t[2], t[0], t[1], e + 1, e);
+        e
+    }
+
+    /// Triangle `(b, a, x)` across gate `e = (a, b)` by `s` (`VERTEX`, `SPLIT`, `LEFT`, `RIGHT`,
+    /// `END`); returns the edge to take next (or [`NONE`]) and an edge for the queue (or NONE).
+    #[inline(always)]
+    fn across(&mut self, e: u32, s: u32, x: u32) -> (u32, u32) {
+        let (ei, a, b) = (e as usize, self.v0[e as usize], self.v1[e as usize]);
+        let (p, n) = (self.prev[ei], self.next[ei]);
+        self.state[ei] = ZIPPED;
+        match s {
+            sym::LEFT => {
+                self.state[p as usize] = ZIPPED;
+                let pp = self.prev[p as usize];
+                let e1 = self.make(x, b, a, pp, n);
+                self.next[pp as usize] = e1;
+                self.prev[n as usize] = e1;
+                (e1, NONE)
+            }
+            sym::RIGHT => {
+                self.state[n as usize] = ZIPPED;
+                let nn = self.next[n as usize];
+                let e1 = self.make(a, x, b, p, nn);
+                self.next[p as usize] = e1;
+                self.prev[nn as usize] = e1;
+                (e1, NONE)
+            }
+            sym::END => {
+                self.state[p as usize] = ZIPPED;
+                self.state[n as usize] = ZIPPED;
+                let (pp, nn) = (self.prev[p as usize], self.next[n as usize]);
+                self.link(pp, nn);
+                (NONE, NONE)
+            }
+            _ => {
+                let e1 = self.make(a, x, b, p, NONE);
+                let e2 = self.make(x, b, a, e1, n);
+                self.next[e1 as usize] = e2;
+                self.next[p as usize] = e1;
+                self.prev[n as usize] = e2;
+                (e1, e2)
+            }
+        }
+    }
+
+    /// Which of `n` vertices lie on an edge not closed by a triangle across it.
+    fn border(&self, n: usize) -> Vec<bool> {
+        let mut border = vec![false; n];
+        for e in 0..self.v0.len() {
+            if self.state[e] != ZIPPED {
+                border[self.v0[e] as usize] = true;
+                border[self.v1[e] as usize] = true;
+            }
+        }
+        border
+    }
+}
+
+/// How a node's codes are quantized beyond the grid, as the writer chose.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Lattice {
     /// Vertices inside the node lie on multiples of `2^shift` grid steps.
@@ -69,7 +446,7 @@ pub struct Lattice {
     pub uv_bits: u32,
 }
 
-/// The lattice point nearest `g` for `shift`, kept below `2^bits`.
+/// The lattice point of `shift` nearest `g`, kept below `2^bits`.
 pub fn snap(g: u32, shift: u32, bits: u32) -> u32 {
     if shift == 0 {
         return g;
@@ -78,8 +455,15 @@ pub fn snap(g: u32, shift: u32, bits: u32) -> u32 {
     ((((g as u64) + (1 << (shift - 1))) >> shift << shift).min(top)) as u32
 }
 
-/// The octahedral code, at `scale`, of the direction `(x, y, z)` given in exact f64 integers: the
-/// prediction both the writer and every reader compute bit for bit (spec §8.5).
+/// The lattice point below-or-nearest: `(p + 2^(shift−1)) >> shift`.
+#[inline(always)]
+fn lattice_of(p: i64, shift: u32) -> i64 {
+    (p + ((1i64 << shift) >> 1)) >> shift
+}
+
+/// The octahedral code, at `scale`, of the direction `(x, y, z)`: the prediction every reader
+/// computes bit for bit (f64, IEEE operations in this order).
+#[inline]
 pub fn predict_octa(x: f64, y: f64, z: f64, scale: i32) -> [i32; 2] {
     let l1 = (x.abs() + y.abs()) + z.abs();
     if l1 == 0.0 {
@@ -95,453 +479,606 @@ pub fn predict_octa(x: f64, y: f64, z: f64, scale: i32) -> [i32; 2] {
     [(px * s + 0.5).floor() as i32, (py * s + 0.5).floor() as i32]
 }
 
-/// `atan(x)` for `x ≥ 0` from IEEE-exact operations only, within 0.005 rad: the same bits in every
-/// reader, unlike a library `atan`.
-#[inline]
-fn atan_approx(x: f64) -> f64 {
-    let f = |t: f64| t * (std::f64::consts::FRAC_PI_4 + 0.273 * (1.0 - t));
-    if x <= 1.0 {
-        f(x)
-    } else {
-        std::f64::consts::FRAC_PI_2 - f(1.0 / x)
-    }
-}
-
-/// Vertex normals of grid points `p` and triangles `t`, each face's normal weighted by its angle at
-/// the vertex (as strata computes normals), predicted as octahedral codes at `scale`. The sums use
-/// f64 operations in a fixed order (faces in order, corners in order), so every reader gets the
-/// same bits.
-fn predicted_normals(p: &[[u32; 3]], t: &[u32], scale: i32) -> Vec<[i32; 2]> {
+/// Each vertex's predicted normal: the sum over faces, in face order, of the cross product of
+/// its edges from the first corner, added to each corner in turn (f64).
+fn normal_sums(p: &[[u32; 3]], t: &[u32]) -> Vec<[f64; 3]> {
     let mut sum = vec![[0f64; 3]; p.len()];
     for f in t.chunks_exact(3) {
-        let q = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
-        let sub = |x: [f64; 3], y: [f64; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
-        let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
-        // Edge k runs from corner k to corner k + 1.
-        let e = [sub(q[1], q[0]), sub(q[2], q[1]), sub(q[0], q[2])];
-        let n = [e[0][1] * e[2][2] - e[0][2] * e[2][1], e[0][2] * e[2][0] - e[0][0] * e[2][2], e[0][0] * e[2][1] - e[0][1] * e[2][0]];
-        let n = n.map(|c| -c);
-        let len = dot(n, n).sqrt();
-        if len == 0.0 {
+        let (q0, q1, q2) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+        let u = [q1[0] as f64 - q0[0] as f64, q1[1] as f64 - q0[1] as f64, q1[2] as f64 - q0[2] as f64];
+        let v = [q2[0] as f64 - q0[0] as f64, q2[1] as f64 - q0[1] as f64, q2[2] as f64 - q0[2] as f64];
+        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        for &i in f {
+            let s = &mut sum[i as usize];
+            s[0] += n[0];
+            s[1] += n[1];
+            s[2] += n[2];
+        }
+    }
+    sum
+}
+
+/// What decoding a payload needs from outside it.
+#[derive(Clone, Copy, Debug)]
+pub struct Expect {
+    pub level: u32,
+    pub faces: u32,
+    pub vertices: u32,
+    /// Grid bits.
+    pub bits: u32,
+    pub materials: u32,
+    pub normals: bool,
+    pub uvs: bool,
+    pub colors: bool,
+    /// The node's box, grid points.
+    pub min: [u32; 3],
+    pub max: [u32; 3],
+}
+
+/// A node's decoded codes, before positions and normals become floats.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Decoded {
+    pub shift: u32,
+    pub uv_bits: u32,
+    pub points: Vec<[u32; 3]>,
+    /// Octahedral codes at the file's normal scale.
+    pub normals: Vec<[i32; 2]>,
+    /// UVs in steps of `2^−uv_bits`.
+    pub uvs: Vec<[i64; 2]>,
+    pub colors: Vec<[u8; 4]>,
+    pub indices: Vec<u32>,
+    pub material_ranges: Vec<MaterialRange>,
+    /// Level 0: each culling cluster's face count.
+    pub clusters: Vec<u32>,
+}
+
+/// A decoding failure: what, and at which byte of the payload.
+pub type Fault = (usize, String);
+
+struct In<'a> {
+    r: RansReader<'a>,
+    raw: BitReader<'a>,
+    d: &'a Decoder,
+    base: usize,
+}
+
+impl In<'_> {
+    #[inline(always)]
+    fn sym(&mut self, al: usize) -> u32 {
+        self.r.get(&self.d.tables[al])
+    }
+
+    /// A value of a residual alphabet.
+    #[inline(always)]
+    fn value(&mut self, al: usize) -> std::result::Result<u32, Fault> {
+        let s = self.sym(al);
+        if s as usize >= rans::BUCKETS {
+            return Err(self.fault(format!("symbol {s} of alphabet {} is not a value", a::NAMES[al])));
+        }
+        let raw = &mut self.raw;
+        Ok(unbucket(s, |k| raw.get(k)))
+    }
+
+    #[inline(always)]
+    fn signed(&mut self, al: usize) -> std::result::Result<i32, Fault> {
+        Ok(unzigzag(self.value(al)?))
+    }
+
+    fn fault(&self, msg: String) -> Fault {
+        (self.base + self.r.position().min(usize::MAX - self.base), msg)
+    }
+}
+
+/// Decode a node's payload into codes.
+pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Result<Decoded, Fault> {
+    let (nf, nv) = (x.faces as usize, x.vertices as usize);
+    // LEB128 length of the symbol stream.
+    let mut len = 0u64;
+    let mut at = 0usize;
+    loop {
+        let b = *payload.get(at).ok_or((at, "the payload ends in its symbol stream's length".to_string()))?;
+        if at == 9 {
+            return Err((at, "the symbol stream's length runs past 10 bytes".into()));
+        }
+        len |= ((b & 0x7F) as u64) << (7 * at);
+        at += 1;
+        if b & 0x80 == 0 {
+            break;
+        }
+    }
+    let end = (at as u64)
+        .checked_add(len)
+        .filter(|&e| e <= payload.len() as u64)
+        .ok_or((0, format!("a symbol stream of {len} bytes runs past the payload's {}", payload.len())))? as usize;
+    // Each face takes at least one symbol, which a byte of stream holds at most 12 times
+    // (frequency 4096 costs nothing only for an alphabet of one symbol, and a triangle is never
+    // coded alone by one); bound the work before allocating.
+    if nf > 0 && nv == 0 || nv > 3 * nf || nf as u64 > 64 * (payload.len() as u64 + 1) * 8 {
+        return Err((0, format!("{nf} faces and {nv} vertices cannot fit in {} bytes", payload.len())));
+    }
+    let mut input = In { r: RansReader::new(&payload[at..end]), raw: BitReader::new(&payload[end..]), d: dec, base: at };
+    let top = (1i64 << x.bits) - 1;
+    let mut d = Decoded::default();
+
+    // Header: lattice shift, UV bits, material ranges, clusters.
+    if x.level > 0 {
+        d.shift = input.sym(a::SHIFT);
+        if d.shift >= x.bits {
+            return Err(input.fault(format!("lattice shift {} on a {}-bit grid", d.shift, x.bits)));
+        }
+    }
+    if x.uvs {
+        d.uv_bits = input.value(a::COUNT)?;
+        if !(1..=24).contains(&d.uv_bits) {
+            return Err(input.fault(format!("UV bits {} (1..=24)", d.uv_bits)));
+        }
+    }
+    let ranges = input.value(a::COUNT)? as u64 + 1;
+    if ranges > nf.max(1) as u64 {
+        return Err(input.fault(format!("{ranges} material ranges for {nf} faces")));
+    }
+    let mut first = 0u64;
+    for k in 0..ranges {
+        let material = input.value(a::COUNT)?;
+        if material >= x.materials {
+            return Err(input.fault(format!("material {material} of {}", x.materials)));
+        }
+        let faces = if k + 1 == ranges { nf as u64 - first } else { input.value(a::COUNT)? as u64 + 1 };
+        if first + faces > nf as u64 || faces == 0 {
+            return Err(input.fault(format!("material ranges cover more than {nf} faces")));
+        }
+        d.material_ranges.push(MaterialRange { material, first_index: 3 * first as u32, index_count: 3 * faces as u32 });
+        first += faces;
+    }
+    if x.level == 0 {
+        let count = input.value(a::COUNT)? as u64 + 1;
+        if count > nf.max(1) as u64 {
+            return Err(input.fault(format!("{count} clusters for {nf} faces")));
+        }
+        let mut covered = 0u64;
+        for k in 0..count {
+            let faces = if k + 1 == count { nf as u64 - covered } else { input.value(a::COUNT)? as u64 + 1 };
+            if covered + faces > nf as u64 || faces == 0 {
+                return Err(input.fault(format!("clusters cover more than {nf} faces")));
+            }
+            d.clusters.push(faces as u32);
+            covered += faces;
+        }
+    }
+    // Runs: the faces between consecutive boundaries of material ranges and clusters.
+    let mut cuts: Vec<u32> = d.material_ranges.iter().map(|r| r.first_index / 3).collect();
+    let mut c = 0u32;
+    for &n in &d.clusters {
+        cuts.push(c);
+        c += n;
+    }
+    cuts.push(nf as u32);
+    cuts.sort_unstable();
+    cuts.dedup();
+
+    // Connectivity.
+    let mut front = Front::with_capacity(2 * nf + 8);
+    let mut preds: Vec<Pred> = Vec::with_capacity(nv);
+    let mut indices: Vec<u32> = Vec::with_capacity(3 * nf);
+    let mut queue: Vec<u32> = Vec::with_capacity(nf + 8);
+    let mut skipped: Vec<u32> = Vec::new();
+    let mut ctx = 7usize;
+    for w in cuts.windows(2) {
+        let mut left = w[1] - w[0];
+        queue.clear();
+        let (mut head, mut pending) = (0usize, NONE);
+        while left > 0 {
+            let e = if pending != NONE {
+                std::mem::replace(&mut pending, NONE)
+            } else if head < queue.len() {
+                head += 1;
+                queue[head - 1]
+            } else {
+                let s = input.value(a::START)?;
+                if s == 0 {
+                    let mut t = [0u32; 3];
+                    for k in 0..3 {
+                        let c = input.value(a::CORNER)?;
+                        t[k] = if c == 0 {
+                            let v = preds.len() as u32;
+                            if v as usize >= nv {
+                                return Err(input.fault(format!("more than {nv} vertices")));
+                            }
+                            preds.push(Pred::Jump(v.wrapping_sub(1)));
+                            v
+                        } else {
+                            let back = c - 1;
+                            if back as usize >= preds.len() {
+                                return Err(input.fault(format!("a corner {back} vertices back of {}", preds.len())));
+                            }
+                            preds.len() as u32 - 1 - back
+                        };
+                    }
+                    let e = front.start(t);
+                    queue.extend_from_slice(&[e, e + 1, e + 2]);
+                    indices.extend_from_slice(&t);
+                    left -= 1;
+                    continue;
+                }
+                let k = (s - 1) as usize;
+                let e =
+                    *skipped.iter().rev().nth(k).ok_or_else(|| input.fault(format!("start from skipped edge {k} of {}", skipped.len())))?;
+                if front.state[e as usize] != OPEN {
+                    return Err(input.fault("start from an edge that is closed".to_string()));
+                }
+                // The gate must make a triangle: read its symbol here.
+                let s = input.sym(a::CONN + ctx);
+                if !matches!(s, sym::VERTEX..=sym::SPLIT) {
+                    return Err(input.fault(format!("a run starts with {}", sym::NAMES.get(s as usize).unwrap_or(&"an unknown symbol"))));
+                }
+                ctx = s as usize;
+                let (next, q) = gate(&mut front, &mut input, &mut preds, &mut indices, e, s, nv)?;
+                pending = next;
+                if q != NONE {
+                    queue.push(q);
+                }
+                left -= 1;
+                continue;
+            };
+            if front.state[e as usize] != OPEN {
+                continue;
+            }
+            let s = input.sym(a::CONN + ctx);
+            match s {
+                sym::BOUNDARY => {
+                    front.state[e as usize] = CLOSED;
+                }
+                sym::SKIP => skipped.push(e),
+                sym::VERTEX..=sym::SPLIT => {
+                    let (next, q) = gate(&mut front, &mut input, &mut preds, &mut indices, e, s, nv)?;
+                    pending = next;
+                    if q != NONE {
+                        queue.push(q);
+                    }
+                    left -= 1;
+                }
+                _ => return Err(input.fault(format!("connectivity symbol {s}"))),
+            }
+            ctx = s as usize;
+        }
+    }
+    if preds.len() != nv {
+        return Err(input.fault(format!("{} vertices, the node record says {nv}", preds.len())));
+    }
+    let border = front.border(nv);
+    drop(front);
+
+    // Positions.
+    let shift = d.shift;
+    let mid = [0, 1, 2].map(|k| (x.min[k] as i64 + x.max[k] as i64) >> 1);
+    let mut points: Vec<[u32; 3]> = Vec::with_capacity(nv);
+    for v in 0..nv {
+        let (p, al, lattice) = match preds[v] {
+            Pred::Para(pa, pb, pc) => {
+                let (qa, qb, qc) = (points[pa as usize], points[pb as usize], points[pc as usize]);
+                let p = [0, 1, 2].map(|k| (qa[k] as i64 + qb[k] as i64 - qc[k] as i64).clamp(0, top));
+                let inner = shift > 0 && !border[v];
+                (p, if border[v] { a::POS_GRID } else { a::POS_LATTICE }, inner)
+            }
+            Pred::Jump(prev) => {
+                let p = if prev == NONE { mid } else { points[prev as usize].map(|c| c as i64) };
+                (p, a::POS_JUMP, shift > 0 && !border[v])
+            }
+        };
+        let mut q = [0u32; 3];
+        for k in 0..3 {
+            let r = input.signed(al)? as i64;
+            let c = if lattice { (lattice_of(p[k], shift) + r) << shift } else { p[k] + r };
+            if !(0..=top).contains(&c) {
+                return Err(input.fault(format!("vertex {v} lies off the {}-bit grid", x.bits)));
+            }
+            q[k] = c as u32;
+        }
+        points.push(q);
+    }
+
+    // Normals.
+    if x.normals {
+        let scale = octa::scale(dec.normal_bits);
+        let sums = normal_sums(&points, &indices);
+        d.normals.reserve(nv);
+        for v in 0..nv {
+            let s = sums[v];
+            let p = predict_octa(s[0], s[1], s[2], scale);
+            let al = if border[v] { a::NORMAL_BORDER } else { a::NORMAL };
+            let q = [p[0] as i64 + input.signed(al)? as i64, p[1] as i64 + input.signed(al)? as i64];
+            if q.iter().any(|c| c.abs() > scale as i64) {
+                return Err(input.fault(format!("normal {v} exceeds the {}-bit scale", dec.normal_bits)));
+            }
+            d.normals.push(q.map(|c| c as i32));
+        }
+    }
+    if x.colors {
+        d.colors.reserve(nv);
+        for v in 0..nv {
+            let p = predict(preds[v], |i| d.colors[i as usize].map(|c| c as i64), [0; 4], 0, 255);
+            let mut c = [0u8; 4];
+            for k in 0..4 {
+                let r = input.signed(a::COLOR)?;
+                if !(-128..=127).contains(&r) {
+                    return Err(input.fault(format!("colour residual {r} of vertex {v}")));
+                }
+                c[k] = (p[k] as i32 + r) as u8;
+            }
+            d.colors.push(c);
+        }
+    }
+    if x.uvs {
+        d.uvs.reserve(nv);
+        for v in 0..nv {
+            let p = predict(preds[v], |i| d.uvs[i as usize], [0; 2], 1 - UV_LIMIT, UV_LIMIT - 1);
+            let q = [p[0] + input.signed(a::UV)? as i64, p[1] + input.signed(a::UV)? as i64];
+            if q.iter().any(|c| c.abs() >= UV_LIMIT) {
+                return Err(input.fault(format!("UV {v} exceeds ±2^30 steps")));
+            }
+            d.uvs.push(q);
+        }
+    }
+    input.r.finish().map_err(|m| (end, m))?;
+    let used = input.raw.consumed().div_ceil(8) as usize;
+    if input.raw.overrun() || used != payload.len() - end {
+        return Err((payload.len(), format!("raw bits end at byte {} of {}", end + used, payload.len())));
+    }
+    d.points = points;
+    d.indices = indices;
+    Ok(d)
+}
+
+/// What `pred` predicts of an attribute `get` reads per stored vertex: the parallelogram clamped
+/// to `lo..=hi`, the vertex before, or `first`.
+#[inline(always)]
+fn predict<const N: usize>(pred: Pred, get: impl Fn(u32) -> [i64; N], first: [i64; N], lo: i64, hi: i64) -> [i64; N] {
+    match pred {
+        Pred::Para(x, y, z) => {
+            let (p, q, r) = (get(x), get(y), get(z));
+            std::array::from_fn(|k| (p[k] + q[k] - r[k]).clamp(lo, hi))
+        }
+        Pred::Jump(NONE) => first,
+        Pred::Jump(v) => get(v),
+    }
+}
+
+/// Decode a triangle across gate `e` by symbol `s`.
+#[inline(always)]
+fn gate(
+    front: &mut Front,
+    input: &mut In,
+    preds: &mut Vec<Pred>,
+    indices: &mut Vec<u32>,
+    e: u32,
+    s: u32,
+    nv: usize,
+) -> std::result::Result<(u32, u32), Fault> {
+    let ei = e as usize;
+    let (va, vb) = (front.v0[ei], front.v1[ei]);
+    let x = match s {
+        sym::VERTEX => {
+            let v = preds.len() as u32;
+            if v as usize >= nv {
+                return Err(input.fault(format!("more than {nv} vertices")));
+            }
+            preds.push(Pred::Para(va, vb, front.opp[ei]));
+            v
+        }
+        sym::SPLIT => {
+            let back = input.value(a::SPLIT)?;
+            if back as usize >= preds.len() {
+                return Err(input.fault(format!("a split {back} vertices back of {}", preds.len())));
+            }
+            preds.len() as u32 - 1 - back
+        }
+        sym::LEFT => {
+            let p = front.prev[ei] as usize;
+            if front.state[p] != OPEN || p == ei {
+                return Err(input.fault("LEFT of a closed edge".into()));
+            }
+            front.v0[p]
+        }
+        sym::RIGHT => {
+            let n = front.next[ei] as usize;
+            if front.state[n] != OPEN || n == ei {
+                return Err(input.fault("RIGHT of a closed edge".into()));
+            }
+            front.v1[n]
+        }
+        _ => {
+            let (p, n) = (front.prev[ei] as usize, front.next[ei] as usize);
+            if front.state[p] != OPEN || front.state[n] != OPEN || p == n || p == ei || front.v0[p] != front.v1[n] {
+                return Err(input.fault("END where the loop does not close".into()));
+            }
+            front.v0[p]
+        }
+    };
+    if x == va || x == vb {
+        return Err(input.fault(format!("a triangle across edge ({va}, {vb}) repeats a corner")));
+    }
+    indices.extend_from_slice(&[vb, va, x]);
+    Ok(front.across(e, s, x))
+}
+
+/// Check and decode a node's format-3 payload.
+pub fn decode(ctx: &NodeContext, payload: &[u8], dec: &Decoder) -> Result<NodeGeometry> {
+    let (rec, h) = (ctx.record, ctx.header);
+    let x = Expect {
+        level: rec.level,
+        faces: rec.faces,
+        vertices: rec.vertices,
+        bits: h.grid.bits,
+        materials: h.materials,
+        normals: h.attributes.normals,
+        uvs: h.attributes.uvs,
+        colors: h.attributes.colors,
+        min: ctx.bounds[0],
+        max: ctx.bounds[1],
+    };
+    let d = decode_codes(payload, x, dec)
+        .map_err(|(at, msg)| Error::at_byte(ctx.path, rec.offset + at as u64, format!("node {}'s geometry: {msg}", ctx.index)))?;
+    Ok(geometry(d, ctx, dec.normal_bits))
+}
+
+/// Decoded codes as floats, with each culling cluster's cone and sphere computed from its faces.
+pub fn geometry(d: Decoded, ctx: &NodeContext, normal_bits: u32) -> NodeGeometry {
+    let grid = ctx.header.grid;
+    let positions: Vec<Vec3> = d.points.iter().map(|&p| grid.decode(p)).collect();
+    let mut g = NodeGeometry { material_ranges: d.material_ranges, colors: d.colors, ..NodeGeometry::default() };
+    if !d.normals.is_empty() {
+        let scale = octa::scale(normal_bits) as f32;
+        g.normals = d.normals.iter().map(|&q| octa::decode_at(q, scale)).collect();
+    }
+    if d.uv_bits > 0 {
+        let s = (1u64 << d.uv_bits) as f64;
+        g.uvs = d.uvs.iter().map(|q| Vec2::new((q[0] as f64 / s) as f32, (q[1] as f64 / s) as f32)).collect();
+    }
+    let mut first = 0u32;
+    for &n in &d.clusters {
+        g.clusters.push(cluster_bounds(&positions, &d.indices[3 * first as usize..3 * (first + n) as usize], first));
+        first += n;
+    }
+    g.positions = positions;
+    g.indices = d.indices;
+    g
+}
+
+/// A cone and sphere holding faces `t` (format 3 stores only clusters' face counts): the axis
+/// along the sum of their unit normals, the half-angle to the farthest normal, the sphere around
+/// the middle of their box; widened a little so that f32 checks hold.
+pub fn cluster_bounds(p: &[Vec3], t: &[u32], first_face: u32) -> Cluster {
+    let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+    let mut normals = Vec::with_capacity(t.len() / 3);
+    let mut sum = DVec3::ZERO;
+    for f in t.chunks_exact(3) {
+        let q = [f[0], f[1], f[2]].map(|i| p[i as usize].as_dvec3());
+        for c in q {
+            lo = lo.min(c);
+            hi = hi.max(c);
+        }
+        let n = (q[1] - q[0]).cross(q[2] - q[0]);
+        let len = n.length();
+        if len > 0.0 && len.is_finite() {
+            normals.push(n / len);
+            sum += n / len;
+        }
+    }
+    let axis = sum.try_normalize().unwrap_or(DVec3::Z);
+    let half = normals.iter().map(|n| n.dot(axis).clamp(-1.0, 1.0).acos()).fold(0f64, f64::max);
+    let half_angle = if normals.is_empty() { 0.0 } else { (half + 1e-6).min(std::f64::consts::PI) as f32 };
+    let center = (lo + hi) * 0.5;
+    let radius = t.iter().map(|&i| p[i as usize].as_dvec3().distance(center)).fold(0f64, f64::max);
+    Cluster {
+        cone: Cone { axis: axis.as_vec3(), half_angle },
+        center: center.as_vec3(),
+        radius: (radius * (1.0 + 1e-6) + 1e-30) as f32 * (1.0 + 1e-6),
+        first_face,
+        face_count: (t.len() / 3) as u32,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Encoding
+
+struct Out {
+    m: Model,
+    w: BitWriter,
+}
+
+impl Out {
+    #[inline]
+    fn sym(&mut self, al: usize, s: u32) {
+        self.m.symbols.push((al as u8, s as u8));
+    }
+
+    fn value(&mut self, al: usize, u: u32) {
+        let (s, n, v) = bucket(u);
+        self.sym(al, s as u32);
+        if n > 0 {
+            self.w.put(v, n);
+            self.m.raw_by_category[category(al)] += n as u64;
+        }
+    }
+
+    fn signed(&mut self, al: usize, v: i64) -> std::result::Result<(), String> {
+        let v = i32::try_from(v).map_err(|_| format!("residual {v} beyond 32 bits"))?;
+        self.value(al, zigzag(v));
+        Ok(())
+    }
+}
+
+/// The faces of a node, as the encoder walks them.
+struct Mesh<'a> {
+    t: &'a [u32],
+    /// The face across each face's edge `k` (from corner `k` to `k + 1`), or NONE.
+    twin: Vec<u32>,
+    run: Vec<u32>,
+}
+
+impl Mesh<'_> {
+    #[inline]
+    fn corner(&self, f: u32, k: usize) -> u32 {
+        self.t[3 * f as usize + k]
+    }
+
+    /// The face across the directed edge `a → b` of face `f`.
+    fn across(&self, f: u32, a: u32, b: u32) -> u32 {
+        (0..3).find(|&k| self.corner(f, k) == a && self.corner(f, (k + 1) % 3) == b).map_or(NONE, |k| self.twin[3 * f as usize + k])
+    }
+}
+
+/// Build each edge's twin: the face holding `b → a` when exactly one face holds it and exactly
+/// one holds `a → b`; none for edges in `cut` (either direction) or of faces with a repeated corner.
+fn twins(t: &[u32], cut: &rustc_hash::FxHashSet<(u32, u32)>) -> Vec<u32> {
+    let nf = t.len() / 3;
+    let mut count: FxHashMap<(u32, u32), (u32, u32)> = FxHashMap::with_capacity_and_hasher(3 * nf, Default::default());
+    let proper = |f: usize| t[3 * f] != t[3 * f + 1] && t[3 * f + 1] != t[3 * f + 2] && t[3 * f] != t[3 * f + 2];
+    for f in 0..nf {
+        if !proper(f) {
             continue;
         }
-        let l = e.map(|x| dot(x, x).sqrt());
         for k in 0..3 {
-            // The angle at corner k, between edge k and the reversed edge k − 1, is
-            // 2·atan(|n| / (|e_k||e_{k−1}| − e_k·e_{k−1})).
-            let before = (k + 2) % 3;
-            let den = l[k] * l[before] - dot(e[k], e[before]);
-            let angle = if den > 0.0 { 2.0 * atan_approx(len / den) } else { std::f64::consts::PI };
-            let w = angle / len;
-            let s = &mut sum[f[k] as usize];
-            s[0] += n[0] * w;
-            s[1] += n[1] * w;
-            s[2] += n[2] * w;
+            let e = count.entry((t[3 * f + k], t[3 * f + (k + 1) % 3])).or_insert((0, f as u32));
+            e.0 += 1;
         }
     }
-    sum.iter().map(|s| predict_octa(s[0], s[1], s[2], scale)).collect()
-}
-
-/// What the decoded geometry predicts of each culling cluster (`counts` faces each, in order):
-/// its cone axis, the octahedral code (16 bits) of the sum of its faces' normals, and its center,
-/// the mean of its faces' corners relative to the node's base in units of `2^shift` grid steps.
-/// Integer arithmetic and exact f64 sums, so every reader predicts the same.
-fn cluster_predictions(p: &[[u32; 3]], t: &[u32], counts: &[u32], shift: u32) -> Vec<[i32; 5]> {
-    let (base, _) = base_and_span(p);
-    let mut out = Vec::with_capacity(counts.len());
-    let mut first = 0usize;
-    for &n in counts {
-        let faces = &t[3 * first..3 * (first + n as usize)];
-        first += n as usize;
-        let mut normal = [0f64; 3];
-        let mut sum = [0u64; 3];
-        for f in faces.chunks_exact(3) {
-            let q = [f[0], f[1], f[2]].map(|i| p[i as usize].map(|x| x as f64));
-            let u = [q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]];
-            let v = [q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]];
-            normal[0] += u[1] * v[2] - u[2] * v[1];
-            normal[1] += u[2] * v[0] - u[0] * v[2];
-            normal[2] += u[0] * v[1] - u[1] * v[0];
-            for &i in f {
-                for k in 0..3 {
-                    sum[k] += p[i as usize][k] as u64;
-                }
-            }
+    let mut twin = vec![NONE; 3 * nf];
+    for f in 0..nf {
+        if !proper(f) {
+            continue;
         }
-        let axis = predict_octa(normal[0], normal[1], normal[2], i16::MAX as i32);
-        let corners = faces.len().max(1) as u64;
-        let center: [i32; 3] =
-            std::array::from_fn(|k| ((sum[k] / corners).saturating_sub(base[k] as u64) >> shift).min(u16::MAX as u64) as i32);
-        out.push([axis[0], axis[1], center[0], center[1], center[2]]);
-    }
-    out
-}
-
-/// Rice states, one per kind of residual, with their first parameters (spec §8.4).
-struct States {
-    lattice: [Rice; 3],
-    border: [Rice; 3],
-    jump: [Rice; 3],
-    index: Rice,
-    far: Rice,
-    color: [Rice; 4],
-    uv: [Rice; 2],
-    /// Normals of vertices inside the node, and of vertices on an open edge, whose prediction
-    /// sees only part of their fan.
-    normal: [Rice; 2],
-    normal_border: [Rice; 2],
-    meta: Rice,
-    /// Cluster axes and centers against their predictions.
-    cluster: [Rice; 3],
-}
-
-impl States {
-    fn new() -> Self {
-        States {
-            lattice: [Rice::new(4); 3],
-            border: [Rice::new(6); 3],
-            jump: [Rice::new(12); 3],
-            index: Rice::new(4),
-            far: Rice::new(5),
-            color: [Rice::new(2); 4],
-            uv: [Rice::new(6); 2],
-            normal: [Rice::new(1); 2],
-            normal_border: [Rice::new(4); 2],
-            meta: Rice::new(4),
-            cluster: [Rice::new(6), Rice::new(6), Rice::new(2)],
-        }
-    }
-}
-
-/// The order [`encode`] chose: the input face stored k-th is `faces[k]`, its corners rotated left
-/// by `rotation[k]`; the input vertex stored k-th is `vertices[k]`.
-#[derive(Clone, Debug, Default)]
-pub struct Order {
-    pub faces: Vec<u32>,
-    pub rotation: Vec<u8>,
-    pub vertices: Vec<u32>,
-}
-
-/// Where a new vertex's prediction comes from, in stored indices.
-#[derive(Clone, Copy)]
-enum Pred {
-    /// The parallelogram `a + b − o` across the shared edge `(a, b)`.
-    Edge(u32, u32, u32),
-    /// The vertex stored before it, or the origin for the first.
-    Jump(Option<u32>),
-}
-
-const NONE: u32 = u32::MAX;
-
-/// What both sides keep, in stored indices: the border of the decoded region as loops of open
-/// edges (directed edges of decoded triangles whose twin is not decoded, each linked to the next
-/// and previous along its loop, as Edgebreaker's front), a ring of the newest open edges and a
-/// ring of the newest vertices named.
-struct Rings {
-    from: Vec<u32>,
-    to: Vec<u32>,
-    /// The third vertex of the triangle that made the edge: the parallelogram's far corner.
-    opp: Vec<u32>,
-    next: Vec<u32>,
-    prev: Vec<u32>,
-    alive: Vec<bool>,
-    edges: [u32; EDGE_RING],
-    edge_head: usize,
-    vertices: [u32; VERTEX_RING],
-    vertex_head: usize,
-}
-
-impl Rings {
-    fn new(faces: usize) -> Self {
-        let cap = 3 * faces;
-        Rings {
-            from: Vec::with_capacity(cap),
-            to: Vec::with_capacity(cap),
-            opp: Vec::with_capacity(cap),
-            next: Vec::with_capacity(cap),
-            prev: Vec::with_capacity(cap),
-            alive: Vec::with_capacity(cap),
-            edges: [NONE; EDGE_RING],
-            edge_head: 0,
-            vertices: [NONE; VERTEX_RING],
-            vertex_head: 0,
-        }
-    }
-
-    /// The open edge `j` places back in the ring, if it is still open.
-    #[inline]
-    fn edge(&self, j: usize) -> Option<u32> {
-        let e = self.edges[(self.edge_head + EDGE_RING - j) % EDGE_RING];
-        (e != NONE && self.alive[e as usize]).then_some(e)
-    }
-
-    /// Start, end and far corner of open edge `e`.
-    #[inline]
-    fn ends(&self, e: u32) -> (u32, u32, u32) {
-        let e = e as usize;
-        (self.from[e], self.to[e], self.opp[e])
-    }
-
-    /// The vertex after edge `e` along its loop (`RIGHT`) and the one before it (`LEFT`).
-    #[inline]
-    fn sides(&self, e: u32) -> [u32; 2] {
-        [self.to[self.next[e as usize] as usize], self.from[self.prev[e as usize] as usize]]
-    }
-
-    #[inline]
-    fn make(&mut self, a: u32, b: u32, o: u32) -> u32 {
-        let e = self.from.len() as u32;
-        self.from.push(a);
-        self.to.push(b);
-        self.opp.push(o);
-        self.next.push(NONE);
-        self.prev.push(NONE);
-        self.alive.push(true);
-        self.edge_head = (self.edge_head + 1) % EDGE_RING;
-        self.edges[self.edge_head] = e;
-        e
-    }
-
-    #[inline]
-    fn link(&mut self, x: u32, y: u32) {
-        self.next[x as usize] = y;
-        self.prev[y as usize] = x;
-    }
-
-    /// After triangle `(b, a, c)` across open edge `e = (a, b)`: `e` closes, and so does the edge
-    /// before or after it when `c` is that edge's far end; the triangle's other edges open.
-    #[inline]
-    fn advance(&mut self, e: u32, c: u32) {
-        let (a, b, _) = self.ends(e);
-        let (l, r) = (self.prev[e as usize], self.next[e as usize]);
-        let right = self.to[r as usize] == c;
-        let left = self.from[l as usize] == c;
-        self.alive[e as usize] = false;
-        match (left, right) {
-            (false, false) => {
-                let x = self.make(a, c, b);
-                let y = self.make(c, b, a);
-                self.link(l, x);
-                self.link(x, y);
-                self.link(y, r);
-            }
-            (false, true) => {
-                self.alive[r as usize] = false;
-                let after = self.next[r as usize];
-                let x = self.make(a, c, b);
-                self.link(l, x);
-                self.link(x, if after == e { l } else { after });
-            }
-            (true, false) => {
-                self.alive[l as usize] = false;
-                let before = self.prev[l as usize];
-                let y = self.make(c, b, a);
-                self.link(if before == e { r } else { before }, y);
-                self.link(y, r);
-            }
-            (true, true) => {
-                self.alive[l as usize] = false;
-                self.alive[r as usize] = false;
-                let (before, after) = (self.prev[l as usize], self.next[r as usize]);
-                if l != r && before != r && self.alive[before as usize] && self.alive[after as usize] {
-                    self.link(before, after);
-                }
-            }
-        }
-    }
-
-    /// After a triangle `s` that shares no open edge: a loop of its three edges.
-    #[inline]
-    fn start(&mut self, s: [u32; 3]) {
-        let x = self.make(s[0], s[1], s[2]);
-        let y = self.make(s[1], s[2], s[0]);
-        let z = self.make(s[2], s[0], s[1]);
-        self.link(x, y);
-        self.link(y, z);
-        self.link(z, x);
-    }
-
-    /// Which of `n` vertices lie on an edge still open: once every triangle is decoded, the node's
-    /// border (and edges whose twin is missing or doubled).
-    fn open_vertices(&self, n: usize) -> Vec<bool> {
-        let mut open = vec![false; n];
-        for (e, &alive) in self.alive.iter().enumerate() {
-            if alive {
-                open[self.from[e] as usize] = true;
-                open[self.to[e] as usize] = true;
-            }
-        }
-        open
-    }
-
-    #[inline]
-    fn vertex(&self, j: usize) -> u32 {
-        self.vertices[(self.vertex_head + VERTEX_RING - j) % VERTEX_RING]
-    }
-    #[inline]
-    fn push_vertex(&mut self, v: u32) {
-        self.vertex_head = (self.vertex_head + 1) % VERTEX_RING;
-        self.vertices[self.vertex_head] = v;
-    }
-}
-
-#[inline]
-fn lattice_of(p: i64, shift: u32) -> i64 {
-    (p + ((1i64 << shift) >> 1)) >> shift
-}
-
-/// What `pred` predicts of an attribute that `get` reads per stored vertex: the parallelogram,
-/// clamped to `lo..=hi`, the vertex before, or zero. Encoder and decoder share it.
-#[inline]
-fn predict<const N: usize>(pred: Pred, get: impl Fn(u32) -> [i64; N], lo: i64, hi: i64) -> [i64; N] {
-    match pred {
-        Pred::Edge(a, b, o) => parallelogram(get(a), get(b), get(o), lo, hi),
-        Pred::Jump(Some(prev)) => get(prev),
-        Pred::Jump(None) => [0; N],
-    }
-}
-
-#[inline]
-fn parallelogram<const N: usize>(a: [i64; N], b: [i64; N], o: [i64; N], lo: i64, hi: i64) -> [i64; N] {
-    std::array::from_fn(|k| (a[k] + b[k] - o[k]).clamp(lo, hi))
-}
-
-/// Where an encoding's bits went, and how often each symbol occurred: for benches and tuning.
-#[derive(Clone, Debug, Default)]
-pub struct Stats {
-    /// Bits of triangle symbols, corner symbols, vertex indices, positions, colors, UVs,
-    /// normals, and material ranges with clusters.
-    pub bits: [u64; 8],
-    pub triangle_symbols: [u64; EDGE_RING + 2],
-    pub corner_symbols: [u64; INDEX + 1],
-}
-
-/// Names of [`Stats::bits`].
-pub const STAT_NAMES: [&str; 8] = ["triangles", "corners", "indices", "positions", "colors", "uvs", "normals", "meta"];
-
-struct Enc<'a> {
-    stats: Stats,
-    g: &'a GeometryCodes,
-    lat: Lattice,
-    bits: u32,
-    border: Vec<bool>,
-    uvq: Vec<[i64; 2]>,
-    w: BitWriter,
-    st: States,
-    stored: Vec<u32>,
-    order: Order,
-    rings: Rings,
-}
-
-impl Enc<'_> {
-    fn input(&self, stored: u32) -> usize {
-        self.order.vertices[stored as usize] as usize
-    }
-
-    /// Code a corner found along the border (`RIGHT` or `LEFT`), stored index `c`.
-    fn side(&mut self, symbol: usize, c: u32) -> u32 {
-        let mark = self.w.len();
-        codes().1.put(&mut self.w, symbol);
-        self.stats.corner_symbols[symbol] += 1;
-        self.stats.bits[1] += self.w.len() - mark;
-        c
-    }
-
-    /// Code corner `v` (an input vertex); a new one is predicted by `pred`. Returns its stored index.
-    fn corner(&mut self, v: u32, pred: Pred) -> u32 {
-        let corner_code = &codes().1;
-        let s = self.stored[v as usize];
-        let mark = self.w.len();
-        if s == NONE {
-            let border = self.border[v as usize];
-            corner_code.put(&mut self.w, if border { NEW_BORDER } else { NEW });
-            self.stats.corner_symbols[if border { NEW_BORDER } else { NEW }] += 1;
-            self.stats.bits[1] += self.w.len() - mark;
-            let s = self.order.vertices.len() as u32;
-            self.stored[v as usize] = s;
-            self.order.vertices.push(v);
-            self.new_vertex(v as usize, border, pred);
-            self.rings.push_vertex(s);
-            return s;
-        }
-        if let Some(j) = (0..VERTEX_RING).find(|&j| self.rings.vertex(j) == s) {
-            corner_code.put(&mut self.w, RING + j);
-            self.stats.corner_symbols[RING + j] += 1;
-            self.stats.bits[1] += self.w.len() - mark;
-            return s;
-        }
-        corner_code.put(&mut self.w, INDEX);
-        self.stats.corner_symbols[INDEX] += 1;
-        self.stats.bits[1] += self.w.len() - mark;
-        let next = self.order.vertices.len() as u32;
-        let mark = self.w.len();
-        self.st.index.put(&mut self.w, next - 1 - s);
-        self.stats.bits[2] += self.w.len() - mark;
-        self.rings.push_vertex(s);
-        s
-    }
-
-    fn new_vertex(&mut self, v: usize, border: bool, pred: Pred) {
-        let top = (1i64 << self.bits) - 1;
-        let p = predict(pred, |s| self.g.points[self.input(s)].map(|x| x as i64), 0, top);
-        let g = self.g.points[v].map(|x| x as i64);
-        let mark = self.w.len();
         for k in 0..3 {
-            match pred {
-                Pred::Jump(_) => self.st.jump[k].put_signed(&mut self.w, (g[k] - p[k]) as i32),
-                Pred::Edge(..) if border => self.st.border[k].put_signed(&mut self.w, (g[k] - p[k]) as i32),
-                Pred::Edge(..) => {
-                    let r = (g[k] >> self.lat.shift) - lattice_of(p[k], self.lat.shift);
-                    self.st.lattice[k].put_signed(&mut self.w, r as i32)
-                }
+            let (x, y) = (t[3 * f + k], t[3 * f + (k + 1) % 3]);
+            if cut.contains(&(x.min(y), x.max(y))) {
+                continue;
+            }
+            if let (Some(&(1, _)), Some(&(1, g))) = (count.get(&(x, y)), count.get(&(y, x))) {
+                twin[3 * f + k] = g;
             }
         }
-        self.stats.bits[3] += self.w.len() - mark;
-        let mark = self.w.len();
-        if !self.g.colors.is_empty() {
-            let pc = predict(pred, |s| self.g.colors[self.input(s)].map(|x| x as i64), 0, 255);
-            let c = self.g.colors[v];
-            for k in 0..4 {
-                self.st.color[k].put_signed(&mut self.w, (c[k] as i64 - pc[k]) as i8 as i32);
-            }
-        }
-        self.stats.bits[4] += self.w.len() - mark;
-        let mark = self.w.len();
-        if !self.g.uvs.is_empty() {
-            let pu = predict(pred, |s| self.uvq[self.input(s)], 1 - UV_LIMIT, UV_LIMIT - 1);
-            let q = self.uvq[v];
-            for k in 0..2 {
-                self.st.uv[k].put_signed(&mut self.w, (q[k] - pu[k]) as i32);
-            }
-        }
-        self.stats.bits[5] += self.w.len() - mark;
     }
+    twin
 }
 
-/// Quantized UVs lie strictly within ±2^30 steps.
-const UV_LIMIT: i64 = 1 << 30;
-
-/// Encode a node's geometry at lattice `lat` on a grid of `bits` bits. Vertices on multiples of
-/// `2^shift` grid steps are coded on the lattice, others (the node's border, which the writer
-/// leaves on the grid) as grid points; normals must lie within the scale of `normal_bits` and UVs
-/// on multiples of `2^−uv_bits`. Faces keep their runs of material and cluster, in an order of
-/// the encoder's choosing, returned with the payload.
-pub fn encode(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::result::Result<(Vec<u8>, Order), String> {
-    encode_with_stats(g, lat, bits).map(|(p, o, _)| (p, o))
-}
-
-/// [`encode`], also saying where the bits went.
-pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::result::Result<(Vec<u8>, Order, Stats), String> {
-    let n = g.points.len();
+/// Turn a node's geometry into a [`Model`] for a grid of `bits` bits and a box `bounds`. Vertices
+/// off the lattice `g.lattice.shift` must be on the node's border; the encoder closes edges
+/// around any that the traversal would find inside. Faces keep their runs (material ranges,
+/// clusters); normals must be codes at `normal_bits`, UVs multiples of `2^−uv_bits`.
+pub fn model(g: &GeometryCodes, bits: u32, bounds: [[u32; 3]; 2], normal_bits: u32) -> std::result::Result<(Model, Order), String> {
     let nf = g.indices.len() / 3;
-    if lat.shift >= bits.max(1) {
-        return Err(format!("lattice shift {} on a {bits}-bit grid", lat.shift));
+    let shift = g.lattice.shift;
+    if shift >= bits.max(1) {
+        return Err(format!("lattice shift {shift} on a {bits}-bit grid"));
     }
-    if (lat.normal_bits > 0) == g.normals.is_empty() || (lat.normal_bits > 0 && !(2..=16).contains(&lat.normal_bits)) {
-        return Err(format!("{} normals at {} bits (2..=16 with normals, 0 without)", g.normals.len(), lat.normal_bits));
+    if g.normals.is_empty() != (normal_bits == 0) || (normal_bits > 0 && !(2..=16).contains(&normal_bits)) {
+        return Err(format!("{} normals at {normal_bits} bits", g.normals.len()));
     }
-    if (lat.uv_bits > 0) == g.uvs.is_empty() || lat.uv_bits > 24 {
-        return Err(format!("{} UVs at {} bits (1..=24 with UVs, 0 without)", g.uvs.len(), lat.uv_bits));
+    if !g.uvs.is_empty() && !(1..=24).contains(&g.lattice.uv_bits) {
+        return Err(format!("UVs at {} bits (1..=24)", g.lattice.uv_bits));
+    }
+    if g.indices.iter().any(|&i| i as usize >= g.points.len()) || g.indices.len() % 3 != 0 || nf == 0 {
+        return Err(format!("{} indices over {} vertices", g.indices.len(), g.points.len()));
     }
     let mut next = 0u64;
     for r in &g.material_ranges {
@@ -550,716 +1087,287 @@ pub fn encode_with_stats(g: &GeometryCodes, lat: Lattice, bits: u32) -> std::res
         }
         next += r.index_count as u64;
     }
-    if next != g.indices.len() as u64 || g.indices.len() % 3 != 0 {
+    if next != g.indices.len() as u64 {
         return Err(format!("material ranges cover {next} of {} indices", g.indices.len()));
     }
-    if let Some((_, records)) = &g.clusters {
-        let covered: u64 = records.iter().map(|c| c.faces as u64).sum();
-        if records.is_empty() || records.iter().any(|c| c.faces == 0) || covered != nf as u64 {
-            return Err(format!("clusters cover {covered} of {nf} faces"));
-        }
+    let clusters: Vec<u32> = g.clusters.as_ref().map(|(_, c)| c.iter().map(|c| c.faces as u32).collect()).unwrap_or_default();
+    if g.clusters.is_some()
+        && (clusters.is_empty() || clusters.contains(&0) || clusters.iter().map(|&c| c as u64).sum::<u64>() != nf as u64)
+    {
+        return Err(format!("clusters {clusters:?} do not tile {nf} faces"));
     }
-    let mask = (1u32 << lat.shift) - 1;
-    let border: Vec<bool> = g.points.iter().map(|p| p.iter().any(|&x| x & mask != 0)).collect();
-    if lat.normal_bits > 0 {
-        let scale = octa::scale(lat.normal_bits);
-        if let Some(v) = g.normals.iter().position(|q| q.iter().any(|&c| (c as i32).abs() > scale)) {
-            return Err(format!("normal {v} exceeds the {}-bit scale", lat.normal_bits));
-        }
+    let scale = if normal_bits > 0 { octa::scale(normal_bits) } else { 0 };
+    if g.normals.iter().any(|n| n.iter().any(|&c| (c as i32).abs() > scale)) {
+        return Err(format!("a normal beyond the {normal_bits}-bit scale"));
     }
-    let s = (1u64 << lat.uv_bits) as f64;
-    let mut uvq = Vec::with_capacity(g.uvs.len());
-    for (v, uv) in g.uvs.iter().enumerate() {
-        let q = uv.map(|b| f32::from_bits(b) as f64 * s);
-        if q.iter().any(|&x| x.fract() != 0.0 || x.is_nan() || x.abs() >= UV_LIMIT as f64) {
-            return Err(format!("UV {v} is not a multiple of 2^-{} within ±2^30 of them", lat.uv_bits));
-        }
-        uvq.push(q.map(|x| x as i64));
+    let uvq: Vec<[i64; 2]> =
+        g.uvs.iter().map(|uv| uv.map(|b| (f32::from_bits(b) as f64 * (1u64 << g.lattice.uv_bits) as f64).round() as i64)).collect();
+    if uvq.iter().any(|q| q.iter().any(|c| c.abs() >= UV_LIMIT)) {
+        return Err(format!("a UV beyond ±2^30 steps of 2^−{}", g.lattice.uv_bits));
     }
+    let on_lattice = |p: [u32; 3]| shift == 0 || p.iter().all(|&c| c & ((1 << shift) - 1) == 0);
 
-    let mut e = Enc {
-        stats: Stats::default(),
-        g,
-        lat,
-        bits,
-        border,
-        uvq,
-        w: BitWriter::default(),
-        st: States::new(),
-        stored: vec![NONE; n],
-        order: Order { faces: Vec::with_capacity(nf), rotation: Vec::with_capacity(nf), vertices: Vec::with_capacity(n) },
-        rings: Rings::new(nf),
-    };
-
-    e.st.meta.put(&mut e.w, g.material_ranges.len() as u32);
-    let mut cuts = vec![0usize, nf];
-    let mut last_material = 0i64;
-    for r in &g.material_ranges {
-        e.st.meta.put_signed(&mut e.w, (r.material as i64 - last_material) as i32);
-        e.st.meta.put(&mut e.w, r.index_count / 3);
-        last_material = r.material as i64;
-        cuts.push(r.first_index as usize / 3);
-    }
-    match &g.clusters {
-        None => e.st.meta.put(&mut e.w, 0),
-        Some((shift, records)) => {
-            e.st.meta.put(&mut e.w, records.len() as u32);
-            e.st.meta.put(&mut e.w, *shift);
-            let mut first = 0usize;
-            for c in records {
-                cuts.push(first);
-                first += c.faces as usize;
-                e.st.meta.put(&mut e.w, c.faces as u32);
+    let mut cut = rustc_hash::FxHashSet::default();
+    for _ in 0..32 {
+        let (m, order, border) = walk(g, &clusters, &cut, bits, bounds, normal_bits, &uvq)?;
+        let off: Vec<u32> =
+            order.vertices.iter().enumerate().filter(|&(s, &v)| !border[s] && !on_lattice(g.points[v as usize])).map(|(_, &v)| v).collect();
+        if off.is_empty() {
+            return Ok((m, order));
+        }
+        let off: rustc_hash::FxHashSet<u32> = off.into_iter().collect();
+        for f in g.indices.chunks_exact(3) {
+            for k in 0..3 {
+                let (x, y) = (f[k], f[(k + 1) % 3]);
+                if off.contains(&x) || off.contains(&y) {
+                    cut.insert((x.min(y), x.max(y)));
+                }
             }
         }
     }
+    Err("vertices off the lattice stay inside the node".into())
+}
+
+/// One traversal of the node, with the edges of `cut` closed; the model, the order and which
+/// stored vertices are on the border.
+#[allow(clippy::too_many_arguments)]
+fn walk(
+    g: &GeometryCodes,
+    clusters: &[u32],
+    cut: &rustc_hash::FxHashSet<(u32, u32)>,
+    bits: u32,
+    bounds: [[u32; 3]; 2],
+    normal_bits: u32,
+    uvq: &[[i64; 2]],
+) -> std::result::Result<(Model, Order, Vec<bool>), String> {
+    let nf = g.indices.len() / 3;
+    let nv_in = g.points.len();
+    let shift = g.lattice.shift;
+    let mut out = Out { m: Model::default(), w: BitWriter::default() };
+
+    // Header.
+    if g.clusters.is_none() {
+        out.sym(a::SHIFT, shift);
+    }
+    if !g.uvs.is_empty() {
+        out.value(a::COUNT, g.lattice.uv_bits);
+    }
+    out.value(a::COUNT, g.material_ranges.len() as u32 - 1);
+    for (k, r) in g.material_ranges.iter().enumerate() {
+        out.value(a::COUNT, r.material);
+        if k + 1 < g.material_ranges.len() {
+            out.value(a::COUNT, r.index_count / 3 - 1);
+        }
+    }
+    if g.clusters.is_some() {
+        out.value(a::COUNT, clusters.len() as u32 - 1);
+        for &c in &clusters[..clusters.len() - 1] {
+            out.value(a::COUNT, c - 1);
+        }
+    }
+    let mut cuts: Vec<u32> = g.material_ranges.iter().map(|r| r.first_index / 3).collect();
+    let mut c = 0u32;
+    for &n in clusters {
+        cuts.push(c);
+        c += n;
+    }
+    cuts.push(nf as u32);
     cuts.sort_unstable();
     cuts.dedup();
-    e.stats.bits[7] = e.w.len();
-
-    let mut directed: Vec<(u64, u32)> = Vec::with_capacity(3 * nf);
-    for (f, t) in g.indices.chunks_exact(3).enumerate() {
-        for k in 0..3 {
-            directed.push((((t[k] as u64) << 32) | t[(k + 1) % 3] as u64, f as u32));
-        }
+    let mut run = vec![0u32; nf];
+    for (r, w) in cuts.windows(2).enumerate() {
+        run[w[0] as usize..w[1] as usize].fill(r as u32);
     }
-    directed.sort_unstable();
+    let mesh = Mesh { t: &g.indices, twin: twins(&g.indices, cut), run };
+
+    // Connectivity, in input vertex numbers; `stored` numbers them as the reader will.
+    let mut stored = vec![NONE; nv_in];
+    let mut order = Order { faces: Vec::with_capacity(nf), rotation: Vec::with_capacity(nf), vertices: Vec::with_capacity(nv_in) };
+    let mut preds: Vec<Pred> = Vec::with_capacity(nv_in);
     let mut done = vec![false; nf];
-    let triangle_code = &codes().0;
-
-    for run in cuts.windows(2) {
-        let (start, end) = (run[0], run[1]);
-        let mut cursor = start;
-        for _ in start..end {
-            let mut hit: Option<(usize, u32, u32)> = None;
-            let mut best = 3;
-            let across = |e: &Enc, edge: u32| {
-                let (a, b, _) = e.rings.ends(edge);
-                let key = ((e.input(b) as u64) << 32) | e.input(a) as u64;
-                let from = directed.partition_point(|x| x.0 < key);
-                directed[from..]
-                    .iter()
-                    .take_while(|x| x.0 == key)
-                    .find(|x| (start..end).contains(&(x.1 as usize)) && !done[x.1 as usize])
-                    .map(|x| x.1)
-            };
-            for j in 0..EDGE_RING {
-                let Some(edge) = e.rings.edge(j) else { continue };
-                if let Some(f) = across(&e, edge) {
-                    let (a, b, _) = e.rings.ends(edge);
-                    let t = &g.indices[3 * f as usize..3 * f as usize + 3];
-                    let third = t.iter().copied().find(|&v| v != e.input(a) as u32 && v != e.input(b) as u32).unwrap_or(t[0]);
-                    let c = e.stored[third as usize];
-                    // Rank: closing against the border (0), a new vertex (1), any other (2).
-                    let rank = if c == NONE {
-                        1
-                    } else if e.rings.sides(edge).contains(&c) {
-                        0
-                    } else {
-                        2
-                    };
-                    if hit.is_none() || rank < best {
-                        hit = Some((j, f, edge));
-                        best = rank;
-                    }
-                    if rank == 0 {
-                        break;
-                    }
-                }
-            }
-            if hit.is_none() {
-                let made = e.rings.from.len() as u32;
-                for edge in (made.saturating_sub(FAR_SCAN)..made).rev() {
-                    if e.rings.alive[edge as usize] {
-                        if let Some(f) = across(&e, edge) {
-                            hit = Some((FAR, f, edge));
-                            break;
-                        }
-                    }
-                }
-            }
-            match hit {
-                Some((j, f, edge)) => {
-                    let (a, b, o) = e.rings.ends(edge);
-                    let mark = e.w.len();
-                    triangle_code.put(&mut e.w, j);
-                    if j == FAR {
-                        e.st.far.put(&mut e.w, e.rings.from.len() as u32 - 1 - edge);
-                    }
-                    e.stats.bits[0] += e.w.len() - mark;
-                    e.stats.triangle_symbols[j] += 1;
-                    let t = &g.indices[3 * f as usize..3 * f as usize + 3];
-                    let b_in = e.input(b) as u32;
-                    let k = (0..3).find(|&k| t[k] == b_in && t[(k + 1) % 3] == e.input(a) as u32).expect("the edge's face holds it");
-                    let third = t[(k + 2) % 3];
-                    let c = e.stored[third as usize];
-                    let [right, left] = e.rings.sides(edge);
-                    let c = if c != NONE && c == right {
-                        e.side(RIGHT, c)
-                    } else if c != NONE && c == left {
-                        e.side(LEFT, c)
-                    } else {
-                        e.corner(third, Pred::Edge(a, b, o))
-                    };
-                    e.rings.advance(edge, c);
-                    done[f as usize] = true;
-                    e.order.faces.push(f);
-                    e.order.rotation.push(k as u8);
-                }
-                None => {
-                    while done[cursor] {
-                        cursor += 1;
-                    }
-                    let f = cursor;
-                    let mark = e.w.len();
-                    triangle_code.put(&mut e.w, MISS);
-                    e.stats.bits[0] += e.w.len() - mark;
-                    e.stats.triangle_symbols[MISS] += 1;
-                    let t = &g.indices[3 * f..3 * f + 3];
-                    let mut s = [0u32; 3];
-                    for k in 0..3 {
-                        let prev = if k > 0 { Some(s[k - 1]) } else { (e.order.vertices.len() as u32).checked_sub(1) };
-                        s[k] = e.corner(t[k], Pred::Jump(prev));
-                    }
-                    e.rings.start(s);
-                    done[f] = true;
-                    e.order.faces.push(f as u32);
-                    e.order.rotation.push(0);
-                }
-            }
-        }
-    }
-
-    let mark = e.w.len();
-    let points: Vec<[u32; 3]> = e.order.vertices.iter().map(|&v| g.points[v as usize]).collect();
-    let tris = stored_indices(g, &e.order, &e.stored);
-    if let Some((shift, records)) = &g.clusters {
-        let counts: Vec<u32> = records.iter().map(|c| c.faces as u32).collect();
-        let pred = cluster_predictions(&points, &tris, &counts, *shift);
-        let mut prev = [0i32; 2];
-        for (c, p) in records.iter().zip(&pred) {
-            let actual = [c.axis[0] as i32, c.axis[1] as i32, c.center[0] as i32, c.center[1] as i32, c.center[2] as i32];
-            for k in 0..5 {
-                e.st.cluster[k.min(2)].put_signed(&mut e.w, actual[k] - p[k]);
-            }
-            e.st.meta.put_signed(&mut e.w, c.half_angle as i32 - prev[0]);
-            e.st.meta.put_signed(&mut e.w, c.radius as i32 - prev[1]);
-            prev = [c.half_angle as i32, c.radius as i32];
-        }
-    }
-    e.stats.bits[7] += e.w.len() - mark;
-    let mark = e.w.len();
-    if lat.normal_bits > 0 {
-        let pred = predicted_normals(&points, &tris, octa::scale(lat.normal_bits));
-        let open = e.rings.open_vertices(points.len());
-        for (s, &v) in e.order.vertices.iter().enumerate() {
-            let q = g.normals[v as usize];
-            let states = if open[s] { &mut e.st.normal_border } else { &mut e.st.normal };
-            for k in 0..2 {
-                states[k].put_signed(&mut e.w, q[k] as i32 - pred[s][k]);
-            }
-        }
-    }
-    e.stats.bits[6] = e.w.len() - mark;
-    let mut payload = vec![lat.shift as u8, lat.normal_bits as u8, lat.uv_bits as u8, 0];
-    payload.extend(e.w.finish());
-    Ok((payload, e.order, e.stats))
-}
-
-/// The stored index array of `order`.
-fn stored_indices(g: &GeometryCodes, order: &Order, stored: &[u32]) -> Vec<u32> {
-    let mut out = Vec::with_capacity(3 * order.faces.len());
-    for (&f, &r) in order.faces.iter().zip(&order.rotation) {
-        let t = &g.indices[3 * f as usize..3 * f as usize + 3];
-        for k in 0..3 {
-            out.push(stored[t[(k + r as usize) % 3] as usize]);
-        }
-    }
-    out
-}
-
-/// The decoded codes of a node, before positions and normals become floats.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Decoded {
-    pub lattice: Lattice,
-    pub points: Vec<[u32; 3]>,
-    /// Octahedral codes at the lattice's normal scale.
-    pub normals: Vec<[i32; 2]>,
-    /// UVs in steps of `2^−uv_bits`.
-    pub uvs: Vec<[i64; 2]>,
-    pub colors: Vec<[u8; 4]>,
-    pub indices: Vec<u32>,
-    pub material_ranges: Vec<MaterialRange>,
-    pub cluster_shift: u32,
-    pub clusters: Vec<ClusterCodes>,
-}
-
-/// What decoding needs from outside the payload.
-#[derive(Clone, Copy, Debug)]
-pub struct Expect {
-    pub faces: u32,
-    pub vertices: u32,
-    pub bits: u32,
-    pub materials: u32,
-    pub normals: bool,
-    pub uvs: bool,
-    pub colors: bool,
-    pub clusters: bool,
-}
-
-/// A decoding failure: what, and at which byte of the payload.
-pub type Fault = (usize, String);
-
-/// Decode a node's payload into codes.
-pub fn decode_codes(payload: &[u8], x: Expect) -> std::result::Result<Decoded, Fault> {
-    if payload.len() < PAYLOAD_HEADER_BYTES {
-        return Err((0, format!("{} bytes; the payload header alone is {PAYLOAD_HEADER_BYTES}", payload.len())));
-    }
-    let lat = Lattice { shift: payload[0] as u32, normal_bits: payload[1] as u32, uv_bits: payload[2] as u32 };
-    if lat.shift > x.bits {
-        return Err((0, format!("lattice shift {} exceeds the {}-bit grid", lat.shift, x.bits)));
-    }
-    if (lat.normal_bits > 0) != x.normals || (x.normals && !(2..=16).contains(&lat.normal_bits)) {
-        return Err((
-            1,
-            format!("normal bits {}; the file {} normals (2..=16 bits)", lat.normal_bits, if x.normals { "has" } else { "has no" }),
-        ));
-    }
-    if (lat.uv_bits > 0) != x.uvs || lat.uv_bits > 24 {
-        return Err((2, format!("UV bits {}; the file {} UVs (1..=24 bits)", lat.uv_bits, if x.uvs { "has" } else { "has no" })));
-    }
-    if payload[3] != 0 {
-        return Err((3, format!("reserved byte {}; must be 0", payload[3])));
-    }
-    let data = &payload[PAYLOAD_HEADER_BYTES..];
-    // Every face and every vertex takes at least one bit: a count beyond that is refused before
-    // anything is allocated for it.
-    let bits = 8 * data.len() as u64;
-    if x.faces as u64 > bits || x.vertices as u64 > bits || x.faces > u32::MAX / 3 {
-        return Err((0, format!("{} faces and {} vertices cannot fit in {} bytes", x.faces, x.vertices, data.len())));
-    }
-    let mut r = BitReader::new(data);
-    // The payload byte a reader has reached, for errors.
-    let at = |r: &BitReader| (PAYLOAD_HEADER_BYTES + (r.consumed() / 8) as usize).min(payload.len());
-    let mut st = States::new();
-    let (nf, nv, top) = (x.faces as usize, x.vertices as usize, (1i64 << x.bits) - 1);
-    let mut d = Decoded { lattice: lat, ..Decoded::default() };
-
-    let ranges = st.meta.get(&mut r) as usize;
-    if ranges > nf.max(1) {
-        return Err((at(&r), format!("{ranges} material ranges for {nf} faces")));
-    }
-    let (mut material, mut first) = (0i64, 0u64);
-    for k in 0..ranges {
-        material += st.meta.get_signed(&mut r) as i64;
-        let faces = st.meta.get(&mut r) as u64;
-        if material < 0 || material >= x.materials as i64 || faces == 0 || first + faces > nf as u64 {
-            return Err((
-                at(&r),
-                format!("material range {k} (material {material}, {faces} faces) is not a run of a known material within the {nf} faces"),
-            ));
-        }
-        d.material_ranges.push(MaterialRange { material: material as u32, first_index: 3 * first as u32, index_count: 3 * faces as u32 });
-        first += faces;
-    }
-    if first != nf as u64 {
-        return Err((at(&r), format!("material ranges cover {first} of {nf} faces")));
-    }
-    let count = st.meta.get(&mut r) as usize;
-    if (count > 0) != x.clusters || count > nf {
-        return Err((
-            at(&r),
-            format!("{count} culling clusters in a node of {nf} faces {}", if x.clusters { "at level 0" } else { "above level 0" }),
-        ));
-    }
-    if count > 0 {
-        d.cluster_shift = st.meta.get(&mut r);
-        if d.cluster_shift > x.bits {
-            return Err((at(&r), format!("cluster shift {} exceeds the {} grid bits", d.cluster_shift, x.bits)));
-        }
-        let mut total = 0u64;
-        for k in 0..count {
-            let faces = st.meta.get(&mut r) as u64;
-            if faces == 0 || faces > u16::MAX as u64 {
-                return Err((at(&r), format!("cluster {k} has {faces} faces")));
-            }
-            total += faces;
-            d.clusters.push(ClusterCodes { faces: faces as u16, ..ClusterCodes::default() });
-        }
-        if total != nf as u64 {
-            return Err((at(&r), format!("clusters cover {total} of {nf} faces")));
-        }
-    }
-
-    let (triangle_code, corner_code) = codes();
-    // Sized for what the bytes can hold at a few bits per face; the vectors grow if needed.
-    let (nv_hint, nf_hint) = (nv.min(data.len()), nf.min(2 * data.len()));
-    let mut rings = Rings::new(nf_hint);
-    d.points.reserve(nv_hint);
-    d.indices.reserve(3 * nf_hint);
-    if x.colors {
-        d.colors.reserve(nv_hint);
-    }
-    if x.uvs {
-        d.uvs.reserve(nv_hint);
-    }
-    let shift = lat.shift;
-    for _ in 0..nf {
-        if r.overrun() {
-            return Err((payload.len(), "the bit stream ends early".into()));
-        }
-        let t = triangle_code.get(&mut r);
-        let corner = |d: &mut Decoded,
-                      r: &mut BitReader,
-                      rings: &mut Rings,
-                      st: &mut States,
-                      pred: Pred,
-                      sides: [u32; 2]|
-         -> std::result::Result<u32, Fault> {
-            let c = corner_code.get(r);
-            let fault = |r: &BitReader, m: String| (at(r), m);
-            if c <= NEW_BORDER {
-                let s = d.points.len() as u32;
-                if s as usize >= nv {
-                    return Err(fault(r, format!("more than the node's {nv} vertices")));
-                }
-                let p = predict(pred, |s| d.points[s as usize].map(|v| v as i64), 0, top);
-                let mut g = [0i64; 3];
-                for k in 0..3 {
-                    g[k] = match pred {
-                        Pred::Jump(_) => p[k] + st.jump[k].get_signed(r) as i64,
-                        Pred::Edge(..) if c == NEW_BORDER => p[k] + st.border[k].get_signed(r) as i64,
-                        Pred::Edge(..) => (lattice_of(p[k], shift) + st.lattice[k].get_signed(r) as i64) << shift,
-                    };
-                }
-                if g.iter().any(|&v| v < 0 || v > top) {
-                    return Err(fault(r, format!("vertex {s} lies off the grid")));
-                }
-                d.points.push(g.map(|v| v as u32));
-                if x.colors {
-                    let pc = predict(pred, |s| d.colors[s as usize].map(|v| v as i64), 0, 255);
-                    let mut col = [0u8; 4];
-                    for k in 0..4 {
-                        let residual = st.color[k].get_signed(r);
-                        if !(-128..=127).contains(&residual) {
-                            return Err(fault(r, format!("vertex {s}: color residual {residual} beyond a byte")));
-                        }
-                        col[k] = (pc[k] + residual as i64) as u8;
-                    }
-                    d.colors.push(col);
-                }
-                if x.uvs {
-                    let pu = predict(pred, |s| d.uvs[s as usize], 1 - UV_LIMIT, UV_LIMIT - 1);
-                    let mut uv = [0i64; 2];
-                    for k in 0..2 {
-                        uv[k] = pu[k] + st.uv[k].get_signed(r) as i64;
-                        if uv[k].abs() >= UV_LIMIT {
-                            return Err(fault(r, format!("vertex {s}: UV beyond ±2^30 steps")));
-                        }
-                    }
-                    d.uvs.push(uv);
-                }
-                rings.push_vertex(s);
-                return Ok(s);
-            }
-            if c == RIGHT || c == LEFT {
-                let s = sides[c - RIGHT];
-                if s == NONE {
-                    return Err(fault(r, "a border corner with no border vertex there".into()));
-                }
-                return Ok(s);
-            }
-            if c < INDEX {
-                let s = rings.vertex(c - RING);
-                if s == NONE {
-                    return Err(fault(r, format!("corner names vertex ring slot {} before it is filled", c - RING)));
-                }
-                return Ok(s);
-            }
-            let back = st.index.get(r) as u64;
-            let next = d.points.len() as u64;
-            if back + 1 > next {
-                return Err(fault(r, format!("corner names vertex {} back of {next}", back + 1)));
-            }
-            let s = (next - 1 - back) as u32;
-            rings.push_vertex(s);
-            Ok(s)
-        };
-        if t != MISS {
-            let edge = if t == FAR {
-                let back = st.far.get(&mut r) as usize;
-                let made = rings.from.len();
-                match made.checked_sub(back + 1) {
-                    Some(edge) if rings.alive[edge] => edge as u32,
-                    _ => {
-                        return Err((
-                            at(&r),
-                            format!("triangle names the open edge made {} edges back of {made}, which is not open", back + 1),
-                        ))
-                    }
-                }
+    let mut front = Front::with_capacity(2 * nf + 8);
+    // The face across each open edge.
+    let mut across: Vec<u32> = Vec::with_capacity(2 * nf + 8);
+    let mut queue: Vec<u32> = Vec::new();
+    let mut skipped: Vec<u32> = Vec::new();
+    let mut ctx = 7usize;
+    let emit = |order: &mut Order, f: u32, first: u32| {
+        let r = (0..3).find(|&k| mesh.corner(f, k) == first).expect("a corner of the face");
+        order.faces.push(f);
+        order.rotation.push(r as u8);
+    };
+    for (r, w) in cuts.windows(2).enumerate() {
+        let r = r as u32;
+        let mut left = w[1] - w[0];
+        let mut cursor = w[0];
+        queue.clear();
+        let (mut head, mut pending) = (0usize, NONE);
+        while left > 0 {
+            let e = if pending != NONE {
+                std::mem::replace(&mut pending, NONE)
+            } else if head < queue.len() {
+                head += 1;
+                queue[head - 1]
             } else {
-                let Some(edge) = rings.edge(t) else {
-                    return Err((at(&r), format!("triangle names edge ring slot {t}, which holds no open edge")));
+                let usable = |e: u32| {
+                    let f = across[e as usize];
+                    front.state[e as usize] == OPEN && f != NONE && !done[f as usize] && mesh.run[f as usize] == r
                 };
-                edge
+                match skipped.iter().rev().take(START_SCAN).position(|&e| usable(e)) {
+                    Some(k) => {
+                        out.value(a::START, k as u32 + 1);
+                        skipped[skipped.len() - 1 - k]
+                    }
+                    None => {
+                        out.value(a::START, 0);
+                        while done[cursor as usize] {
+                            cursor += 1;
+                        }
+                        let f = cursor;
+                        let mut t = [0u32; 3];
+                        for k in 0..3 {
+                            let v = mesh.corner(f, k);
+                            if stored[v as usize] == NONE {
+                                out.value(a::CORNER, 0);
+                                preds.push(Pred::Jump((order.vertices.len() as u32).wrapping_sub(1)));
+                                stored[v as usize] = order.vertices.len() as u32;
+                                order.vertices.push(v);
+                            } else {
+                                out.value(a::CORNER, 1 + (order.vertices.len() as u32 - 1 - stored[v as usize]));
+                            }
+                            t[k] = v;
+                        }
+                        let e = front.start(t);
+                        for k in 0..3 {
+                            across.push(mesh.across(f, t[k], t[(k + 1) % 3]));
+                        }
+                        queue.extend_from_slice(&[e, e + 1, e + 2]);
+                        done[f as usize] = true;
+                        emit(&mut order, f, t[0]);
+                        left -= 1;
+                        continue;
+                    }
+                }
             };
-            let (a, b, o) = rings.ends(edge);
-            let sides = rings.sides(edge);
-            let c = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Edge(a, b, o), sides)?;
-            d.indices.extend_from_slice(&[b, a, c]);
-            rings.advance(edge, c);
-        } else {
-            let mut s = [0u32; 3];
-            for k in 0..3 {
-                let prev = if k > 0 { Some(s[k - 1]) } else { (d.points.len() as u32).checked_sub(1) };
-                s[k] = corner(&mut d, &mut r, &mut rings, &mut st, Pred::Jump(prev), [NONE; 2])?;
+            if front.state[e as usize] != OPEN {
+                continue;
             }
-            d.indices.extend_from_slice(&s);
-            rings.start(s);
+            let ei = e as usize;
+            let f = across[ei];
+            let s = if f == NONE || done[f as usize] {
+                sym::BOUNDARY
+            } else if mesh.run[f as usize] != r {
+                sym::SKIP
+            } else {
+                let (va, vb) = (front.v0[ei], front.v1[ei]);
+                let x = (0..3).map(|k| mesh.corner(f, k)).find(|&c| c != va && c != vb).expect("a proper face");
+                if stored[x as usize] == NONE {
+                    sym::VERTEX
+                } else {
+                    let (p, n) = (front.prev[ei] as usize, front.next[ei] as usize);
+                    let left_ok = p != ei && front.state[p] == OPEN && front.v0[p] == x && across[p] == f;
+                    let right_ok = n != ei && front.state[n] == OPEN && front.v1[n] == x && across[n] == f;
+                    match (left_ok, right_ok) {
+                        (true, true) if p != n => sym::END,
+                        (true, _) => sym::LEFT,
+                        (_, true) => sym::RIGHT,
+                        _ => sym::SPLIT,
+                    }
+                }
+            };
+            out.sym(a::CONN + ctx, s);
+            ctx = s as usize;
+            match s {
+                sym::BOUNDARY => front.state[ei] = CLOSED,
+                sym::SKIP => skipped.push(e),
+                _ => {
+                    let (va, vb) = (front.v0[ei], front.v1[ei]);
+                    let x = (0..3).map(|k| mesh.corner(f, k)).find(|&c| c != va && c != vb).expect("a proper face");
+                    if s == sym::VERTEX {
+                        stored[x as usize] = order.vertices.len() as u32;
+                        preds.push(Pred::Para(stored[va as usize], stored[vb as usize], stored[front.opp[ei] as usize]));
+                        order.vertices.push(x);
+                    } else if s == sym::SPLIT {
+                        out.value(a::SPLIT, order.vertices.len() as u32 - 1 - stored[x as usize]);
+                    }
+                    let (n1, q) = front.across(e, s, x);
+                    // One `across` entry per edge, in the order the edges were made.
+                    for new in [n1, q].into_iter().filter(|&e| e != NONE) {
+                        across.push(mesh.across(f, front.v0[new as usize], front.v1[new as usize]));
+                    }
+                    pending = n1;
+                    if q != NONE {
+                        queue.push(q);
+                    }
+                    done[f as usize] = true;
+                    emit(&mut order, f, vb);
+                    left -= 1;
+                }
+            }
         }
     }
-    if d.points.len() != nv {
-        return Err((at(&r), format!("{} vertices decoded; the node has {nv}", d.points.len())));
-    }
-    if !d.clusters.is_empty() {
-        let counts: Vec<u32> = d.clusters.iter().map(|c| c.faces as u32).collect();
-        let pred = cluster_predictions(&d.points, &d.indices, &counts, d.cluster_shift);
-        let base = base_and_span(&d.points).0;
-        let mut prev = [0i64; 2];
-        for (k, p) in pred.iter().enumerate() {
-            let mut f = [0i64; 5];
-            for (i, v) in f.iter_mut().enumerate() {
-                *v = p[i] as i64 + st.cluster[i.min(2)].get_signed(&mut r) as i64;
-            }
-            let half_angle = prev[0] + st.meta.get_signed(&mut r) as i64;
-            let radius = prev[1] + st.meta.get_signed(&mut r) as i64;
-            prev = [half_angle, radius];
-            let i16s = |v: i64| (i16::MIN as i64..=i16::MAX as i64).contains(&v);
-            let u16s = |v: i64| (0..=u16::MAX as i64).contains(&v);
-            if !(i16s(f[0]) && i16s(f[1]) && f[2..].iter().all(|&v| u16s(v)) && u16s(half_angle) && u16s(radius)) {
-                return Err((at(&r), format!("cluster {k}: a field out of range")));
-            }
-            let c = &mut d.clusters[k];
-            c.axis = [f[0] as i16, f[1] as i16];
-            c.center = [f[2] as u16, f[3] as u16, f[4] as u16];
-            c.half_angle = half_angle as u16;
-            c.radius = radius as u16;
-            if (0..3).any(|a| base[a] as u64 + ((c.center[a] as u64) << d.cluster_shift) > top as u64) {
-                return Err((at(&r), format!("cluster {k}'s center lies off the {}-bit grid", x.bits)));
-            }
-        }
-    }
-    if x.normals {
-        let scale = octa::scale(lat.normal_bits);
-        let pred = predicted_normals(&d.points, &d.indices, scale);
-        let open = rings.open_vertices(nv);
-        d.normals.reserve(nv);
-        for (v, p) in pred.iter().enumerate() {
-            let states = if open[v] { &mut st.normal_border } else { &mut st.normal };
-            let q = [p[0] as i64 + states[0].get_signed(&mut r) as i64, p[1] as i64 + states[1].get_signed(&mut r) as i64];
-            if q.iter().any(|c| c.abs() > scale as i64) {
-                return Err((at(&r), format!("normal {v} exceeds the {}-bit scale", lat.normal_bits)));
-            }
-            d.normals.push(q.map(|c| c as i32));
-        }
-    }
-    if r.overrun() {
-        return Err((payload.len(), "the bit stream ends early".into()));
-    }
-    let used = PAYLOAD_HEADER_BYTES + r.consumed().div_ceil(8) as usize;
-    if used != payload.len() {
-        return Err((used, format!("{} bytes after the bit stream's end", payload.len() - used)));
-    }
-    Ok(d)
-}
+    let nv = order.vertices.len();
+    let border_in = front.border(nv_in);
+    let border: Vec<bool> = order.vertices.iter().map(|&v| border_in[v as usize]).collect();
+    let points: Vec<[u32; 3]> = order.vertices.iter().map(|&v| g.points[v as usize]).collect();
 
-/// Check and decode a node's format-3 payload (the `GEOM` chunk's bytes between frame and CRC).
-pub fn decode(ctx: &NodeContext, payload: &[u8]) -> Result<NodeGeometry> {
-    let (rec, h) = (ctx.record, ctx.header);
-    let x = Expect {
-        faces: rec.faces,
-        vertices: rec.vertices,
-        bits: h.grid.bits,
-        materials: h.materials,
-        normals: h.attributes.normals,
-        uvs: h.attributes.uvs,
-        colors: h.attributes.colors,
-        clusters: rec.level == 0,
-    };
-    let d = decode_codes(payload, x).map_err(|(at, msg)| {
-        Error::at_byte(
-            ctx.path,
-            rec.offset + chunk::HEADER_BYTES + at as u64,
-            format!("{}: node {}: {msg}", chunk::name(&id::GEOM, rec.offset), ctx.index),
-        )
-    })?;
-    Ok(geometry(d, ctx))
-}
-
-/// Decoded codes as floats.
-fn geometry(d: Decoded, ctx: &NodeContext) -> NodeGeometry {
-    let grid = ctx.header.grid;
-    let lat = d.lattice;
-    let mut g = NodeGeometry {
-        positions: d.points.iter().map(|&p| grid.decode(p)).collect(),
-        indices: d.indices,
-        material_ranges: d.material_ranges,
-        colors: d.colors,
-        ..NodeGeometry::default()
-    };
-    if lat.normal_bits > 0 {
-        let scale = octa::scale(lat.normal_bits);
-        g.normals = d.normals.iter().map(|&q| octa::decode_at(q, scale as f32)).collect();
-    }
-    if lat.uv_bits > 0 {
-        let s = (1u64 << lat.uv_bits) as f64;
-        g.uvs = d.uvs.iter().map(|q| Vec2::new((q[0] as f64 / s) as f32, (q[1] as f64 / s) as f32)).collect();
-    }
-    if !d.clusters.is_empty() {
-        let (base, _) = base_and_span(&d.points);
-        let mut first = 0u32;
-        for c in &d.clusters {
-            // On the grid: decode_codes checked it.
-            let center: [u32; 3] = std::array::from_fn(|a| base[a] + ((c.center[a] as u32) << d.cluster_shift));
-            g.clusters.push(Cluster {
-                cone: Cone { axis: octa::decode(c.axis), half_angle: angle_decode(c.half_angle) },
-                center: grid.decode(center),
-                radius: grid.length(radius_decode(c.radius)),
-                first_face: first,
-                face_count: c.faces as u32,
-            });
-            first += c.faces as u32;
-        }
-    }
-    g
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A bumpy grid of `n`² vertices with every attribute, two materials and two clusters.
-    fn sample(n: u32, shift: u32) -> (GeometryCodes, Lattice) {
-        let lat = Lattice { shift, normal_bits: 10, uv_bits: 12 };
-        let mut g = GeometryCodes { lattice: lat, ..GeometryCodes::default() };
-        let scale = octa::scale(lat.normal_bits);
-        for y in 0..n {
-            for x in 0..n {
-                let inner = x > 0 && y > 0 && x + 1 < n && y + 1 < n;
-                let z = 4000 + ((x * 7 + y * 13) % 29) * 37;
-                let p = [x * 300 + 1000, y * 300 + 2000, z];
-                g.points.push(if inner { p.map(|c| snap(c, shift, 16)) } else { p });
-                g.normals.push([((x as i32 * 37) % (2 * scale)) - scale, ((y as i32 * 11) % scale) as i16 as i32].map(|c| c as i16));
-                g.uvs.push([x as f32 / 64.0, y as f32 / 32.0].map(f32::to_bits));
-                g.colors.push([x as u8 * 9, y as u8 * 5, 200, 255]);
+    // Positions.
+    let top = (1i64 << bits) - 1;
+    let mid = [0, 1, 2].map(|k| (bounds[0][k] as i64 + bounds[1][k] as i64) >> 1);
+    for v in 0..nv {
+        let (p, al) = match preds[v] {
+            Pred::Para(pa, pb, pc) => {
+                let (qa, qb, qc) = (points[pa as usize], points[pb as usize], points[pc as usize]);
+                let p = [0, 1, 2].map(|k| (qa[k] as i64 + qb[k] as i64 - qc[k] as i64).clamp(0, top));
+                (p, if border[v] { a::POS_GRID } else { a::POS_LATTICE })
             }
-        }
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let v = y * n + x;
-                g.indices.extend_from_slice(&[v, v + 1, v + n + 1, v, v + n + 1, v + n]);
-            }
-        }
-        let f = g.indices.len() as u32 / 3;
-        let half = f / 2;
-        g.material_ranges = vec![
-            MaterialRange { material: 1, first_index: 0, index_count: 3 * half },
-            MaterialRange { material: 0, first_index: 3 * half, index_count: 3 * (f - half) },
-        ];
-        let c = |faces: u32, k: u16| ClusterCodes {
-            axis: [100, -200],
-            half_angle: 300 + k,
-            faces: faces as u16,
-            center: [k, 2, 3],
-            radius: 40,
+            Pred::Jump(prev) => (if prev == NONE { mid } else { points[prev as usize].map(|c| c as i64) }, a::POS_JUMP),
         };
-        g.clusters = Some((2, vec![c(half, 0), c(f - half, 9)]));
-        (g, lat)
-    }
-
-    fn expect(g: &GeometryCodes) -> Expect {
-        Expect {
-            faces: g.indices.len() as u32 / 3,
-            vertices: g.points.len() as u32,
-            bits: 16,
-            materials: 2,
-            normals: true,
-            uvs: true,
-            colors: true,
-            clusters: true,
+        let lattice = shift > 0 && !border[v];
+        for k in 0..3 {
+            let c = points[v][k] as i64;
+            let r = if lattice { (c >> shift) - lattice_of(p[k], shift) } else { c - p[k] };
+            out.signed(al, r)?;
         }
     }
-
-    #[test]
-    fn codes_round_trip_in_the_encoders_order() {
-        for shift in [0, 3] {
-            let (g, lat) = sample(17, shift);
-            let (payload, order) = encode(&g, lat, 16).unwrap();
-            let d = decode_codes(&payload, expect(&g)).unwrap();
-            assert_eq!(d.points, order.vertices.iter().map(|&v| g.points[v as usize]).collect::<Vec<_>>());
-            assert_eq!(d.colors, order.vertices.iter().map(|&v| g.colors[v as usize]).collect::<Vec<_>>());
-            let normals: Vec<[i32; 2]> = order.vertices.iter().map(|&v| g.normals[v as usize].map(|c| c as i32)).collect();
-            assert_eq!(d.normals, normals);
-            let uvs: Vec<[i64; 2]> =
-                order.vertices.iter().map(|&v| g.uvs[v as usize].map(|b| (f32::from_bits(b) * 4096.0) as i64)).collect();
-            assert_eq!(d.uvs, uvs);
-            let mut stored = vec![0u32; g.points.len()];
-            for (s, &v) in order.vertices.iter().enumerate() {
-                stored[v as usize] = s as u32;
-            }
-            assert_eq!(d.indices, stored_indices(&g, &order, &stored));
-            assert_eq!(d.material_ranges, g.material_ranges);
-            assert_eq!((d.cluster_shift, d.clusters.clone()), g.clusters.clone().unwrap());
-            // Faces stay within their runs: the first half (material 1, cluster 0) first.
-            let half = g.indices.len() / 6;
-            assert!(order.faces[..half].iter().all(|&f| (f as usize) < half));
-            if shift > 0 {
-                let position_bits = |g: &GeometryCodes, lat| encode_with_stats(g, lat, 16).unwrap().2.bits[3];
-                let (fine, fine_lat) = sample(17, 0);
-                assert!(position_bits(&g, lat) < position_bits(&fine, fine_lat), "a coarser lattice costs fewer bits");
+    // Indices of the stored faces.
+    let mut indices = Vec::with_capacity(3 * nf);
+    for (&f, &rot) in order.faces.iter().zip(&order.rotation) {
+        for k in 0..3 {
+            indices.push(stored[mesh.corner(f, (k + rot as usize) % 3) as usize]);
+        }
+    }
+    if !g.normals.is_empty() {
+        let scale = octa::scale(normal_bits);
+        let sums = normal_sums(&points, &indices);
+        for v in 0..nv {
+            let s = sums[v];
+            let p = predict_octa(s[0], s[1], s[2], scale);
+            let n = g.normals[order.vertices[v] as usize];
+            let al = if border[v] { a::NORMAL_BORDER } else { a::NORMAL };
+            out.signed(al, n[0] as i64 - p[0] as i64)?;
+            out.signed(al, n[1] as i64 - p[1] as i64)?;
+        }
+    }
+    if !g.colors.is_empty() {
+        let colors: Vec<[u8; 4]> = order.vertices.iter().map(|&v| g.colors[v as usize]).collect();
+        for v in 0..nv {
+            let p = predict(preds[v], |i| colors[i as usize].map(|c| c as i64), [0; 4], 0, 255);
+            for k in 0..4 {
+                out.signed(a::COLOR, (colors[v][k] as i64 - p[k]) as i8 as i64)?;
             }
         }
     }
-
-    #[test]
-    fn damaged_payloads_are_errors_not_panics() {
-        let (g, lat) = sample(9, 2);
-        let (payload, _) = encode(&g, lat, 16).unwrap();
-        let x = expect(&g);
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut errors = 0;
-        for round in 0..4000 {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let mut p = payload.clone();
-            let at = (state % p.len() as u64) as usize;
-            p[at] ^= 1 << (round % 8);
-            if round % 5 == 0 {
-                p.truncate(at.max(1));
-            }
-            if decode_codes(&p, x).is_err() {
-                errors += 1;
+    if !g.uvs.is_empty() {
+        let uvs: Vec<[i64; 2]> = order.vertices.iter().map(|&v| uvq[v as usize]).collect();
+        for v in 0..nv {
+            let p = predict(preds[v], |i| uvs[i as usize], [0; 2], 1 - UV_LIMIT, UV_LIMIT - 1);
+            for k in 0..2 {
+                out.signed(a::UV, uvs[v][k] - p[k])?;
             }
         }
-        assert!(errors > 2000, "{errors} of 4000 damaged payloads refused");
-        let huge = Expect { faces: u32::MAX, vertices: u32::MAX, ..x };
-        assert!(decode_codes(&payload, huge).unwrap_err().1.contains("cannot fit"));
-        // As many faces as bits: zeros read past the end would decode as faces; refused at the end.
-        let many = Expect { faces: 8 * (payload.len() as u32 - 4), vertices: 8 * (payload.len() as u32 - 4), ..x };
-        let (at, _) = decode_codes(&payload, many).unwrap_err();
-        assert!(at <= payload.len());
     }
-
-    #[test]
-    fn a_normal_beyond_i32_is_refused() {
-        // Found by review: a residual taking a normal to i32::MIN wrapped past the range check.
-        let payload = [
-            0x00, 0x0a, 0x00, 0x00, 0x8c, 0x26, 0x36, 0x80, 0x04, 0x00, 0x20, 0x00, 0x8c, 0x88, 0x00, 0x80, 0x04, 0x63, 0xc6, 0x44, 0x00,
-            0x00, 0x00, 0x07, 0xff, 0xff, 0xff, 0xfc, 0x20, 0x00, 0x00, 0x11, 0x00, 0x00, 0x00, 0x80,
-        ];
-        let x = Expect { faces: 1, vertices: 3, bits: 16, materials: 1, normals: true, uvs: false, colors: false, clusters: false };
-        assert!(decode_codes(&payload, x).is_err());
-    }
+    out.m.raw_bits = out.w.len();
+    out.m.raw = out.w.finish();
+    Ok((out.m, order, border))
 }
