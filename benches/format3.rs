@@ -37,18 +37,46 @@ fn decode_rate(path: &Path, rounds: usize) -> f64 {
     (faces * rounds as u64) as f64 / start.elapsed().as_secs_f64()
 }
 
-/// Level 0 of a file drawn at `size`² from the default view of `strata render` for the bounds of
-/// `frame` (the same camera for both formats: coarse lattices widen format 3's bounds).
-fn level0_image(path: &Path, frame: &Path, size: u32) -> strata::render::Image {
+/// The camera of the image measure, from the format-2 file `frame` (the same for both formats:
+/// coarse lattices widen format 3's bounds), moved sideways by `shift` pixels: `strata render`'s
+/// default view of the whole model, or (`closeup`) the view where a full-detail front is what a
+/// 1-pixel error selects: the median node error of level 1 spans a pixel, looking at the level-0
+/// vertex farthest toward the default view direction.
+fn camera(frame: &Path, size: u32, shift: f32, closeup: bool) -> strata::camera::Camera {
+    let rd = Reader::open_path(frame).expect("open");
+    let h = rd.header().clone();
+    let (center, radius) = ((h.min + h.max) * 0.5, (h.max - h.min).length() * 0.5);
+    let fov = 45f32.to_radians();
+    let dir = glam::Vec3::new(0.3, 0.4, 1.0).normalize();
+    let mut c = strata::camera::Camera::framing(center, radius, dir, fov, size, size);
+    if closeup && h.levels > 1 {
+        let mut errors: Vec<f32> = rd.level_nodes(1).map(|i| rd.nodes()[i as usize].error).collect();
+        errors.sort_by(f32::total_cmp);
+        let median = errors[errors.len() / 2];
+        let distance = median * size as f32 / (2.0 * (0.5 * fov).tan());
+        let front = rd
+            .level_nodes(0)
+            .flat_map(|i| rd.read_node(i).expect("node").positions)
+            .max_by(|a, b| a.dot(dir).total_cmp(&b.dot(dir)))
+            .expect("a vertex");
+        c.target = front;
+        c.eye = front + dir * distance;
+        (c.near, c.far) = (distance * 1e-3, distance + 2.0 * radius);
+    }
+    let pixel = 2.0 * (c.target - c.eye).length() * (0.5 * fov).tan() / size as f32;
+    let right = (c.target - c.eye).cross(c.up).normalize();
+    c.eye += right * pixel * shift;
+    c.target += right * pixel * shift;
+    c
+}
+
+/// Level 0 of a file drawn with `camera`.
+fn level0_image(path: &Path, camera: &strata::camera::Camera) -> strata::render::Image {
     let rd = Reader::open_path(path).expect("open");
-    let h = Reader::open_path(frame).expect("open").header().clone();
-    let (min, max) = (h.min, h.max);
-    let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
-    let camera = strata::camera::Camera::framing(center, radius, glam::Vec3::new(0.3, 0.4, 1.0), 45f32.to_radians(), size, size);
-    let mut image = strata::render::Image::new(size, size);
+    let mut image = strata::render::Image::new(camera.width, camera.height);
     for node in rd.level_nodes(0) {
         let g = rd.read_node(node).expect("node");
-        image.draw(&camera, &g.positions, &g.normals, &g.indices, [200, 200, 200, 255]);
+        image.draw(camera, &g.positions, &g.normals, &g.indices, [200, 200, 200, 255]);
     }
     image
 }
@@ -91,6 +119,7 @@ fn main() {
         lattice: env("STRATA_LATTICE").unwrap_or(d.lattice),
         normal_bits: env("STRATA_NORMAL_BITS").map_or(d.normal_bits, |v| v as u32),
         uv_bits: d.uv_bits,
+        color_bits: env("STRATA_COLOR_BITS").map_or(d.color_bits, |v| v as u32),
     };
     println!(
         "format 3 at grid {} bits, lattice {} of the error, normals {} bits, UVs {} bits",
@@ -110,18 +139,38 @@ fn main() {
             s2.bytes_per_face() / s3.bytes_per_face(),
             s3.skeleton_bytes as f64 / faces
         );
-        if let Some(bits) = s3.geometry_bits {
+        if let Some(by_alphabet) = s3.geometry_bits {
+            let mut bits = [0f64; v3::STAT_NAMES.len()];
+            for (al, b) in by_alphabet.iter().enumerate() {
+                bits[v3::category(al)] += b;
+            }
             let parts: Vec<String> =
                 v3::STAT_NAMES.iter().zip(bits).filter(|(_, b)| *b > 0.0).map(|(n, b)| format!("{n} {:.2}", b / 8.0 / faces)).collect();
             println!("  format 3 geometry, bytes per input face: {}", parts.join(", "));
+            let parts: Vec<String> = (0..v3::alphabet::ALPHABETS)
+                .zip(by_alphabet)
+                .filter(|(_, b)| *b > 0.0)
+                .map(|(n, b)| format!("{} {:.3}", v3::alphabet_name(n), b / 8.0 / faces))
+                .collect();
+            println!("  by alphabet: {}", parts.join(", "));
         }
-        let (i2, i3) = (level0_image(&f2, &f2, 1024), level0_image(&f3, &f2, 1024));
-        println!(
-            "  level 0 drawn at 1024²: covered pixels changed by more than 2, 8, 32 of 255: {:.3} %, {:.3} %, {:.3} %",
-            100.0 * strata::render::changed_share(&i2, &i3, 2),
-            100.0 * strata::render::changed_share(&i2, &i3, 8),
-            100.0 * strata::render::changed_share(&i2, &i3, 32)
-        );
+        // The image measure: level 0 of format 3 against format 2's from the same camera, and, as
+        // the yardstick of what cannot be told apart, format 2's against itself seen from a
+        // quarter of a pixel to the side; over the whole model, and close up where level 0 is
+        // what a 1-pixel error selects.
+        for closeup in [false, true] {
+            let (c, moved) = (camera(&f2, 1024, 0.0, closeup), camera(&f2, 1024, 0.25, closeup));
+            let (i2, i3, i2m) = (level0_image(&f2, &c), level0_image(&f3, &c), level0_image(&f2, &moved));
+            let share = |a, b, t| 100.0 * strata::render::changed_share(a, b, t);
+            println!(
+                "  level 0 {}, covered pixels changed by more than 8 and 32 of 255: format 3 {:.3} % and {:.3} %; format 2 a quarter pixel aside {:.3} % and {:.3} %",
+                if closeup { "close up at 1 px" } else { "whole at 1024²" },
+                share(&i2, &i3, 8),
+                share(&i2, &i3, 32),
+                share(&i2, &i2m, 8),
+                share(&i2, &i2m, 32)
+            );
+        }
         let rounds = (2_000_000.0 / faces).ceil().max(1.0) as usize;
         let (r2, r3) = (decode_rate(&f2, rounds), decode_rate(&f3, rounds));
         println!("  decode, M faces/s (one core): format 2 {:.1}, format 3 {:.1}", r2 / 1e6, r3 / 1e6);

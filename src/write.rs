@@ -67,11 +67,13 @@ pub struct Precision {
     /// UVs are multiples of `2^−uv_bits` (fewer where a node's UVs are too large for f32 to hold
     /// them exactly), 1..=24.
     pub uv_bits: u32,
+    /// Bits of each colour channel, 1..=8 (8 keeps colours exactly).
+    pub color_bits: u32,
 }
 
 impl Default for Precision {
     fn default() -> Self {
-        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 10, uv_bits: 16 }
+        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 8, uv_bits: 16, color_bits: 8 }
     }
 }
 
@@ -235,6 +237,7 @@ impl Piece {
                     shift: self.shifts[l][g],
                     normal_bits: if attributes.normals { p.normal_bits } else { 0 },
                     uv_bits: if attributes.uvs { p.uv_bits } else { 0 },
+                    color_bits: if attributes.colors { p.color_bits } else { 0 },
                 });
                 let geometry =
                     node_geometry(mesh, &self.quant[l], grid, self.faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
@@ -260,11 +263,12 @@ fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
     let valid = (0..=MAX_GRID_BITS).contains(&p.grid_bits)
         && (2..=16).contains(&p.normal_bits)
         && (1..=24).contains(&p.uv_bits)
+        && (1..=8).contains(&p.color_bits)
         && p.lattice.is_finite()
         && p.lattice >= 0.0;
     if !valid {
         return Err(format!(
-            "precision {p:?}: grid bits must be 0 (automatic) or 1..={MAX_GRID_BITS}, normal bits 2..=16, UV bits 1..=24, the lattice fraction finite and ≥ 0"
+            "precision {p:?}: grid bits must be 0 (automatic) or 1..={MAX_GRID_BITS}, normal bits 2..=16, UV bits 1..=24, colour bits 1..=8, the lattice fraction finite and ≥ 0"
         ));
     }
     Ok(p)

@@ -71,8 +71,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0.25)]
     pub lattice: f32,
     /// Format 3: bits of each octahedral normal coordinate, 2..=16.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 8)]
     pub normal_bits: u32,
+    /// Format 3: bits of each colour channel, 1..=8 (8 keeps colours exactly).
+    #[arg(long, default_value_t = 8)]
+    pub color_bits: u32,
     /// No progress bars.
     #[arg(long, short)]
     pub quiet: bool,
@@ -107,7 +110,13 @@ pub fn run(a: Args) -> Result<()> {
         memory: a.memory.unwrap_or(0),
         temp: a.temp.clone(),
         encoding: match a.format_version {
-            3 => Encoding::V3(Precision { grid_bits: a.grid_bits, lattice: a.lattice, normal_bits: a.normal_bits, ..Precision::default() }),
+            3 => Encoding::V3(Precision {
+                grid_bits: a.grid_bits,
+                lattice: a.lattice,
+                normal_bits: a.normal_bits,
+                color_bits: a.color_bits,
+                ..Precision::default()
+            }),
             _ => Encoding::V2,
         },
     };

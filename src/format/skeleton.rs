@@ -468,7 +468,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
         (_, Some(dup), _) => return Err(ctx.err(dup.offset, &id::SKEL, pos, "has a second CODE chunk")),
         (None, None, true) => return Err(ctx.err(pos, &id::SKEL, pos, "has no CODE chunk: format 3 needs its coding tables")),
         (Some(c), None, true) => {
-            let tables = v3::CodeTables::decode(&payload[c.start..c.end], h.attributes.normals)
+            let tables = v3::CodeTables::decode(&payload[c.start..c.end], h.attributes.normals, h.attributes.colors)
                 .map_err(|(at, m)| fields(c).error_at(c.payload_offset() + at as u64, m))?;
             Some(std::sync::Arc::new(v3::Code::new(tables)))
         }

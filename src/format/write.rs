@@ -101,7 +101,7 @@ pub struct WriteSummary {
     pub levels: Vec<LevelSummary>,
     /// Format 3: bits of node geometry by kind ([`v3::STAT_NAMES`]), over all nodes.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub geometry_bits: Option<[f64; 7]>,
+    pub geometry_bits: Option<Vec<f64>>,
     /// Bytes of the images' `TEXL` chunks, padding included.
     pub image_bytes: u64,
 }
@@ -177,6 +177,7 @@ pub struct Writer<W> {
     /// Format 3: symbols per alphabet over every node added, and the normals' bits.
     counts: Vec<Vec<u64>>,
     normal_bits: Option<u32>,
+    color_bits: Option<u32>,
     /// Neighbour pairs `(level, key, key)` added after their nodes ([`Writer::link`]).
     links: Vec<(u32, u32, u32)>,
     spill_dir: Option<PathBuf>,
@@ -216,6 +217,7 @@ impl<W: Write> Writer<W> {
             buf: Vec::new(),
             counts: vec![Vec::new(); v3::alphabet::ALPHABETS],
             normal_bits: None,
+            color_bits: None,
             links: Vec::new(),
             spill_dir: spill_dir.map(Path::to_path_buf),
         })
@@ -256,6 +258,13 @@ impl<W: Write> Writer<W> {
                     node.key, self.normal_bits
                 )));
             }
+            let color_bits = if a.colors { g.lattice.color_bits } else { 0 };
+            if *self.color_bits.get_or_insert(color_bits) != color_bits {
+                return Err(bad(format!(
+                    "level {l} node {}: colours at {color_bits} bits, other nodes at {:?}",
+                    node.key, self.color_bits
+                )));
+            }
             let (model, order) = v3::model(g, self.opts.grid.bits, [node.codes.min, node.codes.max], normal_bits)
                 .map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
             // Format 3 stores the vertices its faces use.
@@ -294,13 +303,13 @@ impl<W: Write> Writer<W> {
 
     /// Format 3: fit the file's coding tables to every node's symbols and code each node's model
     /// into its payload (in a new spill per level); the tables and the bits by kind.
-    fn code_models(&mut self) -> Result<(v3::CodeTables, [f64; 7])> {
+    fn code_models(&mut self) -> Result<(v3::CodeTables, Vec<f64>)> {
         let path = self.path.clone();
         let bad = |msg: String| Error::invalid(&path, None, msg);
         let io = |e: std::io::Error| Error::io(&path, e);
-        let tables = v3::CodeTables::fit(self.normal_bits.unwrap_or(0), &self.counts);
+        let tables = v3::CodeTables::fit(self.normal_bits.unwrap_or(0), self.color_bits.unwrap_or(0), &self.counts);
         let enc: Vec<EncodeTable> = tables.freqs.iter().map(EncodeTable::new).collect();
-        let mut bits = [0f64; 7];
+        let mut bits = vec![0f64; v3::alphabet::ALPHABETS];
         let mut buf = Vec::new();
         for l in 0..self.levels.len() {
             let mut coded = match &self.spill_dir {

@@ -3,14 +3,21 @@
 //! low bits of large values. Integer arithmetic only, so every reader decodes the same symbols.
 //!
 //! A symbol of alphabet `a` with frequency `f` and cumulative frequency `c` (out of
-//! [`PROB_SCALE`]) moves the decoder's 32-bit state `x` to `f·(x >> 12) + (x mod 4096) − c`, then
+//! [`PROB_SCALE`]) moves the decoder's 32-bit state `x` to `f·(x >> 11) + (x mod 2048) − c`, then
 //! the state takes bytes while it is below [`RANS_L`]. The writer encodes symbols last to first,
 //! starting from `x = RANS_L`, so a reader that decodes every symbol ends at `RANS_L` having read
 //! every byte: a check on the whole stream for free.
 
 /// Frequencies of an alphabet add up to `2^PROB_BITS`.
-pub const PROB_BITS: u32 = 12;
+pub const PROB_BITS: u32 = 11;
 pub const PROB_SCALE: u32 = 1 << PROB_BITS;
+/// No symbol's frequency exceeds this (a file's tables are refused otherwise), so that every
+/// symbol costs at least `log2(PROB_SCALE / MAX_FREQ)` ≈ 0.0227 bits and a stream of `n` bytes
+/// holds fewer than [`MAX_SYMBOLS_PER_BYTE`]` · (n + 4)` symbols: decoding work is bounded by
+/// the bytes.
+pub const MAX_FREQ: u32 = PROB_SCALE - PROB_SCALE / 64;
+pub const MAX_SYMBOLS_PER_BYTE: u64 = 353;
+const OFFSET_SHIFT: u32 = 8 + PROB_BITS;
 /// The state lies in `RANS_L .. 256·RANS_L` between symbols.
 pub const RANS_L: u32 = 1 << 23;
 /// Largest alphabet: symbols are bytes.
@@ -49,13 +56,27 @@ impl Freqs {
             f[i] += step;
             sum += step;
         }
+        // No symbol above MAX_FREQ (at most one can be): the excess goes to a neighbour, which an
+        // alphabet of one symbol gains though it never uses it.
+        if let Some(i) = f.iter().position(|&x| x > MAX_FREQ as i64) {
+            let j = if i + 1 < MAX_SYMBOLS { i + 1 } else { i - 1 };
+            if j == f.len() {
+                f.push(0);
+            }
+            f[j] += f[i] - MAX_FREQ as i64;
+            f[i] = MAX_FREQ as i64;
+        }
         Freqs(f.into_iter().map(|x| x as u16).collect())
     }
 
-    /// Check stored frequencies: at most [`MAX_SYMBOLS`], adding up to [`PROB_SCALE`] (or none).
+    /// Check stored frequencies: at most [`MAX_SYMBOLS`], none above [`MAX_FREQ`], adding up to
+    /// [`PROB_SCALE`] (or none).
     pub fn check(&self) -> Result<(), String> {
         if self.0.len() > MAX_SYMBOLS {
             return Err(format!("{} symbols, at most {MAX_SYMBOLS}", self.0.len()));
+        }
+        if let Some(s) = self.0.iter().position(|&f| f as u32 > MAX_FREQ) {
+            return Err(format!("symbol {s} has frequency {}, more than {MAX_FREQ}", self.0[s]));
         }
         let sum: u32 = self.0.iter().map(|&f| f as u32).sum();
         if !self.0.is_empty() && sum != PROB_SCALE {
@@ -79,7 +100,7 @@ impl Freqs {
 }
 
 /// A decoding table: for each of the [`PROB_SCALE`] slots, the symbol, its frequency minus 1 and
-/// the slot's offset within the symbol's range, packed as `symbol | (f − 1) << 8 | offset << 20`.
+/// the slot's offset within the symbol's range, packed as `symbol | (f − 1) << 8 | offset << (8 + PROB_BITS)`.
 /// An empty alphabet decodes every slot as symbol 255 with frequency [`PROB_SCALE`] (the state
 /// does not move), which no caller accepts.
 #[derive(Clone)]
@@ -90,14 +111,14 @@ impl DecodeTable {
         let mut t = vec![0u32; PROB_SCALE as usize].into_boxed_slice();
         if f.0.is_empty() {
             for (slot, e) in t.iter_mut().enumerate() {
-                *e = 0xFF | (PROB_SCALE - 1) << 8 | (slot as u32) << 20;
+                *e = 0xFF | (PROB_SCALE - 1) << 8 | (slot as u32) << OFFSET_SHIFT;
             }
             return DecodeTable(t);
         }
         let mut slot = 0usize;
         for (s, &freq) in f.0.iter().enumerate() {
             for k in 0..freq as u32 {
-                t[slot] = s as u32 | (freq as u32 - 1) << 8 | k << 20;
+                t[slot] = s as u32 | (freq as u32 - 1) << 8 | k << OFFSET_SHIFT;
                 slot += 1;
             }
         }
@@ -147,8 +168,8 @@ impl<'a> RansReader<'a> {
     #[inline(always)]
     pub fn get(&mut self, t: &DecodeTable) -> u32 {
         let e = t.0[(self.x & (PROB_SCALE - 1)) as usize];
-        let freq = ((e >> 8) & 0xFFF) + 1;
-        self.x = freq.wrapping_mul(self.x >> PROB_BITS).wrapping_add(e >> 20);
+        let freq = ((e >> 8) & (PROB_SCALE - 1)) + 1;
+        self.x = freq.wrapping_mul(self.x >> PROB_BITS).wrapping_add(e >> OFFSET_SHIFT);
         if self.x < RANS_L {
             self.x = (self.x << 8) | self.byte() as u32;
             if self.x < RANS_L {

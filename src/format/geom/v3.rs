@@ -53,15 +53,22 @@ pub mod alphabet {
     pub const SPLIT: usize = 10;
     pub const COUNT: usize = 11;
     pub const SHIFT: usize = 12;
-    pub const POS_LATTICE: usize = 13;
-    pub const POS_GRID: usize = 14;
-    pub const POS_JUMP: usize = 15;
-    pub const NORMAL: usize = 16;
-    pub const NORMAL_BORDER: usize = 17;
-    pub const COLOR: usize = 18;
+    /// Positions of vertices not made across a gate.
+    pub const POS_JUMP: usize = 13;
+    pub const NORMAL: usize = 14;
+    pub const NORMAL_BORDER: usize = 15;
+    /// Colours as luma, the two chroma differences and alpha (YCoCg-R).
+    pub const COLOR_Y: usize = 16;
+    pub const COLOR_C: usize = 17;
+    pub const COLOR_A: usize = 18;
     pub const UV: usize = 19;
-    pub const ALPHABETS: usize = 20;
-    pub const NAMES: [&str; ALPHABETS] = [
+    /// Positions of vertices made across a gate, inside the node (`POS_INNER + k`) and on its
+    /// border (`POS_BORDER + k`), `k` the bit length of the gate triangle's extent in the units of
+    /// the residual (0..=21).
+    pub const POS_INNER: usize = 20;
+    pub const POS_BORDER: usize = 42;
+    pub const ALPHABETS: usize = 64;
+    pub const NAMES: [&str; 20] = [
         "conn/vertex",
         "conn/left",
         "conn/right",
@@ -75,12 +82,12 @@ pub mod alphabet {
         "split",
         "count",
         "shift",
-        "pos/lattice",
-        "pos/grid",
         "pos/jump",
         "normal",
         "normal/border",
-        "color",
+        "color/y",
+        "color/c",
+        "color/a",
         "uv",
     ];
 }
@@ -89,15 +96,45 @@ use alphabet as a;
 /// Categories of [`Stats::bits`].
 pub const STAT_NAMES: [&str; 7] = ["connectivity", "indices", "positions", "normals", "colors", "uvs", "meta"];
 
-fn category(alphabet: usize) -> usize {
+/// The [`STAT_NAMES`] category of an alphabet.
+pub fn category(alphabet: usize) -> usize {
     match alphabet {
+        a::POS_INNER.. => 2,
         0..=7 => 0,
         a::START | a::CORNER | a::SPLIT => 1,
-        a::POS_LATTICE | a::POS_GRID | a::POS_JUMP => 2,
+        a::POS_JUMP => 2,
         a::NORMAL | a::NORMAL_BORDER => 3,
-        a::COLOR => 4,
+        a::COLOR_Y | a::COLOR_C | a::COLOR_A => 4,
         a::UV => 5,
         _ => 6,
+    }
+}
+
+/// The name of alphabet `al`.
+pub fn alphabet_name(al: usize) -> String {
+    match al {
+        a::POS_BORDER.. => format!("pos/border/{}", al - a::POS_BORDER),
+        a::POS_INNER.. => format!("pos/inner/{}", al - a::POS_INNER),
+        _ => a::NAMES[al].to_string(),
+    }
+}
+
+/// The position alphabet of a vertex predicted across the gate triangle `(qa, qb, qc)`.
+#[inline(always)]
+fn position_alphabet(border: bool, lattice: bool, shift: u32, qa: [u32; 3], qb: [u32; 3], qc: [u32; 3]) -> usize {
+    let mut extent = 0u32;
+    for k in 0..3 {
+        let (lo, hi) = (qa[k].min(qb[k]).min(qc[k]), qa[k].max(qb[k]).max(qc[k]));
+        extent = extent.max(hi - lo);
+    }
+    if lattice {
+        extent >>= shift;
+    }
+    let ctx = (32 - extent.leading_zeros()).min(21) as usize;
+    if border {
+        a::POS_BORDER + ctx
+    } else {
+        a::POS_INNER + ctx
     }
 }
 
@@ -113,12 +150,15 @@ const NONE: u32 = u32::MAX;
 pub struct CodeTables {
     /// Bits of each octahedral normal coordinate (2..=16), 0 without normals.
     pub normal_bits: u32,
+    /// Bits of each colour channel (1..=8), 0 without colours.
+    pub color_bits: u32,
     pub freqs: Vec<Freqs>,
 }
 
 /// [`CodeTables`] ready to decode with.
 pub struct Decoder {
     pub normal_bits: u32,
+    pub color_bits: u32,
     tables: Vec<DecodeTable>,
 }
 
@@ -126,7 +166,7 @@ impl Decoder {
     pub fn new(t: &CodeTables) -> Decoder {
         let mut tables: Vec<DecodeTable> = t.freqs.iter().map(DecodeTable::new).collect();
         tables.resize_with(a::ALPHABETS, || DecodeTable::new(&Freqs::default()));
-        Decoder { normal_bits: t.normal_bits, tables }
+        Decoder { normal_bits: t.normal_bits, color_bits: t.color_bits, tables }
     }
 }
 
@@ -156,14 +196,18 @@ impl std::fmt::Debug for Code {
 
 impl CodeTables {
     /// Tables fitted to `counts` (per alphabet, per symbol), as the writer makes them.
-    pub fn fit(normal_bits: u32, counts: &[Vec<u64>]) -> CodeTables {
-        CodeTables { normal_bits, freqs: (0..a::ALPHABETS).map(|k| Freqs::from_counts(counts.get(k).map_or(&[][..], |c| c))).collect() }
+    pub fn fit(normal_bits: u32, color_bits: u32, counts: &[Vec<u64>]) -> CodeTables {
+        CodeTables {
+            normal_bits,
+            color_bits,
+            freqs: (0..a::ALPHABETS).map(|k| Freqs::from_counts(counts.get(k).map_or(&[][..], |c| c))).collect(),
+        }
     }
 
-    /// The `CODE` payload: normal bits, three reserved bytes, the alphabet count, then each
-    /// alphabet's symbol count (u16) and frequencies (u16 each).
+    /// The `CODE` payload: normal bits, colour bits, two reserved bytes, the alphabet count, then
+    /// each alphabet's symbol count (u16) and frequencies (u16 each).
     pub fn encode(&self) -> Vec<u8> {
-        let mut out = vec![self.normal_bits as u8, 0, 0, 0];
+        let mut out = vec![self.normal_bits as u8, self.color_bits as u8, 0, 0];
         out.extend_from_slice(&(self.freqs.len() as u32).to_le_bytes());
         for f in &self.freqs {
             out.extend_from_slice(&(f.0.len() as u16).to_le_bytes());
@@ -175,7 +219,7 @@ impl CodeTables {
     }
 
     /// Decode and check a `CODE` payload; an error says what and at which byte.
-    pub fn decode(p: &[u8], normals: bool) -> std::result::Result<CodeTables, (usize, String)> {
+    pub fn decode(p: &[u8], normals: bool, colors: bool) -> std::result::Result<CodeTables, (usize, String)> {
         if p.len() < 8 {
             return Err((0, format!("{} bytes; at least 8", p.len())));
         }
@@ -186,8 +230,12 @@ impl CodeTables {
                 format!("normal bits {normal_bits}; the file {} normals (2..=16 bits)", if normals { "has" } else { "has no" }),
             ));
         }
-        if p[1..4] != [0, 0, 0] {
-            return Err((1, "reserved bytes are not zero".into()));
+        let color_bits = p[1] as u32;
+        if colors != (color_bits != 0) || color_bits > 8 {
+            return Err((1, format!("colour bits {color_bits}; the file {} colours (1..=8 bits)", if colors { "has" } else { "has no" })));
+        }
+        if p[2..4] != [0, 0] {
+            return Err((2, "reserved bytes are not zero".into()));
         }
         let n = u32::from_le_bytes(p[4..8].try_into().expect("4 bytes")) as usize;
         if n != a::ALPHABETS {
@@ -200,18 +248,18 @@ impl CodeTables {
             let count = p.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).ok_or((at, "ends early".to_string()))?;
             at += 2;
             if count > rans::MAX_SYMBOLS {
-                return Err((start, format!("alphabet {k} ({}): {count} symbols, at most {}", a::NAMES[k], rans::MAX_SYMBOLS)));
+                return Err((start, format!("alphabet {k} ({}): {count} symbols, at most {}", alphabet_name(k), rans::MAX_SYMBOLS)));
             }
-            let bytes = p.get(at..at + 2 * count).ok_or((at, format!("alphabet {k} ({}) ends early", a::NAMES[k])))?;
+            let bytes = p.get(at..at + 2 * count).ok_or((at, format!("alphabet {k} ({}) ends early", alphabet_name(k))))?;
             let f = Freqs(bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect());
-            f.check().map_err(|m| (start, format!("alphabet {k} ({}): {m}", a::NAMES[k])))?;
+            f.check().map_err(|m| (start, format!("alphabet {k} ({}): {m}", alphabet_name(k))))?;
             at += 2 * count;
             freqs.push(f);
         }
         if at != p.len() {
             return Err((at, format!("{} bytes after the last alphabet", p.len() - at)));
         }
-        Ok(CodeTables { normal_bits, freqs })
+        Ok(CodeTables { normal_bits, color_bits, freqs })
     }
 }
 
@@ -223,8 +271,8 @@ pub struct Model {
     /// The raw bits, most significant first, and how many.
     pub raw: Vec<u8>,
     pub raw_bits: u64,
-    /// Raw bits by [`STAT_NAMES`] category.
-    pub raw_by_category: [u64; 7],
+    /// Raw bits by alphabet.
+    pub raw_by_alphabet: Vec<u64>,
 }
 
 impl Model {
@@ -257,12 +305,13 @@ impl Model {
         Ok(out)
     }
 
-    /// Bits by [`STAT_NAMES`] category under `freqs`: each symbol costs `log2(4096 / f)`.
-    pub fn bits(&self, freqs: &[Freqs]) -> [f64; 7] {
-        let mut out = self.raw_by_category.map(|b| b as f64);
+    /// Bits by alphabet under `freqs`: each symbol costs `log2(4096 / f)`, plus its raw bits.
+    pub fn bits(&self, freqs: &[Freqs]) -> Vec<f64> {
+        let mut out: Vec<f64> = self.raw_by_alphabet.iter().map(|&b| b as f64).collect();
+        out.resize(a::ALPHABETS, 0.0);
         for &(al, s) in &self.symbols {
             let f = freqs[al as usize].0.get(s as usize).copied().unwrap_or(1).max(1);
-            out[category(al as usize)] += (rans::PROB_SCALE as f64 / f as f64).log2();
+            out[al as usize] += (rans::PROB_SCALE as f64 / f as f64).log2();
         }
         out
     }
@@ -271,8 +320,8 @@ impl Model {
     pub fn to_bytes(&self, out: &mut Vec<u8>) {
         out.extend_from_slice(&(self.symbols.len() as u64).to_le_bytes());
         out.extend_from_slice(&self.raw_bits.to_le_bytes());
-        for c in self.raw_by_category {
-            out.extend_from_slice(&c.to_le_bytes());
+        for k in 0..a::ALPHABETS {
+            out.extend_from_slice(&self.raw_by_alphabet.get(k).copied().unwrap_or(0).to_le_bytes());
         }
         for &(al, s) in &self.symbols {
             out.extend_from_slice(&[al, s]);
@@ -285,15 +334,15 @@ impl Model {
         let u = |at: usize| b.get(at..at + 8).map(|x| u64::from_le_bytes(x.try_into().expect("8 bytes")));
         let n = u(0)? as usize;
         let raw_bits = u(8)?;
-        let mut raw_by_category = [0u64; 7];
-        for (k, c) in raw_by_category.iter_mut().enumerate() {
+        let mut raw_by_alphabet = vec![0u64; a::ALPHABETS];
+        for (k, c) in raw_by_alphabet.iter_mut().enumerate() {
             *c = u(16 + 8 * k)?;
         }
-        let at = 16 + 56;
+        let at = 16 + 8 * a::ALPHABETS;
         let symbols = b.get(at..at + 2 * n)?.chunks_exact(2).map(|x| (x[0], x[1])).collect();
         let raw_len = raw_bits.div_ceil(8) as usize;
         let raw = b.get(at + 2 * n..at + 2 * n + raw_len)?.to_vec();
-        Some((Model { symbols, raw, raw_bits, raw_by_category }, at + 2 * n + raw_len))
+        Some((Model { symbols, raw, raw_bits, raw_by_alphabet }, at + 2 * n + raw_len))
     }
 }
 
@@ -444,6 +493,40 @@ pub struct Lattice {
     pub normal_bits: u32,
     /// UVs are multiples of `2^−uv_bits`; 0 without UVs.
     pub uv_bits: u32,
+    /// Bits of each colour channel (1..=8), 0 without colours.
+    pub color_bits: u32,
+}
+
+/// A colour channel at `bits` (1..=8): `q = ⌊(c·(2^bits − 1) + 127) / 255⌋`.
+#[inline]
+pub fn color_quantize(c: u8, bits: u32) -> i64 {
+    let m = (1i64 << bits) - 1;
+    (c as i64 * m + 127) / 255
+}
+
+/// The byte a quantized channel stands for: `⌊(q·255 + ⌊(2^bits − 1)/2⌋) / (2^bits − 1)⌋`.
+#[inline]
+pub fn color_value(q: i64, bits: u32) -> u8 {
+    let m = (1i64 << bits) - 1;
+    ((q * 255 + (m >> 1)) / m) as u8
+}
+
+/// RGBA (quantized channels) as luma, chroma differences and alpha (YCoCg-R, lossless).
+#[inline]
+fn ycocg(c: [i64; 4]) -> [i64; 4] {
+    let co = c[0] - c[2];
+    let t = c[2] + (co >> 1);
+    let cg = c[1] - t;
+    [t + (cg >> 1), co, cg, c[3]]
+}
+
+/// The inverse of [`ycocg`].
+#[inline]
+fn rgba(y: [i64; 4]) -> [i64; 4] {
+    let t = y[0] - (y[2] >> 1);
+    let g = y[2] + t;
+    let b = t - (y[1] >> 1);
+    [b + y[1], g, b, y[3]]
 }
 
 /// The lattice point of `shift` nearest `g`, kept below `2^bits`.
@@ -476,7 +559,14 @@ pub fn predict_octa(x: f64, y: f64, z: f64, scale: i32) -> [i32; 2] {
         (px, py) = ((1.0 - py.abs()) * sx, (1.0 - px.abs()) * sy);
     }
     let s = scale as f64;
-    [(px * s + 0.5).floor() as i32, (py * s + 0.5).floor() as i32]
+    [floor(px * s + 0.5), floor(py * s + 0.5)]
+}
+
+/// `⌊v⌋` for `|v| < 2^31`, without a library call.
+#[inline(always)]
+fn floor(v: f64) -> i32 {
+    let t = v as i32;
+    t - ((t as f64) > v) as i32
 }
 
 /// Each vertex's predicted normal: the sum over faces, in face order, of the cross product of
@@ -553,7 +643,7 @@ impl In<'_> {
     fn value(&mut self, al: usize) -> std::result::Result<u32, Fault> {
         let s = self.sym(al);
         if s as usize >= rans::BUCKETS {
-            return Err(self.fault(format!("symbol {s} of alphabet {} is not a value", a::NAMES[al])));
+            return Err(self.fault(format!("symbol {s} of alphabet {} is not a value", alphabet_name(al))));
         }
         let raw = &mut self.raw;
         Ok(unbucket(s, |k| raw.get(k)))
@@ -590,10 +680,10 @@ pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Re
         .checked_add(len)
         .filter(|&e| e <= payload.len() as u64)
         .ok_or((0, format!("a symbol stream of {len} bytes runs past the payload's {}", payload.len())))? as usize;
-    // Each face takes at least one symbol, which a byte of stream holds at most 12 times
-    // (frequency 4096 costs nothing only for an alphabet of one symbol, and a triangle is never
-    // coded alone by one); bound the work before allocating.
-    if nf > 0 && nv == 0 || nv > 3 * nf || nf as u64 > 64 * (payload.len() as u64 + 1) * 8 {
+    // Each face takes at least one symbol, and a symbol at least 1/44 bit (rans::MAX_FREQ): bound
+    // the work by the bytes before allocating.
+    let most = rans::MAX_SYMBOLS_PER_BYTE * (len + 4);
+    if (nf > 0 && nv == 0) || nv > 3 * nf || nf as u64 > most {
         return Err((0, format!("{nf} faces and {nv} vertices cannot fit in {} bytes", payload.len())));
     }
     let mut input = In { r: RansReader::new(&payload[at..end]), raw: BitReader::new(&payload[end..]), d: dec, base: at };
@@ -758,7 +848,7 @@ pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Re
                 let (qa, qb, qc) = (points[pa as usize], points[pb as usize], points[pc as usize]);
                 let p = [0, 1, 2].map(|k| (qa[k] as i64 + qb[k] as i64 - qc[k] as i64).clamp(0, top));
                 let inner = shift > 0 && !border[v];
-                (p, if border[v] { a::POS_GRID } else { a::POS_LATTICE }, inner)
+                (p, position_alphabet(border[v], inner, shift, qa, qb, qc), inner)
             }
             Pred::Jump(prev) => {
                 let p = if prev == NONE { mid } else { points[prev as usize].map(|c| c as i64) };
@@ -794,18 +884,23 @@ pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Re
         }
     }
     if x.colors {
+        let cb = dec.color_bits;
+        let m = (1i64 << cb) - 1;
+        let mut ys: Vec<[i64; 4]> = Vec::with_capacity(nv);
         d.colors.reserve(nv);
         for v in 0..nv {
-            let p = predict(preds[v], |i| d.colors[i as usize].map(|c| c as i64), [0; 4], 0, 255);
-            let mut c = [0u8; 4];
+            let p = predict(preds[v], |i| ys[i as usize], [0; 4], -m, m);
+            let mut y = [0i64; 4];
             for k in 0..4 {
-                let r = input.signed(a::COLOR)?;
-                if !(-128..=127).contains(&r) {
-                    return Err(input.fault(format!("colour residual {r} of vertex {v}")));
-                }
-                c[k] = (p[k] as i32 + r) as u8;
+                let al = [a::COLOR_Y, a::COLOR_C, a::COLOR_C, a::COLOR_A][k];
+                y[k] = p[k] + input.signed(al)? as i64;
             }
-            d.colors.push(c);
+            let c = rgba(y);
+            if c.iter().any(|&q| !(0..=m).contains(&q)) || y[1].abs() > m || y[2].abs() > m {
+                return Err(input.fault(format!("colour of vertex {v} beyond {cb} bits")));
+            }
+            ys.push(y);
+            d.colors.push(c.map(|q| color_value(q, cb)));
         }
     }
     if x.uvs {
@@ -965,8 +1060,8 @@ pub fn cluster_bounds(p: &[Vec3], t: &[u32], first_face: u32) -> Cluster {
         }
     }
     let axis = sum.try_normalize().unwrap_or(DVec3::Z);
-    let half = normals.iter().map(|n| n.dot(axis).clamp(-1.0, 1.0).acos()).fold(0f64, f64::max);
-    let half_angle = if normals.is_empty() { 0.0 } else { (half + 1e-6).min(std::f64::consts::PI) as f32 };
+    let nearest = normals.iter().map(|n| n.dot(axis)).fold(1f64, f64::min);
+    let half_angle = if normals.is_empty() { 0.0 } else { (nearest.clamp(-1.0, 1.0).acos() + 1e-6).min(std::f64::consts::PI) as f32 };
     let center = (lo + hi) * 0.5;
     let radius = t.iter().map(|&i| p[i as usize].as_dvec3().distance(center)).fold(0f64, f64::max);
     Cluster {
@@ -997,7 +1092,7 @@ impl Out {
         self.sym(al, s as u32);
         if n > 0 {
             self.w.put(v, n);
-            self.m.raw_by_category[category(al)] += n as u64;
+            self.m.raw_by_alphabet[al] += n as u64;
         }
     }
 
@@ -1074,6 +1169,9 @@ pub fn model(g: &GeometryCodes, bits: u32, bounds: [[u32; 3]; 2], normal_bits: u
     if g.normals.is_empty() != (normal_bits == 0) || (normal_bits > 0 && !(2..=16).contains(&normal_bits)) {
         return Err(format!("{} normals at {normal_bits} bits", g.normals.len()));
     }
+    if !g.colors.is_empty() && !(1..=8).contains(&g.lattice.color_bits) {
+        return Err(format!("colours at {} bits (1..=8)", g.lattice.color_bits));
+    }
     if !g.uvs.is_empty() && !(1..=24).contains(&g.lattice.uv_bits) {
         return Err(format!("UVs at {} bits (1..=24)", g.lattice.uv_bits));
     }
@@ -1143,7 +1241,7 @@ fn walk(
     let nf = g.indices.len() / 3;
     let nv_in = g.points.len();
     let shift = g.lattice.shift;
-    let mut out = Out { m: Model::default(), w: BitWriter::default() };
+    let mut out = Out { m: Model { raw_by_alphabet: vec![0; a::ALPHABETS], ..Model::default() }, w: BitWriter::default() };
 
     // Header.
     if g.clusters.is_none() {
@@ -1319,7 +1417,7 @@ fn walk(
             Pred::Para(pa, pb, pc) => {
                 let (qa, qb, qc) = (points[pa as usize], points[pb as usize], points[pc as usize]);
                 let p = [0, 1, 2].map(|k| (qa[k] as i64 + qb[k] as i64 - qc[k] as i64).clamp(0, top));
-                (p, if border[v] { a::POS_GRID } else { a::POS_LATTICE })
+                (p, position_alphabet(border[v], shift > 0 && !border[v], shift, qa, qb, qc))
             }
             Pred::Jump(prev) => (if prev == NONE { mid } else { points[prev as usize].map(|c| c as i64) }, a::POS_JUMP),
         };
@@ -1350,11 +1448,14 @@ fn walk(
         }
     }
     if !g.colors.is_empty() {
-        let colors: Vec<[u8; 4]> = order.vertices.iter().map(|&v| g.colors[v as usize]).collect();
+        let cb = g.lattice.color_bits;
+        let m = (1i64 << cb) - 1;
+        let ys: Vec<[i64; 4]> = order.vertices.iter().map(|&v| ycocg(g.colors[v as usize].map(|c| color_quantize(c, cb)))).collect();
         for v in 0..nv {
-            let p = predict(preds[v], |i| colors[i as usize].map(|c| c as i64), [0; 4], 0, 255);
+            let p = predict(preds[v], |i| ys[i as usize], [0; 4], -m, m);
             for k in 0..4 {
-                out.signed(a::COLOR, (colors[v][k] as i64 - p[k]) as i8 as i64)?;
+                let al = [a::COLOR_Y, a::COLOR_C, a::COLOR_C, a::COLOR_A][k];
+                out.signed(al, ys[v][k] - p[k])?;
             }
         }
     }
