@@ -15,15 +15,24 @@ use strata::mesh::{Adjacency, Material, Mesh};
 use strata::stream::cache::record_bytes;
 use strata::stream::refine::{Limits, Priority, Refiner};
 use strata::stream::session::orbit;
-use strata::write::{write_to, WriteOptions};
+use strata::write::{write_to, Encoding, Precision, WriteOptions};
+
+/// How node geometry is stored: format 2, or format 3 at its default precision.
+fn encoding(major: u16) -> Encoding {
+    if major == 3 {
+        Encoding::V3(Precision::default())
+    } else {
+        Encoding::V2
+    }
+}
 
 /// The chunk file of `mesh`, grouped with `params` and simplified per level.
-fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64) -> Vec<u8> {
-    convert_placed(mesh, params, metres_per_unit, None)
+fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, major: u16) -> Vec<u8> {
+    convert_placed(mesh, params, metres_per_unit, None, major)
 }
 
 /// [`convert`] with a georeference (a `GEOR` chunk, format 2.1).
-fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, georef: Option<format::Georef>) -> Vec<u8> {
+fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, georef: Option<format::Georef>, major: u16) -> Vec<u8> {
     let adjacency = Adjacency::build(&mesh);
     let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
     let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
@@ -34,7 +43,7 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
         level_ratio: 0.5,
         tool: "strata vectors".into(),
         georef,
-        encoding: strata::write::Encoding::V2,
+        encoding: encoding(major),
         images: Default::default(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
@@ -42,15 +51,15 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
 }
 
 /// A unit square of two triangles: one level, one node, no corner attributes.
-fn plane() -> Vec<u8> {
+fn plane(major: u16) -> Vec<u8> {
     let positions = vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::new(1.0, 1.0, 0.0), glam::Vec3::Y];
     let mesh = Mesh { positions, triangles: vec![[0, 1, 2], [0, 2, 3]], ..Mesh::default() }.clean().expect("finite").0;
-    convert(mesh, HierarchyParams::default(), 1.0)
+    convert(mesh, HierarchyParams::default(), 1.0, major)
 }
 
 /// A sphere of 80 faces with every corner attribute (normals, UVs, colors) and two materials,
 /// grouped small enough for several levels, neighbours and clusters.
-fn sphere() -> Vec<u8> {
+fn sphere(major: u16) -> Vec<u8> {
     let mut mesh = strata::fixtures::colored_sphere(1);
     mesh.uvs = mesh.normals.iter().map(|n| Vec2::new(0.5 + 0.5 * n.x, 0.5 + 0.5 * n.y)).collect();
     mesh.materials = vec![
@@ -59,12 +68,12 @@ fn sphere() -> Vec<u8> {
     ];
     mesh.face_materials = mesh.face_normals.iter().map(|n| u32::from(n.z > 0.0)).collect();
     let params = HierarchyParams { cluster_faces: 4, leaf_faces: 10, growth: 2, top_groups: 2, ..HierarchyParams::default() };
-    convert(mesh, params, 0.0)
+    convert(mesh, params, 0.0, major)
 }
 
 /// A textured globe of 96 faces with a 128 × 64 base color image of two levels: format 2.2 with
 /// `TEXR` and `TEXL` chunks.
-fn textured() -> Vec<u8> {
+fn textured(major: u16) -> Vec<u8> {
     let mut mesh = strata::fixtures::textured_globe(8, 128);
     let mut warnings = Vec::new();
     let images = strata::texture::pyramid::prepare(&mut mesh, &mut warnings, &mut || {});
@@ -80,7 +89,7 @@ fn textured() -> Vec<u8> {
         level_ratio: 0.5,
         tool: "strata vectors".into(),
         georef: None,
-        encoding: strata::write::Encoding::V2,
+        encoding: encoding(major),
         images: images.into(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the textured vector writes");
@@ -103,7 +112,7 @@ fn terrain() -> Vec<u8> {
     .expect("a valid grid");
     let mesh = raw.mesh.clean().expect("finite").0;
     let params = HierarchyParams { cluster_faces: 8, leaf_faces: 24, growth: 2, top_groups: 2, ..HierarchyParams::default() };
-    convert_placed(mesh, params, 1.0, raw.georef)
+    convert_placed(mesh, params, 1.0, raw.georef, 2)
 }
 
 /// Offsets of the chunks read at open, by ID.
@@ -153,6 +162,23 @@ fn index_past_vertices(good: &[u8]) -> Vec<u8> {
     reseal(&mut bytes, geom);
     let crc = bytes[end..end + 4].to_vec();
     bytes[node + 16 + 52..node + 16 + 56].copy_from_slice(&crc);
+    reseal(&mut bytes, node);
+    reseal(&mut bytes, skel);
+    bytes
+}
+
+/// Format 3: `good` with a byte of node 0's payload changed, every checksum recomputed (the node
+/// table's, `GEOS`'s, `NODE`'s and `SKEL`'s): only the codec's own checks can refuse it.
+fn damaged_payload(good: &[u8]) -> Vec<u8> {
+    let rd = Reader::open(Cursor::new(good)).expect("valid");
+    let (n, node, skel) = (rd.nodes()[0], chunk_at(good, "NODE"), chunk_at(good, "SKEL"));
+    let geos = rd.skeleton_end() as usize;
+    let mut bytes = good.to_vec();
+    let (at, size) = (n.offset as usize, n.size as usize);
+    bytes[at + size / 2] ^= 0x10;
+    let crc = strata::format::chunk::crc32(&bytes[at..at + size]);
+    bytes[node + 16 + 52..node + 16 + 56].copy_from_slice(&crc.to_le_bytes());
+    reseal(&mut bytes, geos);
     reseal(&mut bytes, node);
     reseal(&mut bytes, skel);
     bytes
@@ -230,12 +256,21 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
 fn main() -> anyhow::Result<()> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
     std::fs::create_dir_all(&dir)?;
-    let sphere = sphere();
+    let (sphere, sphere3) = (sphere(2), sphere(3));
     let (nan, nan_node) = nan_error(&sphere);
-    let valid = [("plane", plane()), ("sphere", sphere.clone()), ("terrain", terrain()), ("textured", textured())];
+    let valid = [
+        ("plane", plane(2)),
+        ("sphere", sphere.clone()),
+        ("terrain", terrain()),
+        ("textured", textured(2)),
+        ("plane-v3", plane(3)),
+        ("sphere-v3", sphere3.clone()),
+        ("textured-v3", textured(3)),
+    ];
     let refused = [
         ("refused-nan-error", nan, vec![format!("node {nan_node}"), "error".to_string()]),
         ("refused-index-past-vertices", index_past_vertices(&sphere), vec!["node 0".to_string(), "index".to_string()]),
+        ("refused-v3-damaged-payload", damaged_payload(&sphere3), vec!["node 0".to_string()]),
     ];
     for (name, bytes) in valid {
         let rd = Reader::open(Cursor::new(&bytes))?;

@@ -289,10 +289,15 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
                 "colors": g.colors,
                 "indices": g.indices,
                 "material_ranges": g.material_ranges.iter().map(|r| json!([r.material, r.first_index, r.index_count])).collect::<Vec<_>>(),
-                "clusters": g.clusters.iter().map(|c| json!({
-                    "cone": cone(&c.cone), "center": v3(c.center), "radius": f(c.radius),
-                    "first_face": c.first_face, "face_count": c.face_count,
-                })).collect::<Vec<_>>(),
+                // Format 3 stores a cluster's faces only; its bounds are the reader's to compute.
+                "clusters": g.clusters.iter().map(|c| if h.major >= 3 {
+                    json!({ "first_face": c.first_face, "face_count": c.face_count })
+                } else {
+                    json!({
+                        "cone": cone(&c.cone), "center": v3(c.center), "radius": f(c.radius),
+                        "first_face": c.first_face, "face_count": c.face_count,
+                    })
+                }).collect::<Vec<_>>(),
             },
         }));
     }
@@ -341,6 +346,11 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
             }
         }
         out["planes"] = json!(list);
+    }
+    if let Some(code) = &rd.skeleton().code {
+        let t = &code.tables;
+        out["code"] =
+            json!({ "normal_bits": t.normal_bits, "color_bits": t.color_bits, "freqs": t.freqs.iter().map(|f| &f.0).collect::<Vec<_>>() });
     }
     let t = rd.textures();
     if !t.is_empty() {
