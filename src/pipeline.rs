@@ -125,7 +125,7 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
     match opts.build {
         Build::InCore => Ok(None),
         Build::Auto => {
-            let Some(reader) = reader.filter(|_| opts.encoding == Encoding::V2) else { return Ok(None) };
+            let Some(reader) = reader else { return Ok(None) };
             // No format makes more than one triangle per byte: a file of fewer bytes than
             // PARALLEL_FACES has fewer faces too, and when it fits is built in memory without a look.
             let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
@@ -152,9 +152,6 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
                 Ok(d) => Some((with_temp(Budget::new(memory)), reader, d)),
                 Err(_) => None,
             })
-        }
-        Build::Partitioned if opts.encoding != Encoding::V2 => {
-            Err(Error::invalid(input, None, "the partitioned build writes format 2 only"))
         }
         Build::Partitioned => {
             let Some(reader) = reader else {

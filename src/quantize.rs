@@ -41,7 +41,13 @@ pub fn auto_grid_bits(mesh: &Mesh) -> u32 {
         .map(|(a, b)| mesh.positions[a as usize].as_dvec3().distance(mesh.positions[b as usize].as_dvec3()))
         .filter(|d| *d > 0.0 && d.is_finite())
         .collect();
-    if edges.is_empty() || extent <= 0.0 {
+    grid_bits_for(extent, &mut edges)
+}
+
+/// The grid bits of [`auto_grid_bits`] for a model whose largest side is `extent`, from a sample
+/// of its edges' lengths (positive and finite; reordered); 14 without any.
+pub fn grid_bits_for(extent: f64, edges: &mut [f64]) -> u32 {
+    if edges.is_empty() || !(extent > 0.0) {
         return 14;
     }
     let mid = edges.len() / 2;

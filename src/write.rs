@@ -136,7 +136,7 @@ fn write_named<W: Write>(
         Some(p) => p.grid_bits,
     };
     let grid = model_grid(lv, bits);
-    let piece = Piece::new(h, lv, &grid, precision, None, &[]).map_err(bad)?;
+    let piece = Piece::new(h, lv, &grid, precision, None, &[], lv.levels.len()).map_err(bad)?;
     let writer_opts = WriterOptions {
         metres_per_unit: opts.metres_per_unit,
         params: opts.params,
@@ -185,7 +185,9 @@ impl Piece {
     /// whose level 0 is the cells' tops); level 0 is then not the input and its positions are
     /// rounded to the grid like any coarser level's. Otherwise level 0 is the input, its vertices
     /// kept apart on the grid, those of `kept` on their nearest point
-    /// ([`Quantized::distinct_keeping`]).
+    /// ([`Quantized::distinct_keeping`]). With `precision` (format 3), the inner vertices of levels
+    /// `1..snapped` move to their nodes' lattices; a level passed on to be written by another piece
+    /// (a cell's top) must stay unsnapped, as that piece will see it.
     pub fn new(
         h: &Hierarchy,
         lv: &LevelMeshes,
@@ -193,6 +195,7 @@ impl Piece {
         precision: Option<Precision>,
         base: Option<Vec<bounds::NodeBounds>>,
         kept: &[bool],
+        snapped: usize,
     ) -> std::result::Result<Piece, String> {
         let mut quant = Vec::with_capacity(lv.levels.len());
         quant.push(match base {
@@ -202,7 +205,7 @@ impl Piece {
         quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(grid, &l.mesh)));
         let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
         if let Some(p) = precision {
-            for l in 1..lv.levels.len() {
+            for l in 1..snapped.min(lv.levels.len()) {
                 shifts[l] = lv.levels[l].group_error.iter().map(|&e| lattice_shift(e, p.lattice, grid)).collect();
                 quant[l].snap_inner(grid, &lv.levels[l].mesh, &lv.levels[l].face_group, &shifts[l]);
             }

@@ -22,6 +22,7 @@ use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
 use crate::import::stream::{Declared, Faces, Streaming, Vertices};
 use crate::import::Format;
 use crate::pipeline::{ConvertOptions, Converted, Normals, Progress, StageTimes};
+use crate::write::Encoding;
 use cells::{Cells, Layout, Spool};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -185,7 +186,11 @@ pub fn convert(
     let Some(d) = state else {
         return Err(Error::invalid(input, None, "nothing to convert: no faces"));
     };
-    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } = d.finish()?;
+    let precision = match opts.encoding {
+        Encoding::V3(p) => Some(p),
+        Encoding::V2 => None,
+    };
+    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
     lap(&mut times.import_ms);
 
     let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: false, colors: layout.colors };
@@ -205,7 +210,7 @@ pub fn convert(
         input_vertices: 0,
         levels: k as u32 + 1,
         georef: None,
-        major: 2,
+        major: if precision.is_some() { 3 } else { 2 },
         images: Default::default(),
     };
     let mut file = crate::atomic::AtomicFile::create(output)?;
@@ -223,6 +228,7 @@ pub fn convert(
         vertex_normals: vertex_normals.as_deref(),
         shared: &shared,
         crease,
+        precision,
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
     warnings.extend(cell_warnings);
@@ -261,6 +267,10 @@ struct Distribute {
     sums: Option<Vec<Vec3>>,
     lo: Vec3,
     hi: Vec3,
+    /// Lengths of the edges of every `stride`-th face (format 3's automatic grid bits).
+    edges: Vec<f64>,
+    stride: u64,
+    seen: u64,
 }
 
 impl Distribute {
@@ -282,6 +292,9 @@ impl Distribute {
             sums,
             lo: Vec3::splat(f32::MAX),
             hi: Vec3::splat(f32::MIN),
+            edges: Vec::new(),
+            stride: (faces / 65_536).max(1),
+            seen: 0,
         })
     }
 
@@ -292,6 +305,11 @@ impl Distribute {
                 self.lo = self.lo.min(q);
                 self.hi = self.hi.max(q);
             }
+            if self.seen % self.stride == 0 {
+                let lengths = (0..3).map(|k| p[k].as_dvec3().distance(p[(k + 1) % 3].as_dvec3()));
+                self.edges.extend(lengths.filter(|d| *d > 0.0 && d.is_finite()));
+            }
+            self.seen += 1;
             let cell = self.cells.of((p[0] + p[1] + p[2]) / 3.0);
             let n = match faces.normals.get(f) {
                 _ if !self.layout.normals => [Vec3::ZERO; 3],
@@ -325,8 +343,11 @@ impl Distribute {
     /// each axis by whole steps to centre the bounds in the grid's span, so that a simplified
     /// vertex straying outside the input's bounds (pieces do not know the coarse levels' bounds
     /// beforehand) stays on the grid where it can.
-    fn finish(self) -> Result<Distributed> {
-        let mut grid = Grid::fit(self.lo, self.hi, GRID_BITS);
+    /// `bits`: the grid's bits, 0 for format 3's automatic choice from the sampled edges.
+    fn finish(mut self, bits: u32) -> Result<Distributed> {
+        let extent = (self.hi - self.lo).as_dvec3().max_element();
+        let bits = if bits == 0 { crate::quantize::grid_bits_for(extent, &mut self.edges) } else { bits };
+        let mut grid = Grid::fit(self.lo, self.hi, bits);
         let span = grid.step * grid.last() as f64;
         for k in 0..3 {
             let extent = (self.hi[k] as f64 - self.lo[k] as f64).max(0.0);

@@ -19,7 +19,7 @@ use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
 use crate::mesh::{Adjacency, Mesh};
 use crate::pipeline::Progress;
-use crate::write::{Piece, Place};
+use crate::write::{Piece, Place, Precision};
 use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::io::Write;
@@ -59,6 +59,8 @@ pub struct Job<'a> {
     pub shared: &'a [u64],
     /// Corners whose face turns more than this from their vertex's normal keep the face's normal.
     pub crease: f32,
+    /// Format 3's quantization, `None` for format 2.
+    pub precision: Option<Precision>,
 }
 
 /// A piece's top level, for the next round.
@@ -391,13 +393,13 @@ fn merge<W: Write>(
         }
         None => {
             let lv = levels::build_from(first_level, &mut h, &job.levels, None, &mut |_| {});
-            let piece = Piece::new(&h, &lv, &job.grid, None, Some(bounds), &[]).map_err(bad)?;
+            let piece = Piece::new(&h, &lv, &job.grid, job.precision, Some(bounds), &[], lv.levels.len()).map_err(bad)?;
             let file_levels = first + h.levels.len();
             let mut w = writer.lock().map_err(|_| poisoned())?;
             w.set_levels(file_levels as u32)?;
             let place =
                 Place { offset: first, levels: 0..h.levels.len(), file_levels, key: &|l, g| if l == 0 { keys[g as usize] } else { g } };
-            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, None, false, &place)?;
+            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, job.precision, false, &place)?;
             Ok(None)
         }
     }
@@ -429,14 +431,14 @@ fn finish_piece<W: Write>(
         return Err(bad(format!("{g} groups in one level, at most {}", 1 << GROUP_BITS)));
     }
     let piece = match base {
-        Base::Input(kept) => Piece::new(&h, &lv, &job.grid, None, None, kept),
-        Base::Tops(bounds) => Piece::new(&h, &lv, &job.grid, None, Some(bounds), &[]),
+        Base::Input(kept) => Piece::new(&h, &lv, &job.grid, job.precision, None, kept, n),
+        Base::Tops(bounds) => Piece::new(&h, &lv, &job.grid, job.precision, Some(bounds), &[], n),
     }
     .map_err(bad)?;
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
     let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
     let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
-    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, None, false, &place)?;
+    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, job.precision, false, &place)?;
     gathered.lock().map_err(|_| poisoned())?.borders.push(border);
     let mut levels = lv.levels;
     let level = levels.swap_remove(n);
