@@ -117,8 +117,8 @@ fn subs(b: &[u8], (start, end): (usize, usize)) -> Vec<usize> {
 /// Make a damaged chunk file consistent again where that is easy, so that the damage reaches the
 /// decoding behind the checksums (the `reader_sealed` fuzz target, `tests/fuzz_inputs.rs`): the
 /// prologue CRC, `HEAD`'s file size, every sub-chunk's, `GEOM` chunk's and top-level chunk's CRC,
-/// and the node table's copies of the `GEOM` CRCs. Best effort: stops where a frame runs past the
-/// end.
+/// and the node table's copies of the `GEOM` CRCs (format 3: of each node's payload in `GEOS`, as
+/// the node table's sizes lay them out). Best effort: stops where a frame runs past the end.
 pub fn reseal(b: &mut [u8]) {
     if b.len() < 16 {
         return;
@@ -134,6 +134,7 @@ pub fn reseal(b: &mut [u8]) {
     }
     let mut node_table = None;
     let mut geom_crcs = Vec::new();
+    let mut geos = None;
     for &top in &tops {
         let Some(range) = payload(b, top) else { continue };
         let id = [b[top], b[top + 1], b[top + 2], b[top + 3]];
@@ -152,6 +153,18 @@ pub fn reseal(b: &mut [u8]) {
         reseal_chunk(b, top);
         if &id == b"GEOM" {
             geom_crcs.push(b[range.1..range.1 + 4].to_vec());
+        }
+        if &id == b"GEOS" {
+            geos = Some(range);
+        }
+    }
+    if let (Some((s, e)), Some((g, g_end))) = (node_table, geos) {
+        let mut at = g;
+        for field in (s..e.saturating_sub(55)).step_by(56) {
+            let size = u32::from_le_bytes([b[field + 48], b[field + 49], b[field + 50], b[field + 51]]) as usize;
+            let Some(end) = at.checked_add(size).filter(|&x| x <= g_end) else { break };
+            geom_crcs.push(crc32fast::hash(&b[at..end]).to_le_bytes().to_vec());
+            at = end;
         }
     }
     if let Some((s, e)) = node_table {

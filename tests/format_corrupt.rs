@@ -4,13 +4,14 @@
 
 mod common;
 
-use common::{icosphere, written};
+use common::{icosphere, written_as};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::io::Cursor;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use strata::format::{self, inspect, Reader};
 use strata::hierarchy::HierarchyParams;
+use strata::write::{Encoding, Precision};
 
 /// Records the largest single allocation of the test process.
 struct Watch;
@@ -41,10 +42,10 @@ static WATCH: Watch = Watch;
 /// No allocation in these tests needs more than this.
 const ALLOCATION_LIMIT: usize = 64 << 20;
 
-/// A small file with every attribute, several levels and nodes.
-fn small_file() -> Vec<u8> {
+/// A small file with every attribute, several levels and nodes, in the format of `encoding`.
+fn small_file(encoding: Encoding) -> Vec<u8> {
     let params = HierarchyParams { cluster_faces: 6, leaf_faces: 20, growth: 2, top_groups: 2, ..HierarchyParams::default() };
-    let (bytes, summary) = written(&icosphere(1), &params);
+    let (bytes, summary) = written_as(&icosphere(1), &params, encoding);
     assert!(summary.levels.len() >= 2 && summary.nodes >= 6, "{summary:?}");
     bytes
 }
@@ -53,7 +54,12 @@ fn small_file() -> Vec<u8> {
 /// and `TEXR` and `TEXL` chunks (2.2) get the same damage.
 fn damage_targets() -> Vec<(&'static str, Vec<u8>)> {
     let vector = |name: &str| std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors").join(name)).expect(name);
-    vec![("small", small_file()), ("terrain", vector("terrain.strata")), ("textured", vector("textured.strata"))]
+    vec![
+        ("small", small_file(Encoding::V2)),
+        ("small-v3", small_file(Encoding::V3(Precision::default()))),
+        ("terrain", vector("terrain.strata")),
+        ("textured", vector("textured.strata")),
+    ]
 }
 
 /// Open with the skeleton decoded in part (`Reader::open_top`), read the top level's nodes and
@@ -166,7 +172,7 @@ fn damaged(good: &[u8], at: usize, value: &[u8], seal: &[usize]) -> String {
 
 #[test]
 fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
-    let good = small_file();
+    let good = small_file(Encoding::V2);
     let at = offsets(&good);
     let (head, skel, node, nbrs) = (at("HEAD"), at("SKEL"), at("NODE"), at("NBRS"));
     let max16 = u16::MAX.to_le_bytes();
@@ -216,7 +222,7 @@ fn huge_counts_and_sizes_are_refused_without_huge_allocations() {
 /// as it reads the node, and listed by `verify`.
 #[test]
 fn a_shrunken_node_box_is_refused_by_the_reader_and_verify() {
-    let good = small_file();
+    let good = small_file(Encoding::V2);
     let at = offsets(&good);
     let (skel, node) = (at("SKEL"), at("NODE"));
     let mut bytes = good.clone();
@@ -269,7 +275,7 @@ fn whole_file_only(problem: &str) -> bool {
 /// reader refuses nothing that `verify` accepts.
 #[test]
 fn readers_refuse_what_verify_refuses_node_by_node() {
-    let good = small_file();
+    let good = small_file(Encoding::V2);
     let rd = Reader::open(Cursor::new(&good)).expect("open");
     let node_at = rd.skeleton_chunks().iter().find(|c| c.id == "NODE").expect("NODE").offset as usize;
     let mut targets: Vec<usize> = (node_at + 16..node_at + 16 + 56 * rd.nodes().len()).collect();

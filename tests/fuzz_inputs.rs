@@ -201,6 +201,7 @@ fn chunk_files() -> Vec<Seed> {
     use strata::hierarchy::HierarchyParams;
     use strata::levels::LevelParams;
     use strata::pipeline::{convert, ConvertOptions, Normals, Silent};
+    use strata::write::{Encoding, Precision};
     let dir = ImportDir::new().expect("a scratch folder");
     let tiny = ConvertOptions {
         hierarchy: HierarchyParams { cluster_faces: 2, leaf_faces: 4, growth: 2, top_groups: 1, ..HierarchyParams::default() },
@@ -209,13 +210,20 @@ fn chunk_files() -> Vec<Seed> {
     };
     let plain = ConvertOptions::default();
     let no_normals = ConvertOptions { normals: Normals::None, ..ConvertOptions::default() };
+    let v2 = |o: &ConvertOptions| ConvertOptions { encoding: Encoding::V2, ..o.clone() };
+    let v3 = |o: &ConvertOptions| ConvertOptions { encoding: Encoding::V3(Precision::default()), ..o.clone() };
     let inputs = [
-        ("fixtures/cube.obj", "cube", &plain),
-        ("fixtures/cube.obj", "cube_levels", &tiny),
-        ("fixtures/nonmanifold.obj", "nonmanifold", &no_normals),
-        ("fixtures/two_materials.glb", "two_materials", &tiny),
-        ("fuzz/seeds/quad_ascii.ply", "quad_colors_uvs", &plain),
-        ("fuzz/seeds/tetra_datauri.gltf", "tetra_all_attributes", &tiny),
+        ("fixtures/cube.obj", "cube", v2(&plain)),
+        ("fixtures/cube.obj", "cube_levels", v2(&tiny)),
+        ("fixtures/nonmanifold.obj", "nonmanifold", v2(&no_normals)),
+        ("fixtures/two_materials.glb", "two_materials", v2(&tiny)),
+        ("fuzz/seeds/quad_ascii.ply", "quad_colors_uvs", v2(&plain)),
+        ("fuzz/seeds/tetra_datauri.gltf", "tetra_all_attributes", v2(&tiny)),
+        ("fixtures/cube.obj", "cube_levels_v3", v3(&tiny)),
+        ("fixtures/nonmanifold.obj", "nonmanifold_v3", v3(&no_normals)),
+        ("fixtures/two_materials.glb", "two_materials_v3", v3(&tiny)),
+        ("fuzz/seeds/quad_ascii.ply", "quad_colors_uvs_v3", v3(&plain)),
+        ("fuzz/seeds/tetra_datauri.gltf", "tetra_all_attributes_v3", v3(&tiny)),
     ];
     let mut files: Vec<Seed> = inputs
         .iter()
@@ -223,7 +231,7 @@ fn chunk_files() -> Vec<Seed> {
             let input = root().join(input);
             let name = format!("{name}.strata");
             let out = dir.path().join(&name);
-            convert(&input, &Default::default(), &out, opts, &mut Silent).unwrap_or_else(|e| panic!("{}: {e}", input.display()));
+            convert(&input, &Default::default(), &out, &opts, &mut Silent).unwrap_or_else(|e| panic!("{}: {e}", input.display()));
             (name, read(&out))
         })
         .collect();

@@ -70,9 +70,14 @@ pub fn build(mesh: &Mesh, params: &HierarchyParams) -> (Hierarchy, LevelMeshes) 
 
 /// Bytes of a file written from `mesh` with `params`, in memory.
 pub fn written(mesh: &Mesh, params: &HierarchyParams) -> (Vec<u8>, strata::format::WriteSummary) {
+    written_as(mesh, params, strata::write::WriteOptions::default().encoding)
+}
+
+/// [`written`] in the format of `encoding`.
+pub fn written_as(mesh: &Mesh, params: &HierarchyParams, encoding: strata::write::Encoding) -> (Vec<u8>, strata::format::WriteSummary) {
     let (h, lv) = build(mesh, params);
     let mut cur = std::io::Cursor::new(Vec::new());
-    let opts = strata::write::WriteOptions { params: *params, tool: "strata test".into(), ..Default::default() };
+    let opts = strata::write::WriteOptions { params: *params, tool: "strata test".into(), encoding, ..Default::default() };
     let summary = strata::write::write_to(&mut cur, &h, &lv, &opts).expect("write");
     (cur.into_inner(), summary)
 }
