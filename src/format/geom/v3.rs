@@ -376,14 +376,19 @@ enum Pred {
 /// The traversal state both sides keep (strata-v3.md §5.3): open edges as loops, each with its
 /// ends, far corner and links; whether it is open, closed by a triangle across it, or closed by
 /// `BOUNDARY`.
+#[derive(Clone, Copy)]
+struct Edge {
+    v0: u32,
+    v1: u32,
+    opp: u32,
+    prev: u32,
+    next: u32,
+    state: u8,
+}
+
 #[derive(Default)]
 struct Front {
-    v0: Vec<u32>,
-    v1: Vec<u32>,
-    opp: Vec<u32>,
-    prev: Vec<u32>,
-    next: Vec<u32>,
-    state: Vec<u8>,
+    e: Vec<Edge>,
 }
 
 const OPEN: u8 = 0;
@@ -392,37 +397,19 @@ const CLOSED: u8 = 2;
 
 impl Front {
     fn with_capacity(n: usize) -> Front {
-        Front {
-            v0: Vec::with_capacity(n),
-            v1: Vec::with_capacity(n),
-            opp: Vec::with_capacity(n),
-            prev: Vec::with_capacity(n),
-            next: Vec::with_capacity(n),
-            state: Vec::with_capacity(n),
-        }
+        Front { e: Vec::with_capacity(n) }
     }
 
     #[inline(always)]
     fn make(&mut self, v0: u32, v1: u32, opp: u32, prev: u32, next: u32) -> u32 {
-        let e = self.v0.len() as u32;
-        self.v0.push(v0);
-        self.v1.push(v1);
-        self.opp.push(opp);
-        self.prev.push(prev);
-        self.next.push(next);
-        self.state.push(OPEN);
+        let e = self.e.len() as u32;
+        self.e.push(Edge { v0, v1, opp, prev, next, state: OPEN });
         e
-    }
-
-    #[inline(always)]
-    fn link(&mut self, x: u32, y: u32) {
-        self.next[x as usize] = y;
-        self.prev[y as usize] = x;
     }
 
     /// A triangle `(a, b, c)` that shares no open edge: a loop of its three edges.
     fn start(&mut self, t: [u32; 3]) -> u32 {
-        let e = self.v0.len() as u32;
+        let e = self.e.len() as u32;
         self.make(t[0], t[1], t[2], e + 2, e + 1);
         self.make(t[1], t[2], t[0], e, e + 2);
         self.make(t[2], t[0], t[1], e + 1, e);
@@ -433,39 +420,40 @@ impl Front {
     /// `END`); returns the edge to take next (or [`NONE`]) and an edge for the queue (or NONE).
     #[inline(always)]
     fn across(&mut self, e: u32, s: u32, x: u32) -> (u32, u32) {
-        let (ei, a, b) = (e as usize, self.v0[e as usize], self.v1[e as usize]);
-        let (p, n) = (self.prev[ei], self.next[ei]);
-        self.state[ei] = ZIPPED;
+        let g = &mut self.e[e as usize];
+        g.state = ZIPPED;
+        let (a, b, p, n) = (g.v0, g.v1, g.prev, g.next);
         match s {
             sym::LEFT => {
-                self.state[p as usize] = ZIPPED;
-                let pp = self.prev[p as usize];
+                self.e[p as usize].state = ZIPPED;
+                let pp = self.e[p as usize].prev;
                 let e1 = self.make(x, b, a, pp, n);
-                self.next[pp as usize] = e1;
-                self.prev[n as usize] = e1;
+                self.e[pp as usize].next = e1;
+                self.e[n as usize].prev = e1;
                 (e1, NONE)
             }
             sym::RIGHT => {
-                self.state[n as usize] = ZIPPED;
-                let nn = self.next[n as usize];
+                self.e[n as usize].state = ZIPPED;
+                let nn = self.e[n as usize].next;
                 let e1 = self.make(a, x, b, p, nn);
-                self.next[p as usize] = e1;
-                self.prev[nn as usize] = e1;
+                self.e[p as usize].next = e1;
+                self.e[nn as usize].prev = e1;
                 (e1, NONE)
             }
             sym::END => {
-                self.state[p as usize] = ZIPPED;
-                self.state[n as usize] = ZIPPED;
-                let (pp, nn) = (self.prev[p as usize], self.next[n as usize]);
-                self.link(pp, nn);
+                self.e[p as usize].state = ZIPPED;
+                self.e[n as usize].state = ZIPPED;
+                let (pp, nn) = (self.e[p as usize].prev, self.e[n as usize].next);
+                self.e[pp as usize].next = nn;
+                self.e[nn as usize].prev = pp;
                 (NONE, NONE)
             }
             _ => {
                 let e1 = self.make(a, x, b, p, NONE);
                 let e2 = self.make(x, b, a, e1, n);
-                self.next[e1 as usize] = e2;
-                self.next[p as usize] = e1;
-                self.prev[n as usize] = e2;
+                self.e[e1 as usize].next = e2;
+                self.e[p as usize].next = e1;
+                self.e[n as usize].prev = e2;
                 (e1, e2)
             }
         }
@@ -474,10 +462,10 @@ impl Front {
     /// Which of `n` vertices lie on an edge not closed by a triangle across it.
     fn border(&self, n: usize) -> Vec<bool> {
         let mut border = vec![false; n];
-        for e in 0..self.v0.len() {
-            if self.state[e] != ZIPPED {
-                border[self.v0[e] as usize] = true;
-                border[self.v1[e] as usize] = true;
+        for e in &self.e {
+            if e.state != ZIPPED {
+                border[e.v0 as usize] = true;
+                border[e.v1 as usize] = true;
             }
         }
         border
@@ -793,7 +781,7 @@ pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Re
                 let k = (s - 1) as usize;
                 let e =
                     *skipped.iter().rev().nth(k).ok_or_else(|| input.fault(format!("start from skipped edge {k} of {}", skipped.len())))?;
-                if front.state[e as usize] != OPEN {
+                if front.e[e as usize].state != OPEN {
                     return Err(input.fault("start from an edge that is closed".to_string()));
                 }
                 // The gate must make a triangle: read its symbol here.
@@ -810,13 +798,13 @@ pub fn decode_codes(payload: &[u8], x: Expect, dec: &Decoder) -> std::result::Re
                 left -= 1;
                 continue;
             };
-            if front.state[e as usize] != OPEN {
+            if front.e[e as usize].state != OPEN {
                 continue;
             }
             let s = input.sym(a::CONN + ctx);
             match s {
                 sym::BOUNDARY => {
-                    front.state[e as usize] = CLOSED;
+                    front.e[e as usize].state = CLOSED;
                 }
                 sym::SKIP => skipped.push(e),
                 sym::VERTEX..=sym::SPLIT => {
@@ -950,14 +938,14 @@ fn gate(
     nv: usize,
 ) -> std::result::Result<(u32, u32), Fault> {
     let ei = e as usize;
-    let (va, vb) = (front.v0[ei], front.v1[ei]);
+    let (va, vb) = (front.e[ei].v0, front.e[ei].v1);
     let x = match s {
         sym::VERTEX => {
             let v = preds.len() as u32;
             if v as usize >= nv {
                 return Err(input.fault(format!("more than {nv} vertices")));
             }
-            preds.push(Pred::Para(va, vb, front.opp[ei]));
+            preds.push(Pred::Para(va, vb, front.e[ei].opp));
             v
         }
         sym::SPLIT => {
@@ -968,25 +956,25 @@ fn gate(
             preds.len() as u32 - 1 - back
         }
         sym::LEFT => {
-            let p = front.prev[ei] as usize;
-            if front.state[p] != OPEN || p == ei {
+            let p = front.e[ei].prev as usize;
+            if front.e[p].state != OPEN || p == ei {
                 return Err(input.fault("LEFT of a closed edge".into()));
             }
-            front.v0[p]
+            front.e[p].v0
         }
         sym::RIGHT => {
-            let n = front.next[ei] as usize;
-            if front.state[n] != OPEN || n == ei {
+            let n = front.e[ei].next as usize;
+            if front.e[n].state != OPEN || n == ei {
                 return Err(input.fault("RIGHT of a closed edge".into()));
             }
-            front.v1[n]
+            front.e[n].v1
         }
         _ => {
-            let (p, n) = (front.prev[ei] as usize, front.next[ei] as usize);
-            if front.state[p] != OPEN || front.state[n] != OPEN || p == n || p == ei || front.v0[p] != front.v1[n] {
+            let (p, n) = (front.e[ei].prev as usize, front.e[ei].next as usize);
+            if front.e[p].state != OPEN || front.e[n].state != OPEN || p == n || p == ei || front.e[p].v0 != front.e[n].v1 {
                 return Err(input.fault("END where the loop does not close".into()));
             }
-            front.v0[p]
+            front.e[p].v0
         }
     };
     if x == va || x == vb {
@@ -1016,7 +1004,7 @@ pub fn decode(ctx: &NodeContext, payload: &[u8], dec: &Decoder) -> Result<NodeGe
     Ok(geometry(d, ctx, dec.normal_bits))
 }
 
-/// Decoded codes as floats, with each culling cluster's cone and sphere computed from its faces.
+/// Decoded codes as floats; culling clusters with the node's cone and sphere.
 pub fn geometry(d: Decoded, ctx: &NodeContext, normal_bits: u32) -> NodeGeometry {
     let grid = ctx.header.grid;
     let positions: Vec<Vec3> = d.points.iter().map(|&p| grid.decode(p)).collect();
@@ -1029,9 +1017,18 @@ pub fn geometry(d: Decoded, ctx: &NodeContext, normal_bits: u32) -> NodeGeometry
         let s = (1u64 << d.uv_bits) as f64;
         g.uvs = d.uvs.iter().map(|q| Vec2::new((q[0] as f64 / s) as f32, (q[1] as f64 / s) as f32)).collect();
     }
+    // Format 3 stores no cluster bounds: each cluster gets the node's cone and sphere, which hold
+    // it; [`cluster_bounds`] computes tight ones for a reader that culls by cluster.
     let mut first = 0u32;
+    let node_cone = ctx.record.cone;
     for &n in &d.clusters {
-        g.clusters.push(cluster_bounds(&positions, &d.indices[3 * first as usize..3 * (first + n) as usize], first));
+        g.clusters.push(Cluster {
+            cone: node_cone,
+            center: ctx.record.center,
+            radius: ctx.record.radius,
+            first_face: first,
+            face_count: n,
+        });
         first += n;
     }
     g.positions = positions;
@@ -1309,7 +1306,7 @@ fn walk(
             } else {
                 let usable = |e: u32| {
                     let f = across[e as usize];
-                    front.state[e as usize] == OPEN && f != NONE && !done[f as usize] && mesh.run[f as usize] == r
+                    front.e[e as usize].state == OPEN && f != NONE && !done[f as usize] && mesh.run[f as usize] == r
                 };
                 match skipped.iter().rev().take(START_SCAN).position(|&e| usable(e)) {
                     Some(k) => {
@@ -1347,7 +1344,7 @@ fn walk(
                     }
                 }
             };
-            if front.state[e as usize] != OPEN {
+            if front.e[e as usize].state != OPEN {
                 continue;
             }
             let ei = e as usize;
@@ -1357,14 +1354,14 @@ fn walk(
             } else if mesh.run[f as usize] != r {
                 sym::SKIP
             } else {
-                let (va, vb) = (front.v0[ei], front.v1[ei]);
+                let (va, vb) = (front.e[ei].v0, front.e[ei].v1);
                 let x = (0..3).map(|k| mesh.corner(f, k)).find(|&c| c != va && c != vb).expect("a proper face");
                 if stored[x as usize] == NONE {
                     sym::VERTEX
                 } else {
-                    let (p, n) = (front.prev[ei] as usize, front.next[ei] as usize);
-                    let left_ok = p != ei && front.state[p] == OPEN && front.v0[p] == x && across[p] == f;
-                    let right_ok = n != ei && front.state[n] == OPEN && front.v1[n] == x && across[n] == f;
+                    let (p, n) = (front.e[ei].prev as usize, front.e[ei].next as usize);
+                    let left_ok = p != ei && front.e[p].state == OPEN && front.e[p].v0 == x && across[p] == f;
+                    let right_ok = n != ei && front.e[n].state == OPEN && front.e[n].v1 == x && across[n] == f;
                     match (left_ok, right_ok) {
                         (true, true) if p != n => sym::END,
                         (true, _) => sym::LEFT,
@@ -1376,14 +1373,14 @@ fn walk(
             out.sym(a::CONN + ctx, s);
             ctx = s as usize;
             match s {
-                sym::BOUNDARY => front.state[ei] = CLOSED,
+                sym::BOUNDARY => front.e[ei].state = CLOSED,
                 sym::SKIP => skipped.push(e),
                 _ => {
-                    let (va, vb) = (front.v0[ei], front.v1[ei]);
+                    let (va, vb) = (front.e[ei].v0, front.e[ei].v1);
                     let x = (0..3).map(|k| mesh.corner(f, k)).find(|&c| c != va && c != vb).expect("a proper face");
                     if s == sym::VERTEX {
                         stored[x as usize] = order.vertices.len() as u32;
-                        preds.push(Pred::Para(stored[va as usize], stored[vb as usize], stored[front.opp[ei] as usize]));
+                        preds.push(Pred::Para(stored[va as usize], stored[vb as usize], stored[front.e[ei].opp as usize]));
                         order.vertices.push(x);
                     } else if s == sym::SPLIT {
                         out.value(a::SPLIT, order.vertices.len() as u32 - 1 - stored[x as usize]);
@@ -1391,7 +1388,7 @@ fn walk(
                     let (n1, q) = front.across(e, s, x);
                     // One `across` entry per edge, in the order the edges were made.
                     for new in [n1, q].into_iter().filter(|&e| e != NONE) {
-                        across.push(mesh.across(f, front.v0[new as usize], front.v1[new as usize]));
+                        across.push(mesh.across(f, front.e[new as usize].v0, front.e[new as usize].v1));
                     }
                     pending = n1;
                     if q != NONE {
