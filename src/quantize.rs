@@ -47,7 +47,7 @@ pub fn auto_grid_bits(mesh: &Mesh) -> u32 {
 /// The grid bits of [`auto_grid_bits`] for a model whose largest side is `extent`, from a sample
 /// of its edges' lengths (positive and finite; reordered); 14 without any.
 pub fn grid_bits_for(extent: f64, edges: &mut [f64]) -> u32 {
-    if edges.is_empty() || !(extent > 0.0) {
+    if edges.is_empty() || extent.is_nan() || extent <= 0.0 {
         return 14;
     }
     let mid = edges.len() / 2;
