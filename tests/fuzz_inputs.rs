@@ -231,7 +231,7 @@ fn chunk_files() -> Vec<Seed> {
             let input = root().join(input);
             let name = format!("{name}.strata");
             let out = dir.path().join(&name);
-            convert(&input, &Default::default(), &out, &opts, &mut Silent).unwrap_or_else(|e| panic!("{}: {e}", input.display()));
+            convert(&input, &Default::default(), &out, opts, &mut Silent).unwrap_or_else(|e| panic!("{}: {e}", input.display()));
             (name, read(&out))
         })
         .collect();
