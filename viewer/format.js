@@ -1,4 +1,5 @@
-// The web viewer's reader of the strata chunk file, format 2.x (format-spec/strata-v2.md).
+// The web viewer's reader of the strata chunk file, formats 2.x (format-spec/strata-v2.md) and 3.0
+// (format-spec/strata-v3.md: node geometry compressed, one GEOS chunk, coding tables in CODE).
 //
 // A plain ES module without dependencies, for browsers and Node 20. It is written from the spec and
 // agrees with strata's Rust reader (src/format/) value for value: every decoded float is the f32 the
@@ -12,15 +13,24 @@
 //   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials
 //                                     (with { topFirst: true } the top two levels' records only,
 //                                     completeSkeleton(skeleton) the rest, isComplete(skeleton));
-//   decodeNode(skeleton, i, bytes)    one node's GEOM chunk, checked and decoded;
+//   decodeNode(skeleton, i, bytes)    one node's geometry, checked and decoded: its GEOM chunk
+//                                     (format 2) or its payload in GEOS (format 3);
 //   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
 //                                     file inside, for the browser to decode.
 //
 // Hostile input never hangs the reader nor makes it throw anything but a FormatError: every read is
 // bounds-checked first, every size taken from the file is checked against counts and lengths before
-// anything is allocated with it, and u64 fields beyond 2^53 are refused.
+// anything is allocated with it, and u64 fields beyond 2^53 are refused. A format-3 payload's work
+// is bounded by its bytes (strata-v3.md §5.1), and its decoder stops at the first byte or bit read
+// past the payload's end (strata's reader reads zeros there and refuses the node at its end).
 
+/** The format 2 version this reader knows (2.3); it also reads format 3 up to NEWEST_MAJOR.MINOR3. */
 export const MAJOR = 2, MINOR = 3;
+/** The newest major version this reader reads (format 3, strata-v3.md) and the minor of it it knows. */
+export const NEWEST_MAJOR = 3, MINOR3 = 0;
+
+/** The newest minor of `major` this reader knows: a newer minor only adds what older readers skip. */
+export const knownMinor = (major) => (major >= 3 ? MINOR3 : MINOR);
 
 /** A file that breaks the format; `offset` is the byte offset the message names, `node` the node. */
 export class FormatError extends Error {
@@ -135,6 +145,16 @@ const view = (b) => new DataView(b.buffer, b.byteOffset, b.byteLength);
 /** Zero bytes after `end` up to the next multiple of 8. */
 const padding = (end) => (8 - (end % 8)) % 8;
 
+/** Node 0's offset, SKEL (and its padding) ending at `start`: format 3's payloads lie in a GEOS chunk. */
+const geometryStart = (major, start) => (major >= 3 ? start + FRAME : start);
+
+/** The end of node geometry, padding included, of `bytes` bytes (LEVL's sum) after SKEL's end `start`. */
+function geometryEnd(major, start, bytes) {
+  if (major < 3) return start + bytes;
+  const end = start + FRAME + bytes + TRAILER;
+  return end + padding(end);
+}
+
 /** A chunk ID as text, non-printable bytes escaped (as Rust's chunk::id_str). */
 function idStr(b, o) {
   const c0 = b[o], c1 = b[o + 1], c2 = b[o + 2], c3 = b[o + 3];
@@ -185,13 +205,14 @@ const radiusSteps = (k) => (k & 0x7ff) * 2 ** (k >> 11);
 
 /**
  * Octahedral code (qx, qy) to a unit vector written at out[o..o+3], emulating Rust's f32 operations
- * (src/format/octa.rs and glam's Vec3::normalize) one by one.
+ * (src/format/octa.rs and glam's Vec3::normalize) one by one. `scale` is the code of 1: 32767 in
+ * format 2, 2^(bits−1) − 1 in format 3 (octa::decode_at; the f64 quotient rounds to the f32 one).
  */
-export function octaDecode(qx, qy, out, o) {
-  let x = fr(qx / 32767);
+export function octaDecode(qx, qy, out, o, scale = 32767) {
+  let x = fr(qx / scale);
   if (x < -1) x = -1;
   else if (x > 1) x = 1;
-  let y = fr(qy / 32767);
+  let y = fr(qy / scale);
   if (y < -1) y = -1;
   else if (y > 1) y = 1;
   const z = fr(fr(1 - Math.abs(x)) - Math.abs(y));
@@ -263,8 +284,10 @@ function checkPrologue(b, fileLength) {
     if (b[k] !== MAGIC[k]) throw fail(0, 'not a strata file (the first 8 bytes are not the strata magic)');
   }
   const major = u16(b, 8), minor = u16(b, 10);
-  if (major > MAJOR) throw fail(8, `format version ${major}.${minor} is newer than this reader's ${MAJOR}.${MINOR}: a newer strata viewer is needed`);
-  if (major < MAJOR) throw fail(8, `format version ${major}.${minor} is not supported (this reader reads ${MAJOR}.x)`);
+  if (major > NEWEST_MAJOR) {
+    throw fail(8, `format version ${major}.${minor} is newer than this reader's ${NEWEST_MAJOR}.${MINOR3}: a newer strata viewer is needed`);
+  }
+  if (major < MAJOR) throw fail(8, `format version ${major}.${minor} is not supported (this reader reads ${MAJOR}.x and ${NEWEST_MAJOR}.x)`);
   const stored = u32(b, 12), actual = crc32(b, 0, 12);
   if (stored !== actual) throw fail(12, `prologue CRC ${hex(actual)} != stored ${hex(stored)}`);
   return { major, minor };
@@ -311,7 +334,7 @@ export function openingRange(prefix, fileLength) {
   const n = b.length;
   if (fileLength !== undefined && fileLength < PROLOGUE) throw fail(0, `a file of ${fileLength} bytes is too short for a strata file`);
   if (n < PROLOGUE) return { need: PROLOGUE };
-  checkPrologue(b, fileLength);
+  const { major } = checkPrologue(b, fileLength);
   frameFits(PROLOGUE, fileLength);
   if (n < PROLOGUE + FRAME) return { need: PROLOGUE + FRAME };
   const head = checkHeadFrame(b, fileLength);
@@ -333,7 +356,7 @@ export function openingRange(prefix, fileLength) {
     const id = idStr(b, pos);
     const size = u64(b, pos + 8);
     if (id === 'SKEL') break;
-    if (id === 'HEAD' || id === 'GEOM') throw chunkFail(pos, id, pos, 'expected the SKEL chunk before any other known chunk');
+    if (id === 'HEAD' || id === 'GEOM' || id === 'GEOS') throw chunkFail(pos, id, pos, 'expected the SKEL chunk before any other known chunk');
     pos = chunkEnd(pos, id, size, fileLength);
   }
   const skelSize = u64(b, pos + 8);
@@ -349,7 +372,7 @@ export function openingRange(prefix, fileLength) {
       const rec = s + FRAME + (levels - 1) * LEVEL_BYTES;
       if (levels >= 1 && size === levels * LEVEL_BYTES && rec + LEVEL_BYTES <= payloadEnd) {
         const bytes = u64(b, rec + 24);
-        const end = skeletonEnd + bytes;
+        const end = geometryStart(major, skeletonEnd) + bytes;
         if (bytes !== Infinity && (fileLength === undefined || end <= fileLength)) topEnd = end;
       }
       break;
@@ -411,10 +434,10 @@ class Skeleton {
   }
 }
 
-function decodeHead(b, dv, pos, size, minor) {
+function decodeHead(b, dv, pos, size, major, minor) {
   const p0 = pos + FRAME;
   const end = p0 + size;
-  const newer = minor > MINOR;
+  const newer = minor > knownMinor(major);
   const err = (at, msg) => chunkFail(at, 'HEAD', pos, msg);
   const fileSize = u64(b, p0);
   const metresPerUnit = dv.getFloat64(p0 + 8, true);
@@ -490,13 +513,13 @@ const GEO_FRAMES = ['unplaced', 'local_tangent', 'projected'];
  * 'local_tangent' (origin: longitude°, latitude°, height m on WGS 84; x east, y up, z south) or
  * 'projected' (easting = origin[0] + x / k, northing = origin[1] − z / k).
  */
-function decodeGeoref(b, dv, pos, size, minor) {
+function decodeGeoref(b, dv, pos, size, major, minor) {
   const p0 = pos + FRAME, end = p0 + size;
   const err = (at, msg) => chunkFail(at, 'GEOR', pos, msg);
-  const newer = minor > MINOR;
+  const newer = minor > knownMinor(major);
   if (size < GEOR_FIXED) throw err(p0, `${size} bytes, fewer than the ${GEOR_FIXED} of its fixed fields`);
   const code = u32(b, p0);
-  if (code >= GEO_FRAMES.length) throw err(p0, newer ? `frame ${code} is newer than this reader (format ${MAJOR}.${MINOR})` : `unknown frame ${code}`);
+  if (code >= GEO_FRAMES.length) throw err(p0, newer ? `frame ${code} is newer than this reader (format ${major}.${knownMinor(major)})` : `unknown frame ${code}`);
   if (u32(b, p0 + 4) !== 0 && !newer) throw err(p0 + 4, 'reserved field is not 0');
   const origin = [0, 1, 2].map((k) => dv.getFloat64(p0 + 8 + 8 * k, true));
   if (!origin.every(Number.isFinite)) throw err(p0 + 8, `origin [${origin.join(', ')}] is not finite`);
@@ -517,7 +540,8 @@ function decodeGeoref(b, dv, pos, size, minor) {
 
 /**
  * Decode and check the skeleton from `bytes`, which hold at least [0, skeletonEnd) of a file of
- * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL, every check of spec §10 "To open".
+ * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL (in format 3 with its coding
+ * tables, `sk.code`), every check of spec §10 "To open".
  * With `opts.topFirst`, only the top two levels' node records are checked and decoded (nodes
  * [0, sk.decoded)); `completeSkeleton` does the rest before any other node is used, so a first
  * frame of the top level waits for none of it (selection.md §6).
@@ -540,7 +564,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   have(hp + head.size + TRAILER);
   const stored = u32(b, hp + head.size), actual = crc32(b, hp, hp + head.size);
   if (stored !== actual) throw chunkFail(hp + head.size, 'HEAD', PROLOGUE, `CRC ${hex(actual)} != stored ${hex(stored)}`);
-  const header = decodeHead(b, dv, PROLOGUE, head.size, minor);
+  const header = decodeHead(b, dv, PROLOGUE, head.size, major, minor);
   if (header.fileSize !== fileLength) {
     const says = header.fileSize === Infinity ? 'more than 2^53' : header.fileSize;
     throw chunkFail(hp, 'HEAD', PROLOGUE, `the file is ${fileLength} bytes but HEAD says ${says}: truncated or extended`);
@@ -559,7 +583,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     have(pos + FRAME);
     const id = idStr(b, pos);
     if (id === 'SKEL') break;
-    if (id === 'HEAD' || id === 'GEOM') throw chunkFail(pos, id, pos, 'expected the SKEL chunk before any other known chunk');
+    if (id === 'HEAD' || id === 'GEOM' || id === 'GEOS') throw chunkFail(pos, id, pos, 'expected the SKEL chunk before any other known chunk');
     const size = u64(b, pos + 8);
     if (id === 'GEOR' && size > MAX_HEAD_BYTES) throw chunkFail(pos + 8, id, pos, `size ${size === Infinity ? 'beyond 2^53' : size} exceeds the ${MAX_HEAD_BYTES}-byte limit`);
     const end = chunkEnd(pos, id, size, fileLength);
@@ -568,7 +592,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
       have(pos + FRAME + size + TRAILER);
       const stored = u32(b, pos + FRAME + size), actual = crc32(b, pos + FRAME, pos + FRAME + size);
       if (stored !== actual) throw chunkFail(pos + FRAME + size, id, pos, `CRC ${hex(actual)} != stored ${hex(stored)}`);
-      georef = decodeGeoref(b, dv, pos, size, minor);
+      georef = decodeGeoref(b, dv, pos, size, major, minor);
     }
     zeroPadding(pos + FRAME + size + TRAILER, end, id, pos);
     pos = end;
@@ -650,7 +674,11 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const totals = new Float64Array(3 * L);
   const neighborList = new Uint32Array(nbEntries);
   const gl = [0, 0, 0], gh = [0, 0, 0], gc = [0, 0, 0];
-  let nbFirst = 0, geo = skeletonEnd, nextChild = 0, l = L - 1;
+  // Format 3: payloads back to back inside GEOS, unpadded, at least a byte each (strata-v3.md §1).
+  const v3 = major >= 3;
+  const least = v3 ? 1 : FRAME + TRAILER;
+  const boxMid = v3 ? new Uint32Array(3 * N) : null;
+  let nbFirst = 0, geo = geometryStart(major, skeletonEnd), nextChild = 0, l = L - 1;
   // Check and decode level l's records and neighbour lists (levels from the top down), then step
   // to the level below.
   const decodeLevel = () => {
@@ -679,11 +707,11 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
       }
       const nf = u32(b, at + 40), nv = u32(b, at + 44), ns = u32(b, at + 48);
       const gend = geo + ns;
-      const padded = ns + padding(gend);
+      const padded = v3 ? ns : ns + padding(gend);
       totals[3 * l] += nf;
       totals[3 * l + 1] += nv;
       totals[3 * l + 2] += padded;
-      if (!(ns >= FRAME + TRAILER && gend <= fileLength)) {
+      if (!(ns >= least && gend <= fileLength)) {
         throw nerr(at, `geometry ${ns} bytes at offset ${geo} runs past the end of the ${fileLength}-byte file`, i);
       }
       level[i] = l;
@@ -698,6 +726,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
         center[3 * i + k] = gridDecode(origin[k], step, gc[k]);
         boxMin[3 * i + k] = gridDecode(origin[k], step, gl[k]);
         boxMax[3 * i + k] = gridDecode(origin[k], step, gh[k]);
+        if (v3) boxMid[3 * i + k] = (gl[k] + gh[k]) >>> 1;
       }
       radius[i] = r;
       error[i] = e;
@@ -747,7 +776,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   if (l < 0) finish();
   for (let m = L - 1; m >= L - kept; m--) decodeEntries(m);
   // Where the image levels start (§2): checked against the node table by finish().
-  const levelsStart = levels.reduce((sum, rec) => sum + rec.bytes, skeletonEnd);
+  const levelsStart = geometryEnd(major, skeletonEnd, levels.reduce((sum, rec) => sum + rec.bytes, 0));
 
   // MATL
   const merr = (at, msg) => chunkFail(at, 'MATL', matl.at, msg);
@@ -771,16 +800,24 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     const tex = str('texture');
     materials.push({ name, baseColor, texture: tex === '' ? null : tex });
   }
-  if (m < mend && minor <= MINOR) throw merr(m, `${mend - m} bytes after ${h.materials} materials`);
+  if (m < mend && minor <= knownMinor(major)) throw merr(m, `${mend - m} bytes after ${h.materials} materials`);
 
   // TEXR (2.2), optional: images, their levels after the geometry, material maps, node densities.
   const texrs = subs.filter((x) => x.id === 'TEXR');
   if (texrs.length > 1) throw chunkFail(texrs[1].at, 'SKEL', skelAt, 'has a second TEXR chunk');
   const textures = texrs.length ? decodeTexr(b, texrs[0], N, materials, levelsStart, fileLength) : { images: [], levels: [], uvDensity: new Float32Array(N) };
 
+  // CODE (format 3), required: the coding tables of node payloads. A 2.x file's is ignored.
+  const codes = subs.filter((x) => x.id === 'CODE');
+  if (codes.length > 1) throw chunkFail(codes[1].at, 'SKEL', skelAt, 'has a second CODE chunk');
+  if (v3 && codes.length === 0) throw chunkFail(skelAt, 'SKEL', skelAt, 'has no CODE chunk: format 3 needs its coding tables');
+  const code = v3 ? decodeCode(b, codes[0], h.attributes) : null;
+
   Object.assign(sk, {
     materials,
     textures,
+    code,
+    boxMid,
     level,
     parent,
     firstChild,
@@ -821,9 +858,9 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
 // ---------------------------------------------------------------------------------------------
 // Separating planes (§7.6, format 2.3).
 
-/** Where the ORDR chunk starts if the file has one: after the last GEOM or TEXL and its padding. */
+/** Where the ORDR chunk starts if the file has one: after the last GEOM (or GEOS) or TEXL and its padding. */
 export function planesOffset(sk) {
-  let end = sk.skeletonEnd + sk.levels.reduce((a, l) => a + l.bytes, 0);
+  let end = geometryEnd(sk.major, sk.skeletonEnd, sk.levels.reduce((a, l) => a + l.bytes, 0));
   for (const l of sk.textures.levels) end = Math.max(end, l.offset + l.size + ((8 - ((l.offset + l.size) % 8)) % 8));
   return end;
 }
@@ -1165,8 +1202,14 @@ function vertexRules(s, i, P, problem) {
   }
   const cx = s.center[i3], cy = s.center[i3 + 1], cz = s.center[i3 + 2];
   const reach = sphereReach(s.radius[i]);
+  // The f32 distance lies within 3·10⁻⁷ of the true one (five roundings) unless it underflows:
+  // the f64 one decides away from the boundary, the f32 one as Rust computes it near it.
+  const inside = reach * (1 - 1e-6), outside = Math.max(reach * (1 + 1e-6), 1e-30);
   for (let k = 0; k < V; k++) {
-    if (!(dist2(cx, cy, cz, P[3 * k], P[3 * k + 1], P[3 * k + 2]) <= reach)) throw problem(`vertex ${k} lies outside the node's sphere`);
+    const x = P[3 * k], y = P[3 * k + 1], z = P[3 * k + 2];
+    const d = (cx - x) * (cx - x) + (cy - y) * (cy - y) + (cz - z) * (cz - z);
+    if (d <= inside) continue;
+    if (d > outside || !(dist2(cx, cy, cz, x, y, z) <= reach)) throw problem(`vertex ${k} lies outside the node's sphere`);
   }
 }
 
@@ -1204,7 +1247,8 @@ function nodeRules(s, i, g, problem) {
   const half = s.coneHalfAngle[i];
   const cone = new ConeTest(s.coneAxis[i3], s.coneAxis[i3 + 1], s.coneAxis[i3 + 2], half);
   let outsideCone = -1;
-  if (g.clusters.length === 0) {
+  // Format 3's clusters have no cones (face ranges only): every face against the node's cone.
+  if (g.clusters.length === 0 || g.clusters[0].axis === undefined) {
     for (let f = 0, F = I.length / 3; f < F; f++) {
       if (!faceInCone(P, I, f, cone)) {
         outsideCone = f;
@@ -1407,9 +1451,13 @@ function decodeClusters(c, cs) {
 }
 
 /**
- * Decode and check node i's GEOM chunk: `bytes` are exactly the node's `size` bytes at
- * skeleton.offset[i]. opts.localOrigin = [x, y, z] also returns `local`, positions relative to it
- * computed in f64 before the one rounding to f32.
+ * Decode and check node i's geometry: `bytes` are exactly the node's `size` bytes at
+ * skeleton.offset[i], its GEOM chunk (format 2) or its payload inside GEOS (format 3). Returns
+ * `{ positions, normals, uvs, colors, indices, materialRanges, clusters }` (typed arrays, null for
+ * an attribute the file lacks; material ranges as [material, first index, index count]; clusters
+ * with their cone and sphere in format 2, as `{ firstFace, faceCount }` only in format 3).
+ * opts.localOrigin = [x, y, z] also returns `local`, positions relative to it computed in f64
+ * before the one rounding to f32.
  */
 export function decodeNode(skeleton, i, bytes, opts = {}) {
   const s = skeleton;
@@ -1417,6 +1465,12 @@ export function decodeNode(skeleton, i, bytes, opts = {}) {
   if (!(Number.isInteger(i) && i >= 0 && i < N)) throw fail(undefined, `node ${i}: no such node; the file has ${N}`);
   if (!isComplete(s) && !(i < s.decoded && s.firstChild[i] + s.childCount[i] <= s.decoded)) {
     throw fail(undefined, `node ${i}: its record or its children's are not decoded yet (completeSkeleton)`);
+  }
+  if (s.major >= 3) {
+    const geometry = decodeNode3(s, i, bytes, opts);
+    relations(s, i);
+    nodeRules(s, i, geometry, (msg) => chunkFail(s.offset[i], 'GEOS', s.skeletonEnd, `node ${i}: ${msg}`, i));
+    return geometry;
   }
   const b = bytes;
   const at = s.offset[i], size = s.size[i];
@@ -1457,5 +1511,903 @@ export function decodeNode(skeleton, i, bytes, opts = {}) {
   if (local) geometry.local = local;
   relations(s, i);
   nodeRules(s, i, geometry, (msg) => c.err(at, msg));
+  return geometry;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Format 3 (format-spec/strata-v3.md): the coding tables (§3) and a node's payload (§4, §5), as
+// src/format/geom/v3.rs, rans.rs and bits.rs decode them.
+
+const ALPHABETS = 64;
+const PROB_BITS = 11;
+const PROB_SCALE = 1 << PROB_BITS;
+const SLOT_MASK = PROB_SCALE - 1;
+const MAX_FREQ = PROB_SCALE - PROB_SCALE / 64;
+const MAX_SYMBOLS = 256;
+/** Symbols of a value alphabet (§4.3). */
+const BUCKETS = 64;
+/** The rANS state lies in RANS_L .. 256·RANS_L between symbols; the writer starts from RANS_L. */
+const RANS_L = 1 << 23;
+/** No stream of L bytes holds more than 353·(L + 4) symbols (no frequency above MAX_FREQ). */
+const SYMBOLS_PER_BYTE = 353;
+/** A decoding table entry: symbol | (frequency − 1) << 8 | offset in the symbol's slots << 19. */
+const OFFSET_SHIFT = 8 + PROB_BITS;
+// Alphabets (§4.2).
+const A_CONN = 0, A_START = 8, A_CORNER = 9, A_SPLIT = 10, A_COUNT = 11, A_SHIFT = 12, A_POS_JUMP = 13;
+const A_NORMAL = 14, A_NORMAL_BORDER = 15, A_COLOR_Y = 16, A_COLOR_C = 17, A_COLOR_A = 18, A_UV = 19;
+const A_POS_INNER = 20, A_POS_BORDER = 42;
+const ALPHABET_NAMES = ['conn/vertex', 'conn/left', 'conn/right', 'conn/end', 'conn/split', 'conn/boundary', 'conn/skip', 'conn/first', 'start', 'corner',
+  'split', 'count', 'shift', 'pos/jump', 'normal', 'normal/border', 'color/y', 'color/c', 'color/a', 'uv'];
+const alphabetName = (k) => (k >= A_POS_BORDER ? `pos/border/${k - A_POS_BORDER}` : k >= A_POS_INNER ? `pos/inner/${k - A_POS_INNER}` : ALPHABET_NAMES[k]);
+// Connectivity symbols (§5.3) and edge states.
+const VERTEX = 0, LEFT = 1, RIGHT = 2, END = 3, SPLIT = 4, BOUNDARY = 5, SKIP = 6;
+const SYMBOL_NAMES = ['vertex', 'left', 'right', 'end', 'split', 'boundary', 'skip'];
+const OPEN = 0, ZIPPED = 1, CLOSED = 2;
+/** Quantized UVs lie strictly within ±2^30 steps. */
+const UV_LIMIT = 2 ** 30;
+
+/**
+ * SKEL's CODE sub-chunk `c` (§3), checked against HEAD's attributes: normal and colour bits, each
+ * alphabet's frequencies, and the decoding tables built from them (64 × 2048 entries, once a file).
+ */
+function decodeCode(b, c, attrs) {
+  const p0 = c.ps, n = c.size;
+  const err = (o, msg) => chunkFail(p0 + o, 'CODE', c.at, msg);
+  if (n < 8) throw err(0, `${n} bytes; at least 8`);
+  const nb = b[p0], cb = b[p0 + 1];
+  if (attrs.normals !== (nb !== 0) || (attrs.normals && !(nb >= 2 && nb <= 16))) {
+    throw err(0, `normal bits ${nb}; the file ${attrs.normals ? 'has' : 'has no'} normals (2..=16 bits)`);
+  }
+  if (attrs.colors !== (cb !== 0) || cb > 8) throw err(1, `colour bits ${cb}; the file ${attrs.colors ? 'has' : 'has no'} colours (1..=8 bits)`);
+  if (b[p0 + 2] !== 0 || b[p0 + 3] !== 0) throw err(2, 'reserved bytes are not zero');
+  const count = u32(b, p0 + 4);
+  if (count !== ALPHABETS) throw err(4, `${count} alphabets; format 3.0 has ${ALPHABETS}`);
+  const table = new Int32Array(ALPHABETS << PROB_BITS);
+  const freqs = [];
+  let o = 8;
+  for (let k = 0; k < ALPHABETS; k++) {
+    const start = o;
+    if (n - o < 2) throw err(o, 'ends early');
+    const m = u16(b, p0 + o);
+    o += 2;
+    const name = `alphabet ${k} (${alphabetName(k)})`;
+    if (m > MAX_SYMBOLS) throw err(start, `${name}: ${m} symbols, at most ${MAX_SYMBOLS}`);
+    if (n - o < 2 * m) throw err(o, `${name} ends early`);
+    const f = [];
+    let sum = 0;
+    for (let s = 0; s < m; s++) {
+      const x = u16(b, p0 + o + 2 * s);
+      if (x > MAX_FREQ) throw err(start, `${name}: symbol ${s} has frequency ${x}, more than ${MAX_FREQ}`);
+      f.push(x);
+      sum += x;
+    }
+    if (m > 0 && sum !== PROB_SCALE) throw err(start, `${name}: frequencies add up to ${sum}, not ${PROB_SCALE}`);
+    o += 2 * m;
+    freqs.push(f);
+    // An alphabet without symbols decodes every slot as symbol 255 of frequency 2048 (the state
+    // stays), which no caller accepts.
+    const base = k << PROB_BITS;
+    if (m === 0) for (let slot = 0; slot < PROB_SCALE; slot++) table[base + slot] = 0xff | ((PROB_SCALE - 1) << 8) | (slot << OFFSET_SHIFT);
+    for (let s = 0, slot = base; s < m; s++) {
+      for (let j = 0; j < f[s]; j++) table[slot++] = s | ((f[s] - 1) << 8) | (j << OFFSET_SHIFT);
+    }
+  }
+  if (o !== n) throw err(o, `${n - o} bytes after the last alphabet`);
+  return { normalBits: nb, colorBits: cb, freqs, table };
+}
+
+/**
+ * A node's payload being read (§4): the rANS state `x` (the u32 state's bits in an int32), the
+ * symbol stream's next byte `pos` (it ends at `end`), and the raw bits after it, most significant
+ * first (`buf` holds `avail` unread bits in its low end; `rp` is the next byte). Reading past
+ * either end throws at once: strata reads zeros there and refuses the node at its end, so the same
+ * nodes fail, sooner. The hot loops (connectivity3, positions3, normals3) keep this state in local
+ * variables and decode symbols inline, as sym() and value() here do; they store it back after.
+ */
+class Payload {
+  constructor(b, table, start, end, fail) {
+    this.b = b;
+    this.T = table;
+    this.start = start;
+    this.end = end;
+    this.fail = fail;
+    if (end - start < 4) throw this.ended();
+    this.x = b[start] | (b[start + 1] << 8) | (b[start + 2] << 16) | (b[start + 3] << 24);
+    this.pos = start + 4;
+    this.rp = end;
+    this.buf = 0;
+    this.avail = 0;
+  }
+
+  /** An error at byte `at` of the symbol stream (the current one by default). */
+  error(msg, at = this.pos) {
+    return this.fail(at, msg);
+  }
+
+  /** The symbol stream runs out. */
+  ended() {
+    return this.fail(this.end, `the symbol stream of ${this.end - this.start} bytes ends early`);
+  }
+
+  /** Raw bits run out. */
+  overrun() {
+    return this.fail(this.b.length, `raw bits run past the payload's ${this.b.length} bytes`);
+  }
+
+  /** A symbol of a value alphabet that is not a value. */
+  notValue(s, al, at) {
+    return this.fail(at, `symbol ${s} of alphabet ${alphabetName(al)} is not a value`);
+  }
+
+  /** The next symbol, of alphabet `al` (§4.1). */
+  sym(al) {
+    const e = this.T[(al << PROB_BITS) | (this.x & SLOT_MASK)];
+    // f·(x >> 11) + offset < 2^32: Math.imul's low 32 bits are exact.
+    let x = (Math.imul(((e >>> 8) & SLOT_MASK) + 1, this.x >>> PROB_BITS) + (e >>> OFFSET_SHIFT)) | 0;
+    if (x >>> 23 === 0) {
+      if (this.pos >= this.end) throw this.ended();
+      x = (x << 8) | this.b[this.pos++];
+      if (x >>> 23 === 0) {
+        if (this.pos >= this.end) throw this.ended();
+        x = (x << 8) | this.b[this.pos++];
+      }
+    }
+    this.x = x;
+    return e & 0xff;
+  }
+
+  /** A value of alphabet `al` (§4.3): up to 2^32 − 1. */
+  value(al) {
+    const s = this.sym(al);
+    if (s < 4) return s;
+    if (s >= BUCKETS) throw this.notValue(s, al, this.pos);
+    return this.rest(s);
+  }
+
+  /** The value of symbol `s` (4..63) of a value alphabet, its raw bits read. */
+  rest(s) {
+    const k = s - 4, e = (k >> 1) + 1;
+    return (2 + (k & 1)) * (1 << e) + (e > 24 ? this.raw(e - 16) * 65536 + this.raw(16) : this.raw(e));
+  }
+
+  /** A signed value of alphabet `al` (zigzag): an int32. */
+  signed(al) {
+    const u = this.value(al);
+    return (u >>> 1) ^ ((u << 31) >> 31);
+  }
+
+  /** The next `e` (1..=24) raw bits as an unsigned integer, first bit highest (§4.4). */
+  raw(e) {
+    const b = this.b;
+    while (this.avail < e) {
+      this.buf = (this.buf << 8) | (this.rp < b.length ? b[this.rp] : 0);
+      this.rp++;
+      this.avail += 8;
+    }
+    this.avail -= e;
+    if (this.rp > b.length && (this.rp - b.length) * 8 > this.avail) throw this.overrun();
+    return (this.buf >>> this.avail) & ((1 << e) - 1);
+  }
+}
+
+// The format-3 decoder's working arrays, reused from node to node (one decode runs at a time) and
+// grown as faces come, never beyond what the payload has decoded. Edges (at most 3 a face) are
+// records of 8 ints in `edges`, an edge named by its offset there: start, end, far corner, the
+// offsets of the edges before and after it along its loop, its state. The queue and the skipped
+// edges hold offsets. Per vertex its prediction, 3 ints in `preds` (pa, pb, pc: the parallelogram
+// pa + pb − pc; pc = −1: the vertex pa before, −1 for none). Per vertex after connectivity: grid
+// points, border flags, normal sums, colours (YCoCg-R) and UVs in steps.
+const E_V0 = 0, E_V1 = 1, E_OPP = 2, E_PREV = 3, E_NEXT = 4, E_STATE = 5, E_INTS = 8;
+const W3 = {
+  cap: 0,
+  edges: new Int32Array(0),
+  queue: new Int32Array(0),
+  skipped: new Int32Array(0),
+  preds: new Int32Array(0),
+  idx: new Uint32Array(0),
+  vcap: 0,
+  points: new Int32Array(0),
+  border: new Uint8Array(0),
+  sums: new Float64Array(0),
+  ys: new Int32Array(0),
+  uvq: new Int32Array(0),
+};
+
+/** Room in W3 for `faces` faces (3 edges, vertices and corners each), contents kept. */
+function growFaces(faces) {
+  const n = 3 * faces + 3;
+  if (n <= W3.cap) return;
+  const m = Math.max(n, 2 * W3.cap, 3072);
+  const more = (a, per) => {
+    const c = new a.constructor(per * m);
+    c.set(a);
+    return c;
+  };
+  W3.edges = more(W3.edges, E_INTS);
+  W3.queue = more(W3.queue, 1);
+  W3.skipped = more(W3.skipped, 1);
+  W3.preds = more(W3.preds, 3);
+  W3.idx = more(W3.idx, 1);
+  W3.cap = m;
+}
+
+/** Room in W3 for `n` vertices' attributes. */
+function growVertices(n) {
+  if (n <= W3.vcap) return;
+  const m = Math.max(n, 2 * W3.vcap, 1024);
+  Object.assign(W3, { vcap: m, points: new Int32Array(3 * m), border: new Uint8Array(m), sums: new Float64Array(3 * m), ys: new Int32Array(4 * m), uvq: new Int32Array(2 * m) });
+}
+
+/**
+ * Connectivity (§5.3): the faces of runs between `cuts` by traversal, and each vertex's
+ * prediction; then W3.border, whether each vertex lies on an edge not zipped. Returns the faces'
+ * corners: `out` (3·nf), or, without it, a fresh copy of W3.idx. The connectivity symbols are
+ * decoded inline (Payload.sym), the rare values through `r`.
+ */
+function connectivity3(r, cuts, nf, nv, out) {
+  // Room for every face when `out` is given (its caller checked nf against the payload's bytes),
+  // else for what a plausible payload holds, more as faces come.
+  growFaces(out ? nf : Math.min(nf, 16 * (r.end - r.start) + 256));
+  let cap = Math.floor((W3.cap - 3) / 3);
+  let E = W3.edges, queue = W3.queue, skipped = W3.skipped, preds = W3.preds, idx = out ?? W3.idx;
+  const T = r.T, b = r.b, end = r.end;
+  let x = r.x, pos = r.pos;
+  // ne: the next edge's offset; nvd: vertices so far; ni: corners so far.
+  let ne = 0, nvd = 0, ni = 0, nsk = 0, ctx = 7;
+  for (let w = 0; w + 1 < cuts.length; w++) {
+    let left = cuts[w + 1] - cuts[w];
+    let qn = 0, head = 0, pending = -1;
+    while (left > 0) {
+      if (ni >= 3 * cap) {
+        // More faces than the first guess: grow toward the node's count.
+        growFaces(Math.min(nf, 2 * cap));
+        cap = Math.floor((W3.cap - 3) / 3);
+        ({ edges: E, queue, skipped, preds } = W3);
+        if (!out) idx = W3.idx;
+      }
+      let e, sy = -1;
+      if (pending >= 0) {
+        e = pending;
+        pending = -1;
+      } else if (head < qn) {
+        e = queue[head++];
+      } else {
+        // Restart: a new triangle, or a skipped edge.
+        r.x = x;
+        r.pos = pos;
+        const t = r.value(A_START);
+        if (t === 0) {
+          for (let k = 0; k < 3; k++) {
+            const c = r.value(A_CORNER);
+            if (c === 0) {
+              if (nvd >= nv) throw r.error(`more than ${nv} vertices`);
+              preds[3 * nvd] = nvd - 1;
+              preds[3 * nvd + 2] = -1;
+              idx[ni + k] = nvd++;
+            } else {
+              if (c > nvd) throw r.error(`a corner ${c - 1} vertices back of ${nvd}`);
+              idx[ni + k] = nvd - c;
+            }
+          }
+          x = r.x;
+          pos = r.pos;
+          const c0 = idx[ni], c1 = idx[ni + 1], c2 = idx[ni + 2];
+          const e1 = ne + E_INTS, e2 = ne + 2 * E_INTS;
+          E[ne] = c0, E[ne + 1] = c1, E[ne + 2] = c2, E[ne + 3] = e2, E[ne + 4] = e1, E[ne + 5] = OPEN;
+          E[e1] = c1, E[e1 + 1] = c2, E[e1 + 2] = c0, E[e1 + 3] = ne, E[e1 + 4] = e2, E[e1 + 5] = OPEN;
+          E[e2] = c2, E[e2 + 1] = c0, E[e2 + 2] = c1, E[e2 + 3] = e1, E[e2 + 4] = ne, E[e2 + 5] = OPEN;
+          queue[qn++] = ne, queue[qn++] = e1, queue[qn++] = e2;
+          ne += 3 * E_INTS;
+          ni += 3;
+          left--;
+          continue;
+        }
+        if (t > nsk) throw r.error(`start from skipped edge ${t - 1} of ${nsk}`);
+        e = skipped[nsk - t];
+        if (E[e + E_STATE] !== OPEN) throw r.error('start from an edge that is closed');
+        // The gate must make a triangle.
+        sy = r.sym(A_CONN + ctx);
+        x = r.x;
+        pos = r.pos;
+        if (sy > SPLIT) throw r.error(`a run starts with ${SYMBOL_NAMES[sy] ?? 'an unknown symbol'}`);
+      }
+      if (sy < 0) {
+        if (E[e + E_STATE] !== OPEN) continue;
+        // A symbol of CONN + ctx (Payload.sym).
+        const t = T[((A_CONN + ctx) << PROB_BITS) | (x & SLOT_MASK)];
+        x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+          if (x >>> 23 === 0) {
+            if (pos >= end) throw r.ended();
+            x = (x << 8) | b[pos++];
+          }
+        }
+        sy = t & 0xff;
+        if (sy > SPLIT) {
+          if (sy === BOUNDARY) E[e + E_STATE] = CLOSED;
+          else if (sy === SKIP) skipped[nsk++] = e;
+          else throw r.error(`connectivity symbol ${sy}`, pos);
+          ctx = sy;
+          continue;
+        }
+      }
+      ctx = sy;
+      // Triangle (b, a, x) across gate e = (a → b), then the front around it (Front::across).
+      const va = E[e + E_V0], vb = E[e + E_V1], p = E[e + E_PREV], n = E[e + E_NEXT];
+      let vx;
+      if (sy === VERTEX) {
+        if (nvd >= nv) throw r.error(`more than ${nv} vertices`, pos);
+        preds[3 * nvd] = va;
+        preds[3 * nvd + 1] = vb;
+        preds[3 * nvd + 2] = E[e + E_OPP];
+        vx = nvd++;
+      } else if (sy === LEFT) {
+        if (E[p + E_STATE] !== OPEN || p === e) throw r.error('LEFT of a closed edge', pos);
+        vx = E[p + E_V0];
+      } else if (sy === RIGHT) {
+        if (E[n + E_STATE] !== OPEN || n === e) throw r.error('RIGHT of a closed edge', pos);
+        vx = E[n + E_V1];
+      } else if (sy === END) {
+        if (E[p + E_STATE] !== OPEN || E[n + E_STATE] !== OPEN || p === n || p === e || E[p + E_V0] !== E[n + E_V1]) {
+          throw r.error('END where the loop does not close', pos);
+        }
+        vx = E[p + E_V0];
+      } else {
+        r.x = x;
+        r.pos = pos;
+        const back = r.value(A_SPLIT);
+        x = r.x;
+        pos = r.pos;
+        if (back >= nvd) throw r.error(`a split ${back} vertices back of ${nvd}`, pos);
+        vx = nvd - 1 - back;
+      }
+      if (vx === va || vx === vb) throw r.error(`a triangle across edge (${va}, ${vb}) repeats a corner`, pos);
+      idx[ni] = vb, idx[ni + 1] = va, idx[ni + 2] = vx;
+      ni += 3;
+      left--;
+      E[e + E_STATE] = ZIPPED;
+      if (sy === LEFT) {
+        E[p + E_STATE] = ZIPPED;
+        const pp = E[p + E_PREV];
+        E[ne] = vx, E[ne + 1] = vb, E[ne + 2] = va, E[ne + 3] = pp, E[ne + 4] = n, E[ne + 5] = OPEN;
+        E[pp + E_NEXT] = ne;
+        E[n + E_PREV] = ne;
+        pending = ne;
+        ne += E_INTS;
+      } else if (sy === RIGHT) {
+        E[n + E_STATE] = ZIPPED;
+        const nn = E[n + E_NEXT];
+        E[ne] = va, E[ne + 1] = vx, E[ne + 2] = vb, E[ne + 3] = p, E[ne + 4] = nn, E[ne + 5] = OPEN;
+        E[p + E_NEXT] = ne;
+        E[nn + E_PREV] = ne;
+        pending = ne;
+        ne += E_INTS;
+      } else if (sy === END) {
+        E[p + E_STATE] = ZIPPED;
+        E[n + E_STATE] = ZIPPED;
+        const pp = E[p + E_PREV], nn = E[n + E_NEXT];
+        E[pp + E_NEXT] = nn;
+        E[nn + E_PREV] = pp;
+      } else {
+        const e2 = ne + E_INTS;
+        E[ne] = va, E[ne + 1] = vx, E[ne + 2] = vb, E[ne + 3] = p, E[ne + 4] = e2, E[ne + 5] = OPEN;
+        E[e2] = vx, E[e2 + 1] = vb, E[e2 + 2] = va, E[e2 + 3] = ne, E[e2 + 4] = n, E[e2 + 5] = OPEN;
+        E[p + E_NEXT] = ne;
+        E[n + E_PREV] = e2;
+        pending = ne;
+        queue[qn++] = e2;
+        ne += 2 * E_INTS;
+      }
+    }
+  }
+  r.x = x;
+  r.pos = pos;
+  if (nvd !== nv) throw r.error(`${nvd} vertices, the node record says ${nv}`);
+  growVertices(nv);
+  const border = W3.border;
+  border.fill(0, 0, nv);
+  for (let e = 0; e < ne; e += E_INTS) {
+    if (E[e + E_STATE] !== ZIPPED) {
+      border[E[e + E_V0]] = 1;
+      border[E[e + E_V1]] = 1;
+    }
+  }
+  return out ?? idx.slice(0, 3 * nf);
+}
+
+/**
+ * Positions (§5.4) into W3.points, and as f32 into `out` (and `local`, relative to `lo`), each
+ * the f64 origin + g·step rounded once. Values are decoded inline (Payload.value: raw values of up
+ * to 24 bits here, longer ones through `r`), the three coordinates written out one by one.
+ */
+function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
+  const { preds, points: q, border } = W3;
+  const T = r.T, b = r.b, end = r.end, blen = b.length;
+  let x = r.x, pos = r.pos, buf = r.buf, avail = r.avail, rp = r.rp;
+  const top = (1 << bits) - 1, topLattice = top >> shift;
+  const half = (1 << shift) >> 1;
+  const step = grid.step;
+  const [o0, o1, o2] = grid.origin;
+  const [l0, l1, l2] = local ? [o0 - lo[0], o1 - lo[1], o2 - lo[2]] : [0, 0, 0];
+  for (let v = 0; v < nv; v++) {
+    const v3 = 3 * v, c = preds[v3 + 2];
+    const bd = border[v];
+    // On the lattice: vertices inside a coarse node.
+    const lat = shift > 0 && bd === 0;
+    let al, p0, p1, p2;
+    if (c >= 0) {
+      const a3 = 3 * preds[v3], b3 = 3 * preds[v3 + 1], c3 = 3 * c;
+      const ax = q[a3], ay = q[a3 + 1], az = q[a3 + 2];
+      const bx = q[b3], by = q[b3 + 1], bz = q[b3 + 2];
+      const cx = q[c3], cy = q[c3 + 1], cz = q[c3 + 2];
+      p0 = ax + bx - cx;
+      p1 = ay + by - cy;
+      p2 = az + bz - cz;
+      p0 = p0 < 0 ? 0 : p0 > top ? top : p0;
+      p1 = p1 < 0 ? 0 : p1 > top ? top : p1;
+      p2 = p2 < 0 ? 0 : p2 > top ? top : p2;
+      // The alphabet: the bit length of the gate triangle's largest extent (position_alphabet).
+      let ext = Math.max(ax, bx, cx) - Math.min(ax, bx, cx);
+      const ey = Math.max(ay, by, cy) - Math.min(ay, by, cy), ez = Math.max(az, bz, cz) - Math.min(az, bz, cz);
+      if (ey > ext) ext = ey;
+      if (ez > ext) ext = ez;
+      if (lat) ext >>= shift;
+      const k = 32 - Math.clz32(ext);
+      al = (bd ? A_POS_BORDER : A_POS_INNER) + (k > 21 ? 21 : k);
+    } else {
+      const u3 = 3 * preds[v3];
+      if (u3 < 0) {
+        p0 = mid[0];
+        p1 = mid[1];
+        p2 = mid[2];
+      } else {
+        p0 = q[u3];
+        p1 = q[u3 + 1];
+        p2 = q[u3 + 2];
+      }
+      al = A_POS_JUMP;
+    }
+    const tb = al << PROB_BITS;
+    {
+      // A signed value of alphabet al (Payload.sym, value, signed), then coordinate 0.
+      const t = T[tb | (x & SLOT_MASK)];
+      x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+      if (x >>> 23 === 0) {
+        if (pos >= end) throw r.ended();
+        x = (x << 8) | b[pos++];
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+        }
+      }
+      let u = t & 0xff;
+      if (u >= 4) {
+        if (u < 52) {
+          const j = u - 4, n = (j >> 1) + 1;
+          while (avail < n) {
+            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
+            rp++;
+            avail += 8;
+          }
+          avail -= n;
+          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
+          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+        } else if (u < BUCKETS) {
+          Object.assign(r, { buf, avail, rp });
+          u = r.rest(u);
+          ({ buf, avail, rp } = r);
+        } else {
+          throw r.notValue(u, al, pos);
+        }
+      }
+      // Zigzag, int32 throughout (-(u & 1) would make -0).
+      const res = (u >>> 1) ^ ((u << 31) >> 31);
+      let g;
+      if (lat) {
+        // Lattice steps, (P + 2^sh/2) >> sh, checked before the shift back.
+        const l = ((p0 + half) >> shift) + res;
+        if (!(l >= 0 && l <= topLattice)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+        g = l << shift;
+      } else {
+        g = p0 + res;
+        if (!(g >= 0 && g <= top)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+      }
+      q[v3 + 0] = g;
+      out[v3 + 0] = o0 + g * step;
+      if (local) local[v3 + 0] = l0 + g * step;
+    }
+    {
+      // A signed value of alphabet al (Payload.sym, value, signed), then coordinate 1.
+      const t = T[tb | (x & SLOT_MASK)];
+      x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+      if (x >>> 23 === 0) {
+        if (pos >= end) throw r.ended();
+        x = (x << 8) | b[pos++];
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+        }
+      }
+      let u = t & 0xff;
+      if (u >= 4) {
+        if (u < 52) {
+          const j = u - 4, n = (j >> 1) + 1;
+          while (avail < n) {
+            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
+            rp++;
+            avail += 8;
+          }
+          avail -= n;
+          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
+          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+        } else if (u < BUCKETS) {
+          Object.assign(r, { buf, avail, rp });
+          u = r.rest(u);
+          ({ buf, avail, rp } = r);
+        } else {
+          throw r.notValue(u, al, pos);
+        }
+      }
+      // Zigzag, int32 throughout (-(u & 1) would make -0).
+      const res = (u >>> 1) ^ ((u << 31) >> 31);
+      let g;
+      if (lat) {
+        // Lattice steps, (P + 2^sh/2) >> sh, checked before the shift back.
+        const l = ((p1 + half) >> shift) + res;
+        if (!(l >= 0 && l <= topLattice)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+        g = l << shift;
+      } else {
+        g = p1 + res;
+        if (!(g >= 0 && g <= top)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+      }
+      q[v3 + 1] = g;
+      out[v3 + 1] = o1 + g * step;
+      if (local) local[v3 + 1] = l1 + g * step;
+    }
+    {
+      // A signed value of alphabet al (Payload.sym, value, signed), then coordinate 2.
+      const t = T[tb | (x & SLOT_MASK)];
+      x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+      if (x >>> 23 === 0) {
+        if (pos >= end) throw r.ended();
+        x = (x << 8) | b[pos++];
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+        }
+      }
+      let u = t & 0xff;
+      if (u >= 4) {
+        if (u < 52) {
+          const j = u - 4, n = (j >> 1) + 1;
+          while (avail < n) {
+            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
+            rp++;
+            avail += 8;
+          }
+          avail -= n;
+          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
+          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+        } else if (u < BUCKETS) {
+          Object.assign(r, { buf, avail, rp });
+          u = r.rest(u);
+          ({ buf, avail, rp } = r);
+        } else {
+          throw r.notValue(u, al, pos);
+        }
+      }
+      // Zigzag, int32 throughout (-(u & 1) would make -0).
+      const res = (u >>> 1) ^ ((u << 31) >> 31);
+      let g;
+      if (lat) {
+        // Lattice steps, (P + 2^sh/2) >> sh, checked before the shift back.
+        const l = ((p2 + half) >> shift) + res;
+        if (!(l >= 0 && l <= topLattice)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+        g = l << shift;
+      } else {
+        g = p2 + res;
+        if (!(g >= 0 && g <= top)) throw r.error(`vertex ${v} lies off the ${bits}-bit grid`, pos);
+      }
+      q[v3 + 2] = g;
+      out[v3 + 2] = o2 + g * step;
+      if (local) local[v3 + 2] = l2 + g * step;
+    }
+  }
+  Object.assign(r, { x, pos, buf, avail, rp });
+}
+
+/** Octahedral decodes at scale S, memoized by code (NaN: not yet), for S ≤ 255: at most 3 MB. */
+function octaTable(code, S) {
+  if (S > 255) return null;
+  if (!code.octa) code.octa = new Float32Array(3 * (2 * S + 1) * (2 * S + 1)).fill(NaN);
+  return code.octa;
+}
+
+/**
+ * Normals (§5.5): each vertex's face normals summed in f64 in face order, its octahedral code at
+ * scale S predicted from the sum (predict_octa), plus two residuals decoded inline; decoded into
+ * `out` as octa::decode_at does.
+ */
+function normals3(r, nv, nf, idx, code, out) {
+  const { points: p, sums, border } = W3;
+  const nb = code.normalBits;
+  const S = 2 ** (nb - 1) - 1, side = 2 * S + 1;
+  const memo = octaTable(code, S);
+  sums.fill(0, 0, 3 * nv);
+  for (let f = 0, n = 3 * nf; f < n; f += 3) {
+    const i0 = 3 * idx[f], i1 = 3 * idx[f + 1], i2 = 3 * idx[f + 2];
+    const x0 = p[i0], y0 = p[i0 + 1], z0 = p[i0 + 2];
+    const ux = p[i1] - x0, uy = p[i1 + 1] - y0, uz = p[i1 + 2] - z0;
+    const wx = p[i2] - x0, wy = p[i2 + 1] - y0, wz = p[i2 + 2] - z0;
+    // Products below 2^42: exact in f64, as their differences.
+    const nx = uy * wz - uz * wy, ny = uz * wx - ux * wz, nz = ux * wy - uy * wx;
+    sums[i0] += nx;
+    sums[i0 + 1] += ny;
+    sums[i0 + 2] += nz;
+    sums[i1] += nx;
+    sums[i1 + 1] += ny;
+    sums[i1 + 2] += nz;
+    sums[i2] += nx;
+    sums[i2 + 1] += ny;
+    sums[i2 + 2] += nz;
+  }
+  const T = r.T, b = r.b, end = r.end, blen = b.length;
+  let x = r.x, pos = r.pos, buf = r.buf, avail = r.avail, rp = r.rp;
+  for (let v = 0; v < nv; v++) {
+    const sx = sums[3 * v], sy = sums[3 * v + 1], sz = sums[3 * v + 2];
+    const l1 = Math.abs(sx) + Math.abs(sy) + Math.abs(sz);
+    let q0 = 0, q1 = 0;
+    if (l1 !== 0) {
+      let px = sx / l1, py = sy / l1;
+      if (sz < 0) {
+        const tx = (1 - Math.abs(py)) * (px >= 0 ? 1 : -1);
+        py = (1 - Math.abs(px)) * (py >= 0 ? 1 : -1);
+        px = tx;
+      }
+      q0 = Math.floor(px * S + 0.5);
+      q1 = Math.floor(py * S + 0.5);
+    }
+    const al = border[v] ? A_NORMAL_BORDER : A_NORMAL, tb = al << PROB_BITS;
+    {
+      // A signed value of alphabet al, as in positions3, added to coordinate 0.
+      const t = T[tb | (x & SLOT_MASK)];
+      x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+      if (x >>> 23 === 0) {
+        if (pos >= end) throw r.ended();
+        x = (x << 8) | b[pos++];
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+        }
+      }
+      let u = t & 0xff;
+      if (u >= 4) {
+        if (u < 52) {
+          const j = u - 4, n = (j >> 1) + 1;
+          while (avail < n) {
+            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
+            rp++;
+            avail += 8;
+          }
+          avail -= n;
+          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
+          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+        } else if (u < BUCKETS) {
+          Object.assign(r, { buf, avail, rp });
+          u = r.rest(u);
+          ({ buf, avail, rp } = r);
+        } else {
+          throw r.notValue(u, al, pos);
+        }
+      }
+      q0 += (u >>> 1) ^ ((u << 31) >> 31);
+      if (q0 > S || q0 < -S) throw r.error(`normal ${v} exceeds the ${nb}-bit scale`, pos);
+    }
+    {
+      // A signed value of alphabet al, as in positions3, added to coordinate 1.
+      const t = T[tb | (x & SLOT_MASK)];
+      x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
+      if (x >>> 23 === 0) {
+        if (pos >= end) throw r.ended();
+        x = (x << 8) | b[pos++];
+        if (x >>> 23 === 0) {
+          if (pos >= end) throw r.ended();
+          x = (x << 8) | b[pos++];
+        }
+      }
+      let u = t & 0xff;
+      if (u >= 4) {
+        if (u < 52) {
+          const j = u - 4, n = (j >> 1) + 1;
+          while (avail < n) {
+            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
+            rp++;
+            avail += 8;
+          }
+          avail -= n;
+          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
+          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+        } else if (u < BUCKETS) {
+          Object.assign(r, { buf, avail, rp });
+          u = r.rest(u);
+          ({ buf, avail, rp } = r);
+        } else {
+          throw r.notValue(u, al, pos);
+        }
+      }
+      q1 += (u >>> 1) ^ ((u << 31) >> 31);
+      if (q1 > S || q1 < -S) throw r.error(`normal ${v} exceeds the ${nb}-bit scale`, pos);
+    }
+    const v3 = 3 * v;
+    if (memo) {
+      const m = 3 * ((q1 + S) * side + q0 + S);
+      if (memo[m] !== memo[m]) octaDecode(q0, q1, memo, m, S);
+      out[v3] = memo[m];
+      out[v3 + 1] = memo[m + 1];
+      out[v3 + 2] = memo[m + 2];
+    } else {
+      octaDecode(q0, q1, out, v3, S);
+    }
+  }
+  Object.assign(r, { x, pos, buf, avail, rp });
+}
+
+/** Colours (§5.6): YCoCg-R at `cb` bits, predicted as positions are, as RGBA bytes into `out`. */
+function colors3(r, nv, cb, out) {
+  const { preds, ys } = W3;
+  const m = 2 ** cb - 1;
+  const value = new Uint8Array(m + 1);
+  for (let q = 0; q <= m; q++) value[q] = Math.floor((q * 255 + (m >> 1)) / m);
+  for (let v = 0; v < nv; v++) {
+    const c = preds[3 * v + 2], pa = preds[3 * v];
+    let y0 = 0, y1 = 0, y2 = 0, y3 = 0;
+    if (c >= 0) {
+      const a4 = 4 * pa, b4 = 4 * preds[3 * v + 1], c4 = 4 * c;
+      y0 = Math.min(Math.max(ys[a4] + ys[b4] - ys[c4], -m), m);
+      y1 = Math.min(Math.max(ys[a4 + 1] + ys[b4 + 1] - ys[c4 + 1], -m), m);
+      y2 = Math.min(Math.max(ys[a4 + 2] + ys[b4 + 2] - ys[c4 + 2], -m), m);
+      y3 = Math.min(Math.max(ys[a4 + 3] + ys[b4 + 3] - ys[c4 + 3], -m), m);
+    } else if (pa >= 0) {
+      const u4 = 4 * pa;
+      y0 = ys[u4];
+      y1 = ys[u4 + 1];
+      y2 = ys[u4 + 2];
+      y3 = ys[u4 + 3];
+    }
+    y0 += r.signed(A_COLOR_Y);
+    y1 += r.signed(A_COLOR_C);
+    y2 += r.signed(A_COLOR_C);
+    y3 += r.signed(A_COLOR_A);
+    // Co and Cg first, so that the shifts below act on small integers.
+    if (!(Math.abs(y1) <= m && Math.abs(y2) <= m)) throw r.error(`colour of vertex ${v} beyond ${cb} bits`);
+    const t = y0 - (y2 >> 1), g = y2 + t, bl = t - (y1 >> 1), rd = bl + y1;
+    if (!(rd >= 0 && rd <= m && g >= 0 && g <= m && bl >= 0 && bl <= m && y3 >= 0 && y3 <= m)) throw r.error(`colour of vertex ${v} beyond ${cb} bits`);
+    const v4 = 4 * v;
+    ys[v4] = y0;
+    ys[v4 + 1] = y1;
+    ys[v4 + 2] = y2;
+    ys[v4 + 3] = y3;
+    out[v4] = value[rd];
+    out[v4 + 1] = value[g];
+    out[v4 + 2] = value[bl];
+    out[v4 + 3] = value[y3];
+  }
+}
+
+/** UVs (§5.7): steps of 2^−uvBits predicted as colours are, as f32 into `out`. */
+function uvs3(r, nv, uvBits, out) {
+  const { preds, uvq } = W3;
+  const lim = UV_LIMIT - 1, unit = 2 ** uvBits;
+  for (let v = 0; v < nv; v++) {
+    const c = preds[3 * v + 2], pa = preds[3 * v];
+    let u0 = 0, u1 = 0;
+    if (c >= 0) {
+      const a2 = 2 * pa, b2 = 2 * preds[3 * v + 1], c2 = 2 * c;
+      u0 = Math.min(Math.max(uvq[a2] + uvq[b2] - uvq[c2], -lim), lim);
+      u1 = Math.min(Math.max(uvq[a2 + 1] + uvq[b2 + 1] - uvq[c2 + 1], -lim), lim);
+    } else if (pa >= 0) {
+      u0 = uvq[2 * pa];
+      u1 = uvq[2 * pa + 1];
+    }
+    u0 += r.signed(A_UV);
+    u1 += r.signed(A_UV);
+    if (!(Math.abs(u0) < UV_LIMIT && Math.abs(u1) < UV_LIMIT)) throw r.error(`UV ${v} exceeds ±2^30 steps`);
+    uvq[2 * v] = u0;
+    uvq[2 * v + 1] = u1;
+    out[2 * v] = u0 / unit;
+    out[2 * v + 1] = u1 / unit;
+  }
+}
+
+/**
+ * Check and decode node i's format-3 payload (strata-v3.md §5): its size and CRC against the node
+ * table, then header, connectivity, positions, normals, colours and UVs, and the ends of the
+ * symbol stream and the raw bits. Clusters come back as face ranges only.
+ */
+function decodeNode3(s, i, b, opts) {
+  const at = s.offset[i], size = s.size[i], geos = s.skeletonEnd;
+  if (b.length !== size) throw chunkFail(at, 'GEOS', geos, `node ${i}'s geometry is ${b.length} bytes, its record says ${size}`, i);
+  const actual = crc32(b, 0, size);
+  if (actual !== s.crc[i]) throw chunkFail(at, 'GEOS', geos, `node ${i}'s geometry: CRC ${hex(actual)}, node table ${hex(s.crc[i])}`, i);
+  const fail = (o, msg) => chunkFail(at + o, 'GEOS', geos, `node ${i}'s geometry: ${msg}`, i);
+  const h = s.header, attrs = h.attributes, code = s.code;
+  const nf = s.faces[i], nv = s.vertices[i], level = s.level[i];
+  // The symbol stream's length, LEB128 (§5.1).
+  let len = 0, o = 0;
+  for (;;) {
+    if (o >= b.length) throw fail(o, "the payload ends in its symbol stream's length");
+    if (o === 9) throw fail(o, "the symbol stream's length runs past 10 bytes");
+    const x = b[o];
+    len += (x & 0x7f) * 2 ** (7 * o);
+    o++;
+    if (!(x & 0x80)) break;
+  }
+  const end = o + len;
+  if (!(end <= b.length)) throw fail(0, `a symbol stream of ${len} bytes runs past the payload's ${b.length}`);
+  // Each face takes a symbol, and a stream of L bytes holds at most 353·(L + 4): bounded work.
+  if ((nf > 0 && nv === 0) || nv > 3 * nf || nf > SYMBOLS_PER_BYTE * (len + 4)) throw fail(0, `${nf} faces and ${nv} vertices cannot fit in ${b.length} bytes`);
+  const r = new Payload(b, code.table, o, end, fail);
+  const bits = h.grid.bits;
+
+  // Header (§5.2): lattice shift, UV bits, material ranges, clusters; the runs between them.
+  let shift = 0, uvBits = 0;
+  if (level > 0) {
+    shift = r.sym(A_SHIFT);
+    if (shift >= bits) throw r.error(`lattice shift ${shift} on a ${bits}-bit grid`);
+  }
+  if (attrs.uvs) {
+    uvBits = r.value(A_COUNT);
+    if (!(uvBits >= 1 && uvBits <= 24)) throw r.error(`UV bits ${uvBits} (1..=24)`);
+  }
+  const ranges = r.value(A_COUNT) + 1;
+  if (ranges > Math.max(nf, 1)) throw r.error(`${ranges} material ranges for ${nf} faces`);
+  const materialRanges = [];
+  const cuts = [];
+  for (let k = 0, first = 0; k < ranges; k++) {
+    const material = r.value(A_COUNT);
+    if (material >= h.materials) throw r.error(`material ${material} of ${h.materials}`);
+    const faces = k + 1 === ranges ? nf - first : r.value(A_COUNT) + 1;
+    if (first + faces > nf || faces === 0) throw r.error(`material ranges cover more than ${nf} faces`);
+    materialRanges.push([material, 3 * first, 3 * faces]);
+    cuts.push(first);
+    first += faces;
+  }
+  const clusters = [];
+  if (level === 0) {
+    const count = r.value(A_COUNT) + 1;
+    if (count > Math.max(nf, 1)) throw r.error(`${count} clusters for ${nf} faces`);
+    for (let k = 0, covered = 0; k < count; k++) {
+      const faces = k + 1 === count ? nf - covered : r.value(A_COUNT) + 1;
+      if (covered + faces > nf || faces === 0) throw r.error(`clusters cover more than ${nf} faces`);
+      clusters.push({ firstFace: covered, faceCount: faces });
+      cuts.push(covered);
+      covered += faces;
+    }
+  }
+  cuts.push(nf);
+  const sorted = Float64Array.from(cuts).sort();
+  const runs = [sorted[0]];
+  for (let k = 1; k < sorted.length; k++) if (sorted[k] !== sorted[k - 1]) runs.push(sorted[k]);
+
+  const indices = connectivity3(r, runs, nf, nv, nf <= 16 * len + 256 ? new Uint32Array(3 * nf) : null);
+  const positions = new Float32Array(3 * nv);
+  const lo = opts.localOrigin;
+  const local = lo ? new Float32Array(3 * nv) : null;
+  const mid = [s.boxMid[3 * i], s.boxMid[3 * i + 1], s.boxMid[3 * i + 2]];
+  positions3(r, nv, shift, bits, mid, h.grid, positions, local, lo);
+  let normals = null, colors = null, uvs = null;
+  if (attrs.normals) normals3(r, nv, nf, indices, code, (normals = new Float32Array(3 * nv)));
+  if (attrs.colors) colors3(r, nv, code.colorBits, (colors = new Uint8Array(4 * nv)));
+  if (attrs.uvs) uvs3(r, nv, uvBits, (uvs = new Float32Array(2 * nv)));
+  // The ends (§4.1, §4.4): every byte of the stream read, the state back at RANS_L, the raw bits
+  // ending in the payload's last byte.
+  if (r.pos !== end) throw fail(end, `${end - r.pos} bytes after the symbol stream's end`);
+  if (r.x !== RANS_L) throw fail(end, `the symbol stream ends in state 0x${(r.x >>> 0).toString(16)}, not 0x${RANS_L.toString(16)}`);
+  const used = Math.ceil(((r.rp - end) * 8 - r.avail) / 8);
+  if (used !== b.length - end) throw fail(b.length, `raw bits end at byte ${end + used} of ${b.length}`);
+  const geometry = { positions, normals, uvs, colors, indices, materialRanges, clusters };
+  if (local) geometry.local = local;
   return geometry;
 }

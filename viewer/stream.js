@@ -96,7 +96,8 @@ export class Streamer {
    * Open `source` (source.js): read the skeleton and the top level, check and decode the top two
    * levels' records and the top level's geometry (the rest of the node table by the second update).
    * `options`: `prefix` (first read, bytes), `budget` (resident bytes), `maxInFlight`,
-   * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
+   * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `sliceMs` (the longest run of node decoding
+   * before a range's remaining nodes wait for the next task), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
    * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`; for images, `maps` (the map kinds
    * drawn, whose images are read: `['baseColor']`), `onImage(image, level, fileBytes, mime)` → a handle or a promise of
    * one (the renderer's texture; a rejection leaves that level out), `onImageEvict(image, level, handle)`.
@@ -146,6 +147,7 @@ export class Streamer {
     this.maxInFlight = options.maxInFlight ?? 4;
     this.maxRequestBytes = options.maxRequestBytes ?? 1 << 20;
     this.maxGapBytes = options.maxGapBytes ?? 16384;
+    this.sliceMs = options.sliceMs ?? 8;
     this.onLoad = options.onLoad ?? (() => null);
     this.onEvict = options.onEvict ?? (() => {});
     this.onChange = options.onChange ?? (() => {});
@@ -195,7 +197,8 @@ export class Streamer {
   /** Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only leaves the order without them (planesError says why). */
   async readPlanes() {
     const at = planesOffset(this.skeleton), end = this.source.length;
-    if (!(end >= at + 16) || this.skeleton.minor < 3) {
+    // Planes came with format 2.3; every format-3 file may have them.
+    if (!(end >= at + 16) || (this.skeleton.major < 3 && this.skeleton.minor < 3)) {
       this.planes = 'none';
       return;
     }
@@ -480,12 +483,21 @@ export class Streamer {
       const start = s.offset[first];
       this.source
         .read(start, s.offset[last] + s.size[last])
-        .then((bytes) => {
-          if (this.closed) return;
+        .then(async (bytes) => {
+          let slice = performance.now();
           for (const i of nodes) {
+            if (this.closed) return;
             const at = s.offset[i] - start;
             if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
             this.insert(i, bytes.subarray(at, at + s.size[i]));
+            // A range holds up to maxRequestBytes of nodes (format 3: some 300k faces a megabyte,
+            // tens of ms to decode): past sliceMs, let a frame draw what has come.
+            if (performance.now() - slice > this.sliceMs) {
+              this.evict();
+              this.onChange();
+              await new Promise((r) => setTimeout(r, 0));
+              slice = performance.now();
+            }
           }
           this.failures = 0;
           this.evict();

@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, FormatError, crc32, openingRange, completeSkeleton, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
+import { MAJOR, MINOR, NEWEST_MAJOR, MINOR3, FormatError, crc32, openingRange, completeSkeleton, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -122,15 +122,15 @@ function dump(sk, geoms, images = [], planes = { starts: [], entries: [] }) {
         colors: rows(g.colors, 4),
         indices: Array.from(g.indices),
         material_ranges: g.materialRanges,
-        clusters: g.clusters.map((c) => ({
-          cone: { axis: c.axis, half_angle: c.halfAngle },
-          center: c.center,
-          radius: c.radius,
-          first_face: c.firstFace,
-          face_count: c.faceCount,
-        })),
+        // Format 3 stores a cluster's faces only.
+        clusters: g.clusters.map((c) =>
+          sk.major >= 3
+            ? { first_face: c.firstFace, face_count: c.faceCount }
+            : { cone: { axis: c.axis, half_angle: c.halfAngle }, center: c.center, radius: c.radius, first_face: c.firstFace, face_count: c.faceCount },
+        ),
       },
     })),
+    ...(sk.code ? { code: { normal_bits: sk.code.normalBits, color_bits: sk.code.colorBits, freqs: sk.code.freqs } } : {}),
     ...(planes.starts.length
       ? {
           planes: planes.starts.slice(0, -1).flatMap((a, p) =>
@@ -228,7 +228,12 @@ function parseChunks(b, start, end) {
 }
 
 function parseTree(bytes) {
-  return { major: le(bytes).getUint16(8, true), minor: le(bytes).getUint16(10, true), chunks: parseChunks(bytes, 16, bytes.length) };
+  const tree = { major: le(bytes).getUint16(8, true), minor: le(bytes).getUint16(10, true), chunks: parseChunks(bytes, 16, bytes.length) };
+  // Format 3: the node payloads' sizes, to cut GEOS's payload into them when resealing.
+  const skel = find(tree.chunks, 'SKEL');
+  const node = skel && find(skel.subs, 'NODE');
+  if (tree.major >= 3 && node) tree.payloadSizes = Array.from({ length: node.payload.length / 56 }, (_, i) => le(node.payload).getUint32(56 * i + 48, true));
+  return tree;
 }
 
 function concat(parts) {
@@ -250,14 +255,25 @@ function chunkBytes(id, flags, payload) {
 }
 
 const subsPayload = (subs) => concat(subs.map((s) => chunkBytes(s.id, s.flags, s.payload)));
+
+/** GEOS's payload cut into node payloads of `sizes` bytes (what is left over, none). */
+function cutPayloads(payload, sizes) {
+  const out = [];
+  let o = 0;
+  for (const n of sizes) out.push(payload.subarray(Math.min(o, payload.length), Math.min((o += n), payload.length)));
+  return out;
+}
 const find = (list, id) => list.find((c) => c.id === id);
 
 /**
  * The file of `tree`: every CRC recomputed, each node's size and CRC in the node table set to its
- * GEOM chunk's; with `totals`, also LEVL's faces, vertices and bytes and HEAD's file size.
+ * GEOM chunk's (format 3: its payload's, GEOS's payload cut by the sizes the file had); with
+ * `totals`, also LEVL's faces, vertices and bytes and HEAD's file size.
  */
 function serialize(tree, { totals = false } = {}) {
-  const geoms = tree.chunks.filter((c) => c.id === 'GEOM').map((c) => subsPayload(c.subs));
+  const geos = find(tree.chunks, 'GEOS');
+  const v3 = !!(geos && tree.payloadSizes);
+  const geoms = v3 ? cutPayloads(geos.payload, tree.payloadSizes) : tree.chunks.filter((c) => c.id === 'GEOM').map((c) => subsPayload(c.subs));
   const skel = find(tree.chunks, 'SKEL');
   if (skel) {
     const node = find(skel.subs, 'NODE');
@@ -265,7 +281,7 @@ function serialize(tree, { totals = false } = {}) {
       const d = le(node.payload);
       geoms.forEach((g, i) => {
         if (56 * i + 56 > node.payload.length) return;
-        d.setUint32(56 * i + 48, 20 + g.length, true);
+        d.setUint32(56 * i + 48, v3 ? g.length : 20 + g.length, true);
         d.setUint32(56 * i + 52, crc32(g), true);
       });
       const levl = find(skel.subs, 'LEVL');
@@ -278,7 +294,7 @@ function serialize(tree, { totals = false } = {}) {
             f += d.getUint32(56 * i + 40, true);
             v += d.getUint32(56 * i + 44, true);
             const s = d.getUint32(56 * i + 48, true);
-            by += s + pad8(s);
+            by += v3 ? s : s + pad8(s);
           }
           l.setBigUint64(r + 8, BigInt(f), true);
           l.setBigUint64(r + 16, BigInt(v), true);
@@ -396,9 +412,17 @@ test('openingRange on every prefix: needs grow, then the true skeleton and top-l
     const L = levl.byteLength / 32;
     const topNodes = levl.getUint32(32 * (L - 1) + 4, true);
     const geoms = tree.chunks.filter((c) => c.id === 'GEOM');
-    const sk = { skeletonEnd: geoms[0].at };
-    const after = tree.chunks.find((c) => c.id !== 'GEOM' && c.at > geoms[geoms.length - 1].at);
-    const topEnd = topNodes < geoms.length ? geoms[topNodes].at : after ? after.at : bytes.length;
+    const geos = find(tree.chunks, 'GEOS');
+    let sk, topEnd;
+    if (geos) {
+      // Format 3: the top level's payloads from the first byte of GEOS's payload.
+      sk = { skeletonEnd: geos.at };
+      topEnd = geos.at + 16 + tree.payloadSizes.slice(0, topNodes).reduce((a, n) => a + n, 0);
+    } else {
+      sk = { skeletonEnd: geoms[0].at };
+      const after = tree.chunks.find((c) => c.id !== 'GEOM' && c.at > geoms[geoms.length - 1].at);
+      topEnd = topNodes < geoms.length ? geoms[topNodes].at : after ? after.at : bytes.length;
+    }
     for (const fileLength of [bytes.length, undefined]) {
       let need = 0, resolvedAt = -1, topAt = -1;
       for (let p = 0; p <= bytes.length; p++) {
@@ -441,7 +465,8 @@ test('openingRange refuses a bad prologue, an unsupported major version and a ba
     le(b).setUint16(10, minor, true);
     le(b).setUint32(12, crc32(b, 0, 12), true);
   };
-  bad(version(3, 1), ['3.1', `${MAJOR}.${MINOR}`]);
+  bad(version(4, 0), ['4.0', 'newer', `${NEWEST_MAJOR}.${MINOR3}`]);
+  bad(version(65535, 0), ['65535.0', 'newer']);
   bad(version(1, 0), ['1.0', 'not supported']);
   bad((b) => (b[12] ^= 1), ['CRC']);
   bad((b) => (b[16] = 0x68), ['HEAD']);
@@ -464,11 +489,19 @@ test('openingRange refuses a bad prologue, an unsupported major version and a ba
 /**
  * The bytes no check of a reader covers: the flags of top-level chunks of kinds that define none
  * (ignored, §4.3; a sub-chunk's frame lies inside its parent's CRC), the padding after each GEOM
- * chunk (a node is read as its `size` bytes, padding excluded) and after ORDR.
+ * chunk (a node is read as its `size` bytes, padding excluded) and after ORDR; in format 3, GEOS's
+ * frame, CRC and padding (a reader checks each node's payload against the node table's CRC; the
+ * GEOS frame and CRC are `strata verify`'s, strata-v3.md §1).
  */
 function uncheckedBytes(bytes) {
   const out = new Set();
   for (const c of parseTree(bytes).chunks) {
+    if (c.id === 'GEOS') {
+      const e = c.at + 16 + c.payload.length;
+      for (let k = c.at; k < c.at + 16; k++) out.add(k);
+      for (let k = e; k < e + 4 + pad8(e + 4); k++) out.add(k);
+      continue;
+    }
     if (c.id === 'ORDR') {
       // Its flags are the index width (checked); the padding after it, at the end of the file, is
       // read by no reader.
@@ -484,8 +517,8 @@ function uncheckedBytes(bytes) {
   return out;
 }
 
-test('every byte of sphere.strata flipped: refused with a FormatError, or read only where no check applies', (t) => {
-  const bytes = read('sphere.strata');
+for (const file of ['sphere.strata', 'sphere-v3.strata']) test(`every byte of ${file} flipped: refused with a FormatError, or read only where no check applies`, (t) => {
+  const bytes = read(file);
   const free = uncheckedBytes(bytes);
   const original = JSON.stringify(dump(...Object.values(decodeAll(bytes))));
   const accepted = { 0xff: [], 0x01: [] };
@@ -501,10 +534,10 @@ test('every byte of sphere.strata flipped: refused with a FormatError, or read o
     }
   }
   for (const x of [0xff, 0x01]) assert.deepEqual(accepted[x], [...free].sort((p, q) => p - q), `^0x${x.toString(16)}: exactly the unchecked bytes are read`);
-  t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, and GEOM padding); every other flip refused`);
+  t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, GEOM padding; GEOS's frame, CRC and padding); every other flip refused`);
 });
 
-for (const file of ['sphere.strata', 'terrain.strata', 'textured.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
+for (const file of ['sphere.strata', 'terrain.strata', 'textured.strata', 'sphere-v3.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
   const bytes = read(file);
   const tree = parseTree(bytes);
   const spots = leaves(tree);
@@ -772,6 +805,248 @@ test('the worked example of spec §9 and plane.strata decode to the values the s
   assert.deepEqual([...g.local], [-0.5, -0.5, 0, 0.5, -0.5, 0, 0.5, 0.5, 0, -0.5, 0.5, 0]);
 });
 
+// ---------------------------------------------------------------------------------------------
+// Format 3 (format-spec/strata-v3.md)
+
+/**
+ * A value of strata-v3.md §4.3 as (alphabet, symbol) and raw bits: values 0–3 are symbols; a value
+ * of b ≥ 3 bits is symbol 4 + 2(b − 3) + its bit below the leading one, its b − 2 low bits raw.
+ */
+function putValue(out, alphabet, u) {
+  if (u < 4) return out.symbols.push([alphabet, u]);
+  const b = 32 - Math.clz32(u);
+  out.symbols.push([alphabet, 4 + 2 * (b - 3) + ((u >>> (b - 2)) & 1)]);
+  for (let k = b - 3; k >= 0; k--) out.bits.push((u >>> k) & 1);
+}
+const putSigned = (out, alphabet, v) => putValue(out, alphabet, ((v << 1) ^ (v >> 31)) >>> 0);
+
+/**
+ * rANS as §4.1 specifies it, written here from the spec: symbols last to first from the state
+ * 2^23, bytes pushed out low first while the state is at least (2^23 >> 11 << 8)·f; then the final
+ * state, and everything reversed, so that a reader finds the state first (little-endian).
+ */
+function ransEncode(symbols, tables) {
+  let x = 2 ** 23;
+  const out = [];
+  for (let k = symbols.length - 1; k >= 0; k--) {
+    const [a, s] = symbols[k];
+    const f = tables[a][s], c = tables[a].slice(0, s).reduce((p, q) => p + q, 0);
+    assert.ok(f > 0, `symbol ${s} of alphabet ${a} has no frequency`);
+    while (x >= ((2 ** 23 / 2048) * 256) * f) {
+      out.push(x % 256);
+      x = Math.floor(x / 256);
+    }
+    x = Math.floor(x / f) * 2048 + (x % f) + c;
+  }
+  out.push((x >>> 24) & 255, (x >>> 16) & 255, (x >>> 8) & 255, x & 255);
+  return out.reverse();
+}
+
+/** A node payload (§5.1): the stream's length (LEB128), the stream, the raw bits (MSB first, zero-padded). */
+function payloadBytes(stream, bits) {
+  const out = [];
+  for (let n = stream.length; ; ) {
+    const b = n & 0x7f;
+    n >>>= 7;
+    out.push(n > 0 ? b | 0x80 : b);
+    if (n === 0) break;
+  }
+  out.push(...stream);
+  const raw = new Array(Math.ceil(bits.length / 8)).fill(0);
+  bits.forEach((bit, k) => (raw[k >> 3] |= bit << (7 - (k & 7))));
+  return new Uint8Array([...out, ...raw]);
+}
+
+/** A CODE payload (§3): normal bits, colour bits, reserved, the alphabet count, each alphabet's frequencies. */
+function codeBytes(nb, cb, freqs, count = freqs.length) {
+  const out = [nb, cb, 0, 0, count & 255, (count >>> 8) & 255, 0, 0];
+  for (const f of freqs) out.push(f.length & 255, f.length >>> 8, ...f.flatMap((x) => [x & 255, x >>> 8]));
+  return new Uint8Array(out);
+}
+
+/**
+ * The unit square of strata-v2.md §9 in format 3 (strata-v3.md §7; tests/format3_handmade.rs
+ * builds the same file in Rust): the example of v2 §9 with major 3, a CODE chunk of this test's
+ * tables, and its GEOM chunk replaced by a GEOS chunk of a payload encoded here from the spec.
+ */
+function v3Example() {
+  const [COUNT, START, CORNER, CONN_FIRST, CONN_AFTER_BOUNDARY, POS_JUMP, POS_BORDER_20] = [11, 8, 9, 7, 5, 13, 42 + 20];
+  const tables = Array.from({ length: 64 }, () => []);
+  tables[COUNT] = tables[START] = tables[CORNER] = tables[POS_BORDER_20] = [2016, 32];
+  tables[CONN_FIRST] = tables[CONN_AFTER_BOUNDARY] = [1024, 0, 0, 0, 0, 1024];
+  tables[POS_JUMP] = Array.from({ length: 41 }, (_, s) => ({ 0: 1000, 37: 524, 40: 524 })[s] ?? 0);
+  const out = { symbols: [], bits: [] };
+  putValue(out, COUNT, 0); // one material range
+  putValue(out, COUNT, 0); // material 0
+  putValue(out, COUNT, 0); // one cluster
+  putValue(out, START, 0); // a new triangle
+  for (let k = 0; k < 3; k++) putValue(out, CORNER, 0); // new vertices 0, 1, 2
+  out.symbols.push([CONN_FIRST, 5], [CONN_AFTER_BOUNDARY, 5]); // gates 0→1, 1→2: BOUNDARY
+  out.symbols.push([CONN_AFTER_BOUNDARY, 0]); // gate 2→0: VERTEX 3, triangle (0, 2, 3)
+  // Vertex 0 from the middle of the box (2^18 on x and y), 1 from 0, 2 from 1 (jumps); 3 by the
+  // parallelogram 2 + 0 − 1 across the gate, a border vertex of a triangle 2^19 steps wide.
+  const [one, half] = [2 ** 19, 2 ** 18];
+  const residuals = [[[-half, -half, 0], POS_JUMP], [[one, 0, 0], POS_JUMP], [[0, one, 0], POS_JUMP], [[0, 0, 0], POS_BORDER_20]];
+  for (const [r, alphabet] of residuals) for (const v of r) putSigned(out, alphabet, v);
+  const payload = payloadBytes(ransEncode(out.symbols, tables), out.bits);
+  const tree = parseTree(specExample());
+  tree.major = 3;
+  tree.minor = 0;
+  const skel = find(tree.chunks, 'SKEL');
+  skel.subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
+  tree.chunks = tree.chunks.filter((c) => c.id !== 'GEOM');
+  tree.chunks.push({ id: 'GEOS', flags: 0, payload });
+  tree.payloadSizes = [payload.length];
+  return { bytes: serialize(tree, { totals: true }), payload };
+}
+
+test('the example of strata-v3.md §7, encoded here from the spec, decodes to the unit square; damage to its payload is refused', (t) => {
+  const { bytes, payload } = v3Example();
+  const { sk, geoms } = decodeAll(bytes);
+  assert.deepEqual([sk.major, sk.minor], [3, 0]);
+  const g = geoms[0];
+  assert.deepEqual([...g.positions], [0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0]);
+  assert.deepEqual([...g.indices], [0, 1, 2, 0, 2, 3]);
+  assert.deepEqual(g.materialRanges, [[0, 0, 6]]);
+  assert.deepEqual(g.clusters, [{ firstFace: 0, faceCount: 2 }]);
+  assert.deepEqual([g.normals, g.uvs, g.colors], [null, null, null]);
+  assert.deepEqual([sk.offset[0], sk.size[0]], [sk.skeletonEnd + 16, payload.length]);
+  assert.equal(planesOffset(sk), bytes.length);
+  // Every bit of the payload flipped, its CRC in the node table and every checksum recomputed:
+  // the codec's checks refuse it, or it decodes to a sound node (values no check can tell).
+  const tree = parseTree(bytes);
+  const geos = find(tree.chunks, 'GEOS');
+  let refusedCount = 0, readCount = 0;
+  for (let k = 0; k < payload.length; k++) {
+    for (let bit = 0; bit < 8; bit++) {
+      geos.payload[k] ^= 1 << bit;
+      const b = serialize(tree);
+      geos.payload[k] ^= 1 << bit;
+      if (refused(b, `payload byte ${k} bit ${bit}`)) refusedCount++;
+      else {
+        readCount++;
+        const d = decodeAll(b).geoms[0];
+        assert.ok(d.positions.length === 12 && d.indices.every((i) => i < 4), `payload byte ${k} bit ${bit}`);
+      }
+    }
+  }
+  t.diagnostic(`${payload.length} payload bytes × 8 bits flipped and resealed: ${refusedCount} refused, ${readCount} read (raw bits of residuals the codec cannot check)`);
+  assert.ok(refusedCount > readCount);
+});
+
+test('format 3: the CODE chunk is required and checked as strata checks it; a 2.x file ignores one', () => {
+  const bytes = read('sphere-v3.strata');
+  const tree = parseTree(bytes);
+  const { freqs } = decodeSkeleton(bytes, bytes.length).code;
+  const variant = (edit) => {
+    const v = clone(tree);
+    edit(v, find(v.chunks, 'SKEL').subs);
+    return serialize(v, { totals: true });
+  };
+  const setCode = (subs, payload) => (find(subs, 'CODE').payload = payload);
+  const refusedWith = (b, words) =>
+    assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}, not ${words}`));
+  const withFreqs = (k, f) => freqs.map((x, j) => (j === k ? f : x));
+  refusedWith(variant((v, subs) => subs.splice(subs.findIndex((c) => c.id === 'CODE'), 1)), ['SKEL', 'has no CODE']);
+  refusedWith(variant((v, subs) => subs.push({ ...find(subs, 'CODE') })), ['SKEL', 'second CODE']);
+  for (const nb of [0, 1, 17]) refusedWith(variant((v, subs) => setCode(subs, codeBytes(nb, 8, freqs))), ['CODE', `normal bits ${nb}`]);
+  for (const cb of [0, 9]) refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, cb, freqs))), ['CODE', `colour bits ${cb}`]);
+  refusedWith(variant((v, subs) => (find(subs, 'CODE').payload[3] = 1)), ['CODE', 'reserved']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, freqs, 63))), ['CODE', '63 alphabets']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, freqs.slice(0, 63), 64))), ['CODE', 'ends early']);
+  refusedWith(variant((v, subs) => setCode(subs, new Uint8Array([...codeBytes(8, 8, freqs), 0, 0]))), ['CODE', '2 bytes after the last alphabet']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, withFreqs(11, [2016, 31])))), ['CODE', 'alphabet 11 (count)', 'add up to 2047']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, withFreqs(12, [2017, 31])))), ['CODE', 'alphabet 12 (shift)', 'more than 2016']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, withFreqs(30, [...new Array(256).fill(8), 0])))), ['CODE', 'alphabet 30 (pos/inner/10)', '257 symbols']);
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, withFreqs(13, [0, 0])))), ['CODE', 'alphabet 13 (pos/jump)', 'add up to 0']);
+  // An alphabet without symbols opens, but a node that needs it is refused.
+  refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, 8, withFreqs(11, [])))), ['node 0', 'alphabet count', 'not a value']);
+  // A file without normals has normal bits 0.
+  const plane = parseTree(read('plane-v3.strata'));
+  find(find(plane.chunks, 'SKEL').subs, 'CODE').payload[0] = 8;
+  refusedWith(serialize(plane), ['CODE', 'normal bits 8', 'has no normals']);
+  // A 2.x file's CODE chunk is no concern of its reader.
+  const v2 = parseTree(read('sphere.strata'));
+  find(v2.chunks, 'SKEL').subs.push({ ...find(find(tree.chunks, 'SKEL').subs, 'CODE') });
+  const b = serialize(v2, { totals: true });
+  const base = decodeAll(read('sphere.strata'));
+  const a = decodeAll(b);
+  assert.equal(a.sk.code, null);
+  assert.deepEqual(a.geoms, base.geoms);
+});
+
+test('format 3: versions, layout, hostile counts and damaged payloads are refused with a FormatError naming the node', () => {
+  const bytes = read('sphere-v3.strata');
+  const tree = parseTree(bytes);
+  const base = decodeAll(bytes);
+  const variant = (edit, totals = true) => {
+    const v = clone(tree);
+    edit(v);
+    return serialize(v, { totals });
+  };
+  const refusedWith = (b, words) =>
+    assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}, not ${words}`));
+  const head = (v) => find(v.chunks, 'HEAD').payload;
+  const node = (v) => le(find(find(v.chunks, 'SKEL').subs, 'NODE').payload);
+  // A newer minor of 3 reads as 3.0 does, with what it may add; 3.0 refuses the additions; 4.0 is refused.
+  const newer = (minor) => (v) => {
+    v.minor = minor;
+    const h = find(v.chunks, 'HEAD');
+    h.payload = concat([h.payload, new Uint8Array(8).fill(7)]);
+    le(h.payload).setUint32(40, le(h.payload).getUint32(40, true) | 0x100, true);
+  };
+  const n = decodeAll(variant(newer(MINOR3 + 1)));
+  assert.equal(`${n.sk.major}.${n.sk.minor}`, `3.${MINOR3 + 1}`);
+  assert.deepEqual(n.geoms, base.geoms);
+  refusedWith(variant(newer(MINOR3)), ['unknown attribute bits']);
+  refusedWith(variant((v) => (v.major = 4)), ['format version 4.0', 'newer']);
+  // GEOS before SKEL; a node of no bytes; a payload longer than its stream and raw bits.
+  refusedWith(variant((v) => v.chunks.splice(1, 0, find(v.chunks, 'GEOS'))), ['GEOS', 'expected the SKEL chunk']);
+  const sizes = tree.payloadSizes;
+  refusedWith(
+    variant((v) => {
+      find(v.chunks, 'GEOS').payload = find(v.chunks, 'GEOS').payload.slice(sizes[0]);
+      v.payloadSizes = [0, ...sizes.slice(1)];
+    }),
+    ['node 0', 'geometry 0 bytes'],
+  );
+  refusedWith(
+    variant((v) => {
+      const g = find(v.chunks, 'GEOS').payload;
+      find(v.chunks, 'GEOS').payload = concat([g.subarray(0, sizes[0]), new Uint8Array(1), g.subarray(sizes[0])]);
+      v.payloadSizes = [sizes[0] + 1, ...sizes.slice(1)];
+    }),
+    ['node 0', 'raw bits end at byte'],
+  );
+  // The stream's length: more than 10 bytes, or past the payload.
+  const payload0 = (edit) => (v) => {
+    const g = find(v.chunks, 'GEOS').payload;
+    const p = g.slice(0, sizes[0]);
+    edit(p);
+    g.set(p);
+  };
+  refusedWith(variant(payload0((p) => p.fill(0x80, 0, 10))), ['node 0', 'past 10 bytes']);
+  refusedWith(variant(payload0((p) => (p[0] = 0x7f))), ['node 0', 'runs past the payload']);
+  // Counts a payload cannot hold are refused before anything is allocated with them.
+  refusedWith(variant((v) => node(v).setUint32(40, 0xffffffff, true)), ['node 0', '4294967295 faces', 'cannot fit']);
+  refusedWith(variant((v) => node(v).setUint32(44, 3 * node(v).getUint32(40, true) + 1, true)), ['node 0', 'cannot fit']);
+  refusedWith(variant((v) => node(v).setUint32(44, node(v).getUint32(44, true) + 1, true)), ['node 0', 'the node record says']);
+  // A vertex off the node's box, decoded from a payload the codec accepts, is refused by the rules.
+  const damaged = read('refused-v3-damaged-payload.strata');
+  refusedWith(damaged, ['node 0', "outside the node's box"]);
+  // decodeNode with other bytes than the node's.
+  const sk = decodeSkeleton(bytes, bytes.length);
+  for (const [i, b] of [
+    [0, nodeBytes(sk, 0, bytes).subarray(1)],
+    [0, bytes.subarray(sk.offset[1], sk.offset[1] + sk.size[0])],
+    [0, new Uint8Array(0)],
+    [1, nodeBytes(sk, 0, bytes)],
+  ]) {
+    assert.throws(() => decodeNode(sk, i, b), (e) => (e instanceof FormatError && e.node === i && /GEOS/.test(e.message)) || assert.fail(e.message));
+  }
+  assert.ok(head(tree).length > 0);
+});
+
 test('opts.localOrigin keeps precision far from the origin', (t) => {
   // The sphere moved by 2^20 on every axis: the grid origin shifts (exactly, in f64), grid points stay.
   const far0 = 2 ** 20;
@@ -889,9 +1164,10 @@ test('files strata converts agree with `strata inspect --json`, and every node d
     if (!existsSync(CTHEAD)) t.diagnostic(`skipping the CT head: ${CTHEAD} not found`);
     else if (!RELEASE) t.diagnostic(`skipping the CT head: ${BIN} is not a release build`);
     else inputs.push(CTHEAD);
-    for (const input of inputs.filter(existsSync)) {
-      const out = join(dir, input.split('/').pop().replace(/\.\w+$/, '.strata'));
-      execFileSync(BIN, ['convert', '-q', input, out], { stdio: 'ignore' });
+    // Both formats, whatever convert's default: 2.x, and 3.0 with compressed node geometry.
+    for (const [input, version] of inputs.filter(existsSync).flatMap((f) => [[f, '2'], [f, '3']])) {
+      const out = join(dir, input.split('/').pop().replace(/\.\w+$/, `-v${version}.strata`));
+      execFileSync(BIN, ['convert', '-q', '--format-version', version, input, out], { stdio: 'ignore' });
       const bytes = new Uint8Array(readFileSync(out));
       let t0 = performance.now();
       const sk = decodeSkeleton(bytes, bytes.length);
@@ -900,7 +1176,8 @@ test('files strata converts agree with `strata inspect --json`, and every node d
       const r = openingRange(bytes.subarray(0, Math.min(bytes.length, 65536)), bytes.length);
       if (r.need === undefined) {
         assert.equal(r.skeletonEnd, sk.skeletonEnd);
-        if (r.topEnd !== undefined) assert.equal(r.topEnd, sk.skeletonEnd + sk.levels[sk.top()].bytes);
+        // The top level's nodes come first: from node 0's offset (format 3: inside GEOS).
+        if (r.topEnd !== undefined) assert.equal(r.topEnd, sk.offset[0] + sk.levels[sk.top()].bytes);
       }
       // Every node, three times: the best pass is reported (the first warms the JIT).
       let ms = Infinity, faces = 0;
@@ -919,12 +1196,12 @@ test('files strata converts agree with `strata inspect --json`, and every node d
       }
       const geomBytes = bytes.length - sk.skeletonEnd;
       t.diagnostic(
-        `${input.split('/').pop()}: ${bytes.length} bytes, ${sk.nodeCount} nodes, ${sk.levels.length} levels, ${faces} faces; ` +
+        `${input.split('/').pop()}, format ${sk.major}.${sk.minor}: ${bytes.length} bytes, ${sk.nodeCount} nodes, ${sk.levels.length} levels, ${faces} faces; ` +
           `skeleton ${sk.skeletonEnd} bytes in ${skelMs.toFixed(1)} ms; ` +
           `nodes in ${ms.toFixed(0)} ms: ${Math.round(sk.nodeCount / (ms / 1000))} nodes/s, ${(geomBytes / 1e6 / (ms / 1000)).toFixed(0)} MB/s, ` +
           `${((faces / 1e6) / (ms / 1000)).toFixed(1)} M faces/s`,
       );
-      if (input === CTHEAD) {
+      if (input === CTHEAD && version === '2') {
         t0 = performance.now();
         for (let k = 0; k < 5; k++) crc32(bytes);
         t.diagnostic(`crc32: ${((5 * bytes.length) / 1e6 / ((performance.now() - t0) / 1000)).toFixed(0)} MB/s`);

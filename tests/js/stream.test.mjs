@@ -64,9 +64,12 @@ function orbitCamera(s, k, n, distance) {
   return cam;
 }
 
+// Format 3 (strata-v3.md): the same fixtures with compressed node geometry.
+const V3 = ['--format-version', '3'];
+
 test('opening takes two round trips and reads no more than the skeleton and the top level', async () => {
-  for (const [name, mesh] of [['noisy_sphere', 'noisy_sphere.ply'], ['icosphere', 'icosphere.obj']]) {
-    const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/${mesh}`, [])));
+  for (const [name, mesh, args] of [['noisy_sphere', 'noisy_sphere.ply', []], ['icosphere', 'icosphere.obj', []], ['noisy_sphere_v3', 'noisy_sphere.ply', V3], ['icosphere_v3', 'icosphere.obj', V3]]) {
+    const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/${mesh}`, args)));
     const src = new SlowSource(bytes);
     const st = await Streamer.open(src);
     const s = st.skeleton;
@@ -78,13 +81,12 @@ test('opening takes two round trips and reads no more than the skeleton and the 
   }
 });
 
-test('a long orbit under a small budget keeps converging, within the cap on reads in flight', async (t) => {
-  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, [])));
+for (const [name, args, n] of [['noisy_sphere', [], 240], ['noisy_sphere_v3', V3, 80]]) test(`a long orbit under a small budget keeps converging, within the cap on reads in flight (${name})`, async (t) => {
+  const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/noisy_sphere.ply`, args)));
   const src = new SlowSource(bytes, 0);
   const budget = 1_500_000;
   const st = await Streamer.open(src, { budget, pixelError: 0.5, maxInFlight: 3 });
   let peakIdle = 0;
-  const n = 240;
   for (let k = 0; k < n; k++) {
     const camera = orbitCamera(st.skeleton, k, 60, 0.4 + 0.6 * Math.abs(Math.sin(k / 17)));
     await settle(st, camera);
@@ -96,9 +98,10 @@ test('a long orbit under a small budget keeps converging, within the cap on read
   t.diagnostic(`${n} cameras: ${src.requests} reads, ${src.bytes} bytes of ${bytes.length}; resident when idle at most ${peakIdle}, peak while loading ${st.peakResidentBytes} (budget ${budget})`);
 });
 
-test('what is drawn while loading is resident and a front: coarser where data is missing, nothing drawn twice', async () => {
-  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, [])));
-  const st = await Streamer.open(new SlowSource(bytes, 2), { pixelError: 0.5 });
+// Format 3 with sliceMs 0: every node of a range waits for its own task, frames drawn between them.
+for (const [name, args, opts] of [['noisy_sphere', [], {}], ['noisy_sphere_v3', V3, { sliceMs: 0 }]]) test(`what is drawn while loading is resident and a front: coarser where data is missing, nothing drawn twice (${name})`, async () => {
+  const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/noisy_sphere.ply`, args)));
+  const st = await Streamer.open(new SlowSource(bytes, 2), { pixelError: 0.5, ...opts });
   const s = st.skeleton;
   const near = orbitCamera(s, 0, 8, 0.35);
   const far = orbitCamera(s, 0, 8, 3);
@@ -123,7 +126,9 @@ test('what is drawn while loading is resident and a front: coarser where data is
 // Image levels (selection.md §4).
 
 const TEXTURED_VECTOR = `${root}/format-spec/vectors/textured.strata`;
+const TEXTURED_VECTOR_V3 = `${root}/format-spec/vectors/textured-v3.strata`;
 const globe = () => converted('textured_globe', `${root}/fixtures/textured_globe.glb`, []);
+const globeV3 = () => converted('textured_globe_v3', `${root}/fixtures/textured_globe.glb`, V3);
 
 function openWhole(path) {
   const bytes = new Uint8Array(readFileSync(path));
@@ -223,7 +228,7 @@ function coarsestBytes(sk, images) {
   return entries.reduce((sum, e, k) => sum + (k === entries.length - 1 ? t.levels[e].size : Math.ceil(t.levels[e].size / 8) * 8), 0);
 }
 
-for (const [name, path] of [['the textured vector', () => TEXTURED_VECTOR], ['the converted globe', globe]]) {
+for (const [name, path] of [['the textured vector', () => TEXTURED_VECTOR], ['the converted globe', globe], ['the textured vector, format 3', () => TEXTURED_VECTOR_V3], ['the converted globe, format 3', globeV3]]) {
   test(`${name}: the first textured frame reads the coarsest levels in one range, then the wanted levels, within the budget`, async (t) => {
     const bytes = new Uint8Array(readFileSync(path()));
     const src = new SlowSource(bytes, 2);
