@@ -8,7 +8,7 @@ use crate::import::{import_with, ImportOptions};
 use crate::levels::{self, LevelParams};
 use crate::mesh::Adjacency;
 use crate::normals::smooth_normals;
-use crate::write::{self, Encoding, WriteOptions};
+use crate::write::{self, Encoding, Precision, WriteOptions};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -51,7 +51,7 @@ impl Default for ConvertOptions {
             hierarchy: HierarchyParams::default(),
             levels: LevelParams::default(),
             normals: Normals::Auto { crease_angle: 60f32.to_radians() },
-            encoding: Encoding::V2,
+            encoding: Encoding::V3(Precision::default()),
             build: Build::Auto,
             memory: 0,
             temp: None,

@@ -43,17 +43,16 @@ pub struct WriteOptions {
     pub images: Arc<Vec<ImageIn>>,
 }
 
-/// How node geometry is stored: format 2's fixed-width arrays on a 20-bit grid, or format 3's
-/// compressed streams at a chosen precision. Format 3 is in progress (issue 15; notes/format3.md):
-/// until its spec is in `format-spec/` and the viewer reads it, `strata convert` does not write it.
+/// How node geometry is stored: format 3's compressed payloads at a chosen precision (the default;
+/// format-spec/strata-v3.md), or format 2's fixed-width arrays on a 20-bit grid.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Encoding {
     V2,
     V3(Precision),
 }
 
-/// Format 3's quantization (strata-v3.md §8.1): level 0 on the grid, coarser levels' inner vertices
-/// on lattices tied to their error, normals and UVs to stated bits.
+/// Format 3's quantization (strata-v3.md §6): level 0 on the grid, coarser levels' inner vertices
+/// on lattices tied to their error, normals, colours and UVs to stated bits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Precision {
     /// Grid bits per axis over the model's largest extent (level 0's precision), 1..=21; 0 picks
@@ -94,7 +93,7 @@ impl Default for WriteOptions {
             level_ratio: 0.5,
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
             georef: None,
-            encoding: Encoding::V2,
+            encoding: Encoding::V3(Precision::default()),
             images: Arc::default(),
         }
     }

@@ -1,15 +1,21 @@
-//! Write then read: every node decodes, each level assembles back into the input mesh, the layout is
+//! Write then read, in format 2 (format 3's quantized counterpart is tests/format3_roundtrip.rs):
+//! every node decodes, each level assembles back into the input mesh, the layout is
 //! breadth-first, opening reads only the skeleton, and the written file verifies.
 
 mod common;
 
-use common::{build, face_key, grid, icosphere, small_params, written};
+use common::{build, face_key, grid, icosphere, small_params, written_as};
 use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
 use strata::format::{self, octa, Reader};
 use strata::mesh::Mesh;
-use strata::write::WriteOptions;
+use strata::write::{Encoding, WriteOptions};
+
+/// Files of format 2, whose geometry is the input's exactly on a 20-bit grid.
+fn written(mesh: &Mesh, params: &strata::hierarchy::HierarchyParams) -> (Vec<u8>, format::WriteSummary) {
+    written_as(mesh, params, Encoding::V2)
+}
 
 /// Per face (keyed by its corner positions): material and corner attributes in key order.
 type Faces = HashMap<[[u32; 3]; 3], (u32, Vec<glam::Vec3>, Vec<glam::Vec2>, Vec<[u8; 4]>)>;
@@ -151,7 +157,7 @@ fn write_to_a_path_is_atomic() {
     let path = dir.join("ico.strata");
     let mesh = icosphere(2);
     let (h, mut lv) = build(&mesh, &small_params());
-    let summary = strata::write::write(&path, &h, &lv, &WriteOptions::default()).expect("write");
+    let summary = strata::write::write(&path, &h, &lv, &WriteOptions { encoding: Encoding::V2, ..WriteOptions::default() }).expect("write");
     assert_eq!(std::fs::metadata(&path).expect("written").len(), summary.file_bytes);
     let rd = Reader::open_path(&path).expect("open");
     assert!(rd.header().tool.starts_with("strata "));
@@ -216,8 +222,9 @@ fn real_mesh_sizes() {
     }
 }
 
-/// The size targets on the 566k-face CT head, through the whole pipeline: the file takes at
-/// most 32 bytes per input face and opening it (header and skeleton) reads at most 2% of it.
+/// The size targets on the 566k-face CT head, through the whole pipeline, in format 2: the
+/// file takes at most 32 bytes per input face and opening it (header and skeleton) reads at most 2%
+/// of it.
 #[test]
 fn large_mesh_sizes() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/large/cthead_skin_native.ply");
@@ -226,7 +233,7 @@ fn large_mesh_sizes() {
         return;
     }
     let out = std::env::temp_dir().join(format!("strata-large-{}.strata", std::process::id()));
-    let opts = strata::pipeline::ConvertOptions::default();
+    let opts = strata::pipeline::ConvertOptions { encoding: Encoding::V2, ..Default::default() };
     let c = strata::pipeline::convert(&path, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
     let rd = Reader::open_path(&out).expect("open");
     let (file, read) = (c.summary.file_bytes, rd.bytes_read());

@@ -60,7 +60,7 @@ pub struct Args {
     pub in_core: bool,
     /// Format version to write: 3 compresses node geometry (positions quantized as --grid-bits,
     /// --lattice and --normal-bits say); 2 stores fixed-width arrays on a 20-bit grid.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(2..=3))]
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u16).range(2..=3))]
     pub format_version: u16,
     /// Format 3: bits of the position grid over the model's largest side (level 0's precision),
     /// 1..=21; 0 picks them from the mesh (a step of at most a 64th of its median edge).

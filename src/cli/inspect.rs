@@ -43,8 +43,14 @@ pub fn run(a: Args) -> Result<()> {
     for c in &v.chunks {
         println!("  {}{} at {} ({} bytes, flags {})", "  ".repeat(c.depth as usize), c.id, c.offset, c.size, c.flags);
     }
+    // Format 3 keeps node payloads in one GEOS chunk; format 2 gives each node a GEOM chunk.
+    let (geos, indent, what) = if v.version.starts_with('3') { (true, "    ", "payloads") } else { (false, "  ", "GEOM") };
+    if geos {
+        let (start, end) = (v.levels.iter().map(|l| l.start).min().unwrap_or(0), v.levels.iter().map(|l| l.end).max().unwrap_or(0));
+        println!("  GEOS at {} ({} bytes of node payloads)", start.saturating_sub(16), end - start);
+    }
     for l in v.levels.iter().rev() {
-        println!("  GEOM x{} level {} at {}..{} ({} bytes)", l.nodes, l.level, l.start, l.end, l.bytes);
+        println!("{indent}{what} x{} level {} at {}..{} ({} bytes)", l.nodes, l.level, l.start, l.end, l.bytes);
     }
     let texl: usize = v.images.iter().map(|i| i.levels.len()).sum();
     if texl > 0 {

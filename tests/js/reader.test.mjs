@@ -934,6 +934,50 @@ test('the example of strata-v3.md §7, encoded here from the spec, decodes to th
   assert.ok(refusedCount > readCount);
 });
 
+test('format 3: a node of many faces in few bytes decodes (the work bounded by its bytes, the decoder growing as faces come)', () => {
+  // A fan of N triangles around vertex 0, every vertex at the middle of the box (the unit square
+  // of v2 §9): symbols of frequency 2016 cost 1/44 bit, so N faces take some N/20 bytes, past the
+  // decoder's first guess of 16 faces a byte.
+  const N = 100000;
+  const [COUNT, START, CORNER, CONN_FIRST, CONN_AFTER_VERTEX, POS_JUMP, POS_INNER_0, POS_BORDER_0] = [11, 8, 9, 7, 0, 13, 20, 42];
+  const tables = Array.from({ length: 64 }, () => []);
+  for (const a of [COUNT, START, CORNER, CONN_FIRST, CONN_AFTER_VERTEX, POS_JUMP, POS_INNER_0, POS_BORDER_0]) tables[a] = [2016, 32];
+  const out = { symbols: [], bits: [] };
+  for (let k = 0; k < 4; k++) putValue(out, [COUNT, COUNT, COUNT, START][k], 0);
+  for (let k = 0; k < 3; k++) putValue(out, CORNER, 0);
+  out.symbols.push([CONN_FIRST, 0]);
+  for (let f = 2; f < N; f++) out.symbols.push([CONN_AFTER_VERTEX, 0]);
+  // Vertices 0–2 jump (from the box's middle, then the vertex before); the others come across a
+  // gate whose triangle spans nothing: POS_INNER + 0 or POS_BORDER + 0 (symbol 0 is residual 0 in
+  // both, whichever a vertex is).
+  for (let v = 0; v < N + 2; v++) for (let k = 0; k < 3; k++) out.symbols.push([v < 3 ? POS_JUMP : POS_INNER_0, 0]);
+  const payload = payloadBytes(ransEncode(out.symbols, tables), out.bits);
+  const tree = parseTree(specExample());
+  tree.major = 3;
+  tree.minor = 0;
+  find(tree.chunks, 'SKEL').subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
+  const node = le(find(find(tree.chunks, 'SKEL').subs, 'NODE').payload);
+  node.setUint32(40, N, true);
+  node.setUint32(44, N + 2, true);
+  le(find(tree.chunks, 'HEAD').payload).setBigUint64(64, BigInt(N), true);
+  tree.chunks = tree.chunks.filter((c) => c.id !== 'GEOM');
+  tree.chunks.push({ id: 'GEOS', flags: 0, payload });
+  tree.payloadSizes = [payload.length];
+  const bytes = serialize(tree, { totals: true });
+  assert.ok(N > 16 * payload.length + 256, `${payload.length} bytes for ${N} faces`);
+  const { geoms } = decodeAll(bytes);
+  const g = geoms[0];
+  assert.equal(g.indices.length, 3 * N);
+  assert.deepEqual([...g.indices.subarray(0, 9)], [0, 1, 2, 1, 0, 3, 3, 0, 4]);
+  assert.deepEqual([...g.indices.subarray(3 * N - 3)], [N, 0, N + 1]);
+  assert.ok(g.positions.length === 3 * (N + 2) && g.positions.every((c, k) => c === [0.5, 0.5, 0][k % 3]));
+  // Claiming more faces than the bytes can hold is refused before any work.
+  const most = 353 * (payload.length + 4);
+  node.setUint32(40, most + 1, true);
+  le(find(tree.chunks, 'HEAD').payload).setBigUint64(64, BigInt(most + 1), true);
+  assert.throws(() => decodeAll(serialize(tree, { totals: true })), (e) => (e instanceof FormatError && /node 0.*cannot fit/.test(e.message)) || assert.fail(e.message));
+});
+
 test('format 3: the CODE chunk is required and checked as strata checks it; a 2.x file ignores one', () => {
   const bytes = read('sphere-v3.strata');
   const tree = parseTree(bytes);
