@@ -1599,9 +1599,9 @@ function decodeCode(b, c, attrs) {
 /**
  * A node's payload being read (§4): the rANS state `x` (the u32 state's bits in an int32), the
  * symbol stream's next byte `pos` (it ends at `end`), and the raw bits after it, most significant
- * first (`buf` holds `avail` unread bits in its low end; `rp` is the next byte). Reading past
- * either end throws at once: strata reads zeros there and refuses the node at its end, so the same
- * nodes fail, sooner. The hot loops (connectivity3, positions3, normals3) keep this state in local
+ * first, `bp` the next one's offset in bits from the payload's start. Reading past either end
+ * throws at once: strata reads zeros there and refuses the node at its end, so the same nodes
+ * fail, sooner. The hot loops (connectivity3, positions3, normals3) keep this state in local
  * variables and decode symbols inline, as sym() and value() here do; they store it back after.
  */
 class Payload {
@@ -1614,9 +1614,7 @@ class Payload {
     if (end - start < 4) throw this.ended();
     this.x = b[start] | (b[start + 1] << 8) | (b[start + 2] << 16) | (b[start + 3] << 24);
     this.pos = start + 4;
-    this.rp = end;
-    this.buf = 0;
-    this.avail = 0;
+    this.bp = 8 * end;
   }
 
   /** An error at byte `at` of the symbol stream (the current one by default). */
@@ -1676,17 +1674,17 @@ class Payload {
     return (u >>> 1) ^ ((u << 31) >> 31);
   }
 
-  /** The next `e` (1..=24) raw bits as an unsigned integer, first bit highest (§4.4). */
+  /**
+   * The next `e` (1..=24) raw bits as an unsigned integer, first bit highest (§4.4): from the 32
+   * bits at the byte holding the first (zeros past the end), which hold them all.
+   */
   raw(e) {
-    const b = this.b;
-    while (this.avail < e) {
-      this.buf = (this.buf << 8) | (this.rp < b.length ? b[this.rp] : 0);
-      this.rp++;
-      this.avail += 8;
-    }
-    this.avail -= e;
-    if (this.rp > b.length && (this.rp - b.length) * 8 > this.avail) throw this.overrun();
-    return (this.buf >>> this.avail) & ((1 << e) - 1);
+    const b = this.b, bp = this.bp, n = b.length;
+    if (bp + e > 8 * n) throw this.overrun();
+    const k = bp >> 3;
+    const w = (b[k] << 24) | ((k + 1 < n ? b[k + 1] : 0) << 16) | ((k + 2 < n ? b[k + 2] : 0) << 8) | (k + 3 < n ? b[k + 3] : 0);
+    this.bp = bp + e;
+    return (w << (bp & 7)) >>> (32 - e);
   }
 }
 
@@ -1748,20 +1746,21 @@ function connectivity3(r, cuts, nf, nv, out) {
   // Room for every face when `out` is given (its caller checked nf against the payload's bytes),
   // else for what a plausible payload holds, more as faces come.
   growFaces(out ? nf : Math.min(nf, 16 * (r.end - r.start) + 256));
-  let cap = Math.floor((W3.cap - 3) / 3);
+  let limit = 3 * Math.floor((W3.cap - 3) / 3);
   let E = W3.edges, queue = W3.queue, skipped = W3.skipped, preds = W3.preds, idx = out ?? W3.idx;
   const T = r.T, b = r.b, end = r.end;
   let x = r.x, pos = r.pos;
   // ne: the next edge's offset; nvd: vertices so far; ni: corners so far.
-  let ne = 0, nvd = 0, ni = 0, nsk = 0, ctx = 7;
+  // ctx: the table offset of CONN + the previous symbol (7 before the first).
+  let ne = 0, nvd = 0, ni = 0, nsk = 0, ctx = (A_CONN + 7) << PROB_BITS;
   for (let w = 0; w + 1 < cuts.length; w++) {
     let left = cuts[w + 1] - cuts[w];
     let qn = 0, head = 0, pending = -1;
     while (left > 0) {
-      if (ni >= 3 * cap) {
+      if (ni >= limit) {
         // More faces than the first guess: grow toward the node's count.
-        growFaces(Math.min(nf, 2 * cap));
-        cap = Math.floor((W3.cap - 3) / 3);
+        growFaces(Math.min(nf, (2 * limit) / 3));
+        limit = 3 * Math.floor((W3.cap - 3) / 3);
         ({ edges: E, queue, skipped, preds } = W3);
         if (!out) idx = W3.idx;
       }
@@ -1806,7 +1805,7 @@ function connectivity3(r, cuts, nf, nv, out) {
         e = skipped[nsk - t];
         if (E[e + E_STATE] !== OPEN) throw r.error('start from an edge that is closed');
         // The gate must make a triangle.
-        sy = r.sym(A_CONN + ctx);
+        sy = r.sym(ctx >> PROB_BITS);
         x = r.x;
         pos = r.pos;
         if (sy > SPLIT) throw r.error(`a run starts with ${SYMBOL_NAMES[sy] ?? 'an unknown symbol'}`);
@@ -1814,7 +1813,7 @@ function connectivity3(r, cuts, nf, nv, out) {
       if (sy < 0) {
         if (E[e + E_STATE] !== OPEN) continue;
         // A symbol of CONN + ctx (Payload.sym).
-        const t = T[((A_CONN + ctx) << PROB_BITS) | (x & SLOT_MASK)];
+        const t = T[ctx | (x & SLOT_MASK)];
         x = (Math.imul(((t >>> 8) & SLOT_MASK) + 1, x >>> PROB_BITS) + (t >>> OFFSET_SHIFT)) | 0;
         if (x >>> 23 === 0) {
           if (pos >= end) throw r.ended();
@@ -1829,11 +1828,11 @@ function connectivity3(r, cuts, nf, nv, out) {
           if (sy === BOUNDARY) E[e + E_STATE] = CLOSED;
           else if (sy === SKIP) skipped[nsk++] = e;
           else throw r.error(`connectivity symbol ${sy}`, pos);
-          ctx = sy;
+          ctx = (A_CONN + sy) << PROB_BITS;
           continue;
         }
       }
-      ctx = sy;
+      ctx = (A_CONN + sy) << PROB_BITS;
       // Triangle (b, a, x) across gate e = (a → b), then the front around it (Front::across).
       const va = E[e + E_V0], vb = E[e + E_V1], p = E[e + E_PREV], n = E[e + E_NEXT];
       let vx;
@@ -1925,7 +1924,7 @@ function connectivity3(r, cuts, nf, nv, out) {
 function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
   const { preds, points: q, border } = W3;
   const T = r.T, b = r.b, end = r.end, blen = b.length;
-  let x = r.x, pos = r.pos, buf = r.buf, avail = r.avail, rp = r.rp;
+  let x = r.x, pos = r.pos, bp = r.bp;
   const top = (1 << bits) - 1, topLattice = top >> shift;
   const half = (1 << shift) >> 1;
   const step = grid.step;
@@ -1985,19 +1984,23 @@ function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
       let u = t & 0xff;
       if (u >= 4) {
         if (u < 52) {
-          const j = u - 4, n = (j >> 1) + 1;
-          while (avail < n) {
-            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
-            rp++;
-            avail += 8;
+          // Raw bits as Payload.raw reads them: the 32 at bp's byte, here without a check while
+          // the payload holds them.
+          const j = u - 4, n = (j >> 1) + 1, k = bp >> 3;
+          let raw;
+          if (k + 3 < blen) {
+            raw = (((b[k] << 24) | (b[k + 1] << 16) | (b[k + 2] << 8) | b[k + 3]) << (bp & 7)) >>> (32 - n);
+            bp += n;
+          } else {
+            r.bp = bp;
+            raw = r.raw(n);
+            bp = r.bp;
           }
-          avail -= n;
-          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
-          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+          u = ((2 | (j & 1)) << n) | raw;
         } else if (u < BUCKETS) {
-          Object.assign(r, { buf, avail, rp });
+          r.bp = bp;
           u = r.rest(u);
-          ({ buf, avail, rp } = r);
+          bp = r.bp;
         } else {
           throw r.notValue(u, al, pos);
         }
@@ -2033,19 +2036,23 @@ function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
       let u = t & 0xff;
       if (u >= 4) {
         if (u < 52) {
-          const j = u - 4, n = (j >> 1) + 1;
-          while (avail < n) {
-            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
-            rp++;
-            avail += 8;
+          // Raw bits as Payload.raw reads them: the 32 at bp's byte, here without a check while
+          // the payload holds them.
+          const j = u - 4, n = (j >> 1) + 1, k = bp >> 3;
+          let raw;
+          if (k + 3 < blen) {
+            raw = (((b[k] << 24) | (b[k + 1] << 16) | (b[k + 2] << 8) | b[k + 3]) << (bp & 7)) >>> (32 - n);
+            bp += n;
+          } else {
+            r.bp = bp;
+            raw = r.raw(n);
+            bp = r.bp;
           }
-          avail -= n;
-          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
-          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+          u = ((2 | (j & 1)) << n) | raw;
         } else if (u < BUCKETS) {
-          Object.assign(r, { buf, avail, rp });
+          r.bp = bp;
           u = r.rest(u);
-          ({ buf, avail, rp } = r);
+          bp = r.bp;
         } else {
           throw r.notValue(u, al, pos);
         }
@@ -2081,19 +2088,23 @@ function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
       let u = t & 0xff;
       if (u >= 4) {
         if (u < 52) {
-          const j = u - 4, n = (j >> 1) + 1;
-          while (avail < n) {
-            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
-            rp++;
-            avail += 8;
+          // Raw bits as Payload.raw reads them: the 32 at bp's byte, here without a check while
+          // the payload holds them.
+          const j = u - 4, n = (j >> 1) + 1, k = bp >> 3;
+          let raw;
+          if (k + 3 < blen) {
+            raw = (((b[k] << 24) | (b[k + 1] << 16) | (b[k + 2] << 8) | b[k + 3]) << (bp & 7)) >>> (32 - n);
+            bp += n;
+          } else {
+            r.bp = bp;
+            raw = r.raw(n);
+            bp = r.bp;
           }
-          avail -= n;
-          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
-          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+          u = ((2 | (j & 1)) << n) | raw;
         } else if (u < BUCKETS) {
-          Object.assign(r, { buf, avail, rp });
+          r.bp = bp;
           u = r.rest(u);
-          ({ buf, avail, rp } = r);
+          bp = r.bp;
         } else {
           throw r.notValue(u, al, pos);
         }
@@ -2115,7 +2126,7 @@ function positions3(r, nv, shift, bits, mid, grid, out, local, lo) {
       if (local) local[v3 + 2] = l2 + g * step;
     }
   }
-  Object.assign(r, { x, pos, buf, avail, rp });
+  Object.assign(r, { x, pos, bp });
 }
 
 /** Octahedral decodes at scale S, memoized by code (NaN: not yet), for S ≤ 255: at most 3 MB. */
@@ -2154,7 +2165,7 @@ function normals3(r, nv, nf, idx, code, out) {
     sums[i2 + 2] += nz;
   }
   const T = r.T, b = r.b, end = r.end, blen = b.length;
-  let x = r.x, pos = r.pos, buf = r.buf, avail = r.avail, rp = r.rp;
+  let x = r.x, pos = r.pos, bp = r.bp;
   for (let v = 0; v < nv; v++) {
     const sx = sums[3 * v], sy = sums[3 * v + 1], sz = sums[3 * v + 2];
     const l1 = Math.abs(sx) + Math.abs(sy) + Math.abs(sz);
@@ -2185,19 +2196,23 @@ function normals3(r, nv, nf, idx, code, out) {
       let u = t & 0xff;
       if (u >= 4) {
         if (u < 52) {
-          const j = u - 4, n = (j >> 1) + 1;
-          while (avail < n) {
-            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
-            rp++;
-            avail += 8;
+          // Raw bits as Payload.raw reads them: the 32 at bp's byte, here without a check while
+          // the payload holds them.
+          const j = u - 4, n = (j >> 1) + 1, k = bp >> 3;
+          let raw;
+          if (k + 3 < blen) {
+            raw = (((b[k] << 24) | (b[k + 1] << 16) | (b[k + 2] << 8) | b[k + 3]) << (bp & 7)) >>> (32 - n);
+            bp += n;
+          } else {
+            r.bp = bp;
+            raw = r.raw(n);
+            bp = r.bp;
           }
-          avail -= n;
-          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
-          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+          u = ((2 | (j & 1)) << n) | raw;
         } else if (u < BUCKETS) {
-          Object.assign(r, { buf, avail, rp });
+          r.bp = bp;
           u = r.rest(u);
-          ({ buf, avail, rp } = r);
+          bp = r.bp;
         } else {
           throw r.notValue(u, al, pos);
         }
@@ -2220,19 +2235,23 @@ function normals3(r, nv, nf, idx, code, out) {
       let u = t & 0xff;
       if (u >= 4) {
         if (u < 52) {
-          const j = u - 4, n = (j >> 1) + 1;
-          while (avail < n) {
-            buf = (buf << 8) | (rp < blen ? b[rp] : 0);
-            rp++;
-            avail += 8;
+          // Raw bits as Payload.raw reads them: the 32 at bp's byte, here without a check while
+          // the payload holds them.
+          const j = u - 4, n = (j >> 1) + 1, k = bp >> 3;
+          let raw;
+          if (k + 3 < blen) {
+            raw = (((b[k] << 24) | (b[k + 1] << 16) | (b[k + 2] << 8) | b[k + 3]) << (bp & 7)) >>> (32 - n);
+            bp += n;
+          } else {
+            r.bp = bp;
+            raw = r.raw(n);
+            bp = r.bp;
           }
-          avail -= n;
-          if (rp > blen && (rp - blen) * 8 > avail) throw r.overrun();
-          u = ((2 | (j & 1)) << n) | ((buf >>> avail) & ((1 << n) - 1));
+          u = ((2 | (j & 1)) << n) | raw;
         } else if (u < BUCKETS) {
-          Object.assign(r, { buf, avail, rp });
+          r.bp = bp;
           u = r.rest(u);
-          ({ buf, avail, rp } = r);
+          bp = r.bp;
         } else {
           throw r.notValue(u, al, pos);
         }
@@ -2251,7 +2270,7 @@ function normals3(r, nv, nf, idx, code, out) {
       octaDecode(q0, q1, out, v3, S);
     }
   }
-  Object.assign(r, { x, pos, buf, avail, rp });
+  Object.assign(r, { x, pos, bp });
 }
 
 /** Colours (§5.6): YCoCg-R at `cb` bits, predicted as positions are, as RGBA bytes into `out`. */
@@ -2405,7 +2424,7 @@ function decodeNode3(s, i, b, opts) {
   // ending in the payload's last byte.
   if (r.pos !== end) throw fail(end, `${end - r.pos} bytes after the symbol stream's end`);
   if (r.x !== RANS_L) throw fail(end, `the symbol stream ends in state 0x${(r.x >>> 0).toString(16)}, not 0x${RANS_L.toString(16)}`);
-  const used = Math.ceil(((r.rp - end) * 8 - r.avail) / 8);
+  const used = Math.ceil((r.bp - 8 * end) / 8);
   if (used !== b.length - end) throw fail(b.length, `raw bits end at byte ${end + used} of ${b.length}`);
   const geometry = { positions, normals, uvs, colors, indices, materialRanges, clusters };
   if (local) geometry.local = local;

@@ -902,6 +902,12 @@ function v3Example() {
 
 test('the example of strata-v3.md §7, encoded here from the spec, decodes to the unit square; damage to its payload is refused', (t) => {
   const { bytes, payload } = v3Example();
+  // The spec quotes the payload: the stream's length, the stream, the raw bits.
+  const md = readFileSync(join(ROOT, 'format-spec', 'strata-v3.md'), 'utf8').replace(/\s+/g, ' ');
+  const quoted = /payload is \d+ bytes: `([0-9a-f ]+)` \(the symbol stream's length\), the stream `([0-9a-f ]+)`, and the raw bits `([0-9a-f ]+)`/.exec(md);
+  assert.ok(quoted, 'strata-v3.md §7 quotes the payload');
+  const hexBytes = (b) => Array.from(b, (x) => x.toString(16).padStart(2, '0')).join(' ');
+  assert.equal(hexBytes(payload), quoted.slice(1).join(' '));
   const { sk, geoms } = decodeAll(bytes);
   assert.deepEqual([sk.major, sk.minor], [3, 0]);
   const g = geoms[0];
