@@ -168,10 +168,12 @@ fn index_past_vertices(good: &[u8]) -> Vec<u8> {
 }
 
 /// Format 3: `good` with a byte of node 0's payload changed, every checksum recomputed (the node
-/// table's, `GEOS`'s, `NODE`'s and `SKEL`'s): only the codec's own checks can refuse it.
+/// table's, `GEOS`'s, the top level's `NODL`'s and `SKEL`'s): only the codec's own checks can
+/// refuse it.
 fn damaged_payload(good: &[u8]) -> Vec<u8> {
     let rd = Reader::open(Cursor::new(good)).expect("valid");
-    let (n, node, skel) = (rd.nodes()[0], chunk_at(good, "NODE"), chunk_at(good, "SKEL"));
+    // Node 0's record opens the first node page (the top level's).
+    let (n, node, skel) = (rd.nodes()[0], chunk_at(good, "NODL"), chunk_at(good, "SKEL"));
     let geos = rd.skeleton_end() as usize;
     let mut bytes = good.to_vec();
     let (at, size) = (n.offset as usize, n.size as usize);

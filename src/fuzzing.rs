@@ -132,7 +132,9 @@ pub fn reseal(b: &mut [u8]) {
         let after = e + 4;
         at = after + (8 - after % 8) % 8;
     }
-    let mut node_table = None;
+    // Where each node's record starts, in node order: in NODE (format 2), or in the NODL pages, each
+    // as many records as LEVL gives its level, from the top (format 3).
+    let mut records: Vec<usize> = Vec::new();
     let mut geom_crcs = Vec::new();
     let mut geos = None;
     for &top in &tops {
@@ -143,9 +145,19 @@ pub fn reseal(b: &mut [u8]) {
             b[range.0..range.0 + 8].copy_from_slice(&len.to_le_bytes());
         }
         if &id == b"SKEL" || &id == b"GEOM" {
+            let mut counts: Vec<usize> = Vec::new();
             for sub in subs(b, range) {
-                if &id == b"SKEL" && &b[sub..sub + 4] == b"NODE" {
-                    node_table = payload(b, sub);
+                let (sid, p) = (&b[sub..sub + 4], payload(b, sub));
+                match (&id, sid, p) {
+                    (b"SKEL", b"LEVL", Some((s, e))) => {
+                        counts = (s..e.saturating_sub(31)).step_by(32).map(|r| u32_at(b, r + 4) as usize).collect()
+                    }
+                    (b"SKEL", b"NODE", Some((s, e))) => records.extend((s..e.saturating_sub(55)).step_by(56)),
+                    (b"SKEL", b"NODL", Some((s, e))) => {
+                        let n = counts.pop().unwrap_or(0);
+                        records.extend((s..e.saturating_sub(55)).step_by(56).take(n));
+                    }
+                    _ => {}
                 }
                 reseal_chunk(b, sub);
             }
@@ -158,30 +170,27 @@ pub fn reseal(b: &mut [u8]) {
             geos = Some(range);
         }
     }
-    if let (Some((s, e)), Some((g, g_end))) = (node_table, geos) {
+    if let Some((g, g_end)) = geos {
         let mut at = g;
-        for field in (s..e.saturating_sub(55)).step_by(56) {
-            let size = u32::from_le_bytes([b[field + 48], b[field + 49], b[field + 50], b[field + 51]]) as usize;
+        for &field in &records {
+            let size = u32_at(b, field + 48) as usize;
             let Some(end) = at.checked_add(size).filter(|&x| x <= g_end) else { break };
             geom_crcs.push(crc32fast::hash(&b[at..end]).to_le_bytes().to_vec());
             at = end;
         }
     }
-    if let Some((s, e)) = node_table {
-        for (i, crc) in geom_crcs.iter().enumerate() {
-            let field = s + 56 * i + 52;
-            if field + 4 <= e {
-                b[field..field + 4].copy_from_slice(crc);
-            }
+    if !records.is_empty() {
+        for (&field, crc) in records.iter().zip(&geom_crcs) {
+            b[field + 52..field + 56].copy_from_slice(crc);
         }
-        // The node table changed: reseal NODE and SKEL again.
+        // The node table changed: reseal NODE or the NODL pages, and SKEL, again.
         for &top in &tops {
             if &b[top..top + 4] != b"SKEL" {
                 continue;
             }
             if let Some(range) = payload(b, top) {
                 for sub in subs(b, range) {
-                    if &b[sub..sub + 4] == b"NODE" {
+                    if &b[sub..sub + 4] == b"NODE" || &b[sub..sub + 4] == b"NODL" {
                         reseal_chunk(b, sub);
                     }
                 }
@@ -189,6 +198,10 @@ pub fn reseal(b: &mut [u8]) {
             }
         }
     }
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
 }
 
 /// A folder of this process for mesh files to import: in `/dev/shm` when it exists, else in the

@@ -188,19 +188,6 @@ fn file() -> Vec<u8> {
         levl.extend_from_slice(&v.to_le_bytes());
     }
     chunk(&mut skel, b"LEVL", 0, &levl);
-    let mut rec = Vec::new();
-    for v in [0u16, 0, 0, 0, 0, RADIUS] {
-        rec.extend_from_slice(&v.to_le_bytes()); // children, neighbours, axis +z, half-angle 0, radius
-    }
-    for v in [0u64, ONE | ONE << 21, HALF | HALF << 21] {
-        rec.extend_from_slice(&v.to_le_bytes()); // box min, box max, sphere center
-    }
-    rec.extend_from_slice(&((STEP * 3f64.sqrt() / 2.0) as f32).to_le_bytes());
-    for v in [2u32, 4, node.len() as u32, crc32fast::hash(&node)] {
-        rec.extend_from_slice(&v.to_le_bytes());
-    }
-    chunk(&mut skel, b"NODE", 0, &rec);
-    chunk(&mut skel, b"NBRS", 2, &[]);
     let mut matl = Vec::new();
     matl.extend_from_slice(&7u32.to_le_bytes());
     matl.extend_from_slice(b"default");
@@ -218,6 +205,19 @@ fn file() -> Vec<u8> {
         }
     }
     chunk(&mut skel, b"CODE", 0, &code);
+    // The one level's page (§1.1): its node record, then no neighbour entries (width 2).
+    let mut rec = Vec::new();
+    for v in [0u16, 0, 0, 0, 0, RADIUS] {
+        rec.extend_from_slice(&v.to_le_bytes()); // children, neighbours, axis +z, half-angle 0, radius
+    }
+    for v in [0u64, ONE | ONE << 21, HALF | HALF << 21] {
+        rec.extend_from_slice(&v.to_le_bytes()); // box min, box max, sphere center
+    }
+    rec.extend_from_slice(&((STEP * 3f64.sqrt() / 2.0) as f32).to_le_bytes());
+    for v in [2u32, 4, node.len() as u32, crc32fast::hash(&node)] {
+        rec.extend_from_slice(&v.to_le_bytes());
+    }
+    chunk(&mut skel, b"NODL", 2, &rec);
 
     let mut out = b"\x89STRATA\n".to_vec();
     out.extend_from_slice(&3u16.to_le_bytes());

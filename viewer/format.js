@@ -12,7 +12,8 @@
 //   openingRange(prefix, fileLength)  how many bytes the skeleton needs (a few short reads);
 //   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials
 //                                     (with { topFirst: true } the top two levels' records only,
-//                                     completeSkeleton(skeleton) the rest, isComplete(skeleton));
+//                                     from a prefix of SKEL in format 3; completeSkeleton(skeleton,
+//                                     bytes) the rest, isComplete(skeleton), skeletonNeeds(skeleton));
 //   decodeNode(skeleton, i, bytes)    one node's geometry, checked and decoded: its GEOM chunk
 //                                     (format 2) or its payload in GEOS (format 3);
 //   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
@@ -326,8 +327,11 @@ function checkHeadFrame(b, fileLength) {
 
 /**
  * How far the opening reads must go, given a prefix of the file: `{ need }` when the prefix is too
- * short to tell (the prefix length needed to learn more), else `{ skeletonEnd, topEnd }`, topEnd
- * being undefined unless SKEL's LEVL sub-chunk lies in the prefix.
+ * short to tell (the prefix length needed to learn more), else `{ skeletonEnd, topEnd, pagesEnd }`:
+ * topEnd, where the top level's geometry ends, is undefined unless SKEL's LEVL sub-chunk lies in
+ * the prefix; pagesEnd, the bytes `decodeSkeleton(…, { topFirst: true })` needs, is skeletonEnd in
+ * format 2, and in format 3 the end of the top two levels' NODL pages (strata-v3.md §1.1),
+ * undefined unless the frames up to them lie in the prefix.
  */
 export function openingRange(prefix, fileLength) {
   const b = prefix;
@@ -361,26 +365,33 @@ export function openingRange(prefix, fileLength) {
   }
   const skelSize = u64(b, pos + 8);
   const skeletonEnd = chunkEnd(pos, 'SKEL', skelSize, fileLength);
-  let topEnd;
-  // A hint: the top level's bytes from LEVL, if its record lies in the prefix; decodeSkeleton checks it.
-  const payloadEnd = Math.min(pos + FRAME + skelSize, n);
-  let s = pos + FRAME;
+  // Hints, which decodeSkeleton checks: the top level's bytes from LEVL, if its record lies in the
+  // prefix; in format 3, the end of the top two levels' NODL pages, if their frames do.
+  let topEnd, pagesEnd = major >= 3 && levels !== undefined && levels <= 2 ? skeletonEnd : undefined;
+  const se = pos + FRAME + skelSize, payloadEnd = Math.min(se, n);
+  let s = pos + FRAME, pages = 0;
   while (levels !== undefined && s + FRAME <= payloadEnd) {
     const size = u64(b, s + 8);
     if (size === Infinity) break;
-    if (isId(b, s, 'LEVL')) {
+    if (isId(b, s, 'LEVL') && topEnd === undefined) {
       const rec = s + FRAME + (levels - 1) * LEVEL_BYTES;
       if (levels >= 1 && size === levels * LEVEL_BYTES && rec + LEVEL_BYTES <= payloadEnd) {
         const bytes = u64(b, rec + 24);
         const end = geometryStart(major, skeletonEnd) + bytes;
         if (bytes !== Infinity && (fileLength === undefined || end <= fileLength)) topEnd = end;
       }
+      if (major < 3) break;
+    }
+    const page = isId(b, s, 'NODL');
+    const e = s + FRAME + size + TRAILER;
+    if (e > se) break;
+    s = Math.min(e + padding(e), se);
+    if (page && ++pages === 2 && pagesEnd === undefined) {
+      pagesEnd = s >= se ? skeletonEnd : s;
       break;
     }
-    const e = s + FRAME + size + TRAILER;
-    s = e + padding(e);
   }
-  return { skeletonEnd, topEnd };
+  return major >= 3 ? { skeletonEnd, topEnd, pagesEnd } : { skeletonEnd, topEnd, pagesEnd: skeletonEnd };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -393,13 +404,25 @@ export function isComplete(sk) {
   return !(sk.decoded < sk.nodeCount);
 }
 
-/** Check and decode the node records `decodeSkeleton(…, { topFirst: true })` left; throws a FormatError as it would have. */
-export function completeSkeleton(sk) {
+/** The bytes of the file `completeSkeleton(sk, bytes)` needs, [0, needs): 0 if it needs none. */
+export function skeletonNeeds(sk) {
+  return isComplete(sk) || sk._failed ? 0 : sk._needs;
+}
+
+/**
+ * Check and decode the node records `decodeSkeleton(…, { topFirst: true })` left; throws a
+ * FormatError as it would have. A format-3 skeleton decoded from a prefix of the file (its SKEL
+ * up to the top pages) needs `bytes`, the file from its first byte to at least skeletonNeeds(sk).
+ */
+export function completeSkeleton(sk, bytes) {
   if (isComplete(sk)) return;
   if (sk._failed) throw sk._failed;
   if (typeof sk._rest !== 'function') throw new Error('completeSkeleton: not a skeleton decodeSkeleton returned (a copy?)');
+  if (sk._needs && !(bytes && bytes.length >= sk._needs)) {
+    throw new Error(`completeSkeleton: needs the file's bytes up to offset ${sk._needs} (skeletonNeeds); ${bytes ? bytes.length : 'none'} given`);
+  }
   try {
-    sk._rest();
+    sk._rest(bytes);
   } catch (e) {
     Object.defineProperty(sk, '_failed', { value: e });
     throw e;
@@ -547,7 +570,8 @@ function decodeGeoref(b, dv, pos, size, major, minor) {
  * frame of the top level waits for none of it (selection.md §6).
  */
 export function decodeSkeleton(bytes, fileLength, opts = {}) {
-  const b = bytes;
+  let b = bytes;
+  const prefixBytes = bytes;
   if (!(Number.isSafeInteger(fileLength) && fileLength >= 0)) throw fail(undefined, `file length ${fileLength} is not a byte count`);
   const have = (end) => {
     if (b.length < end) throw fail(Math.min(b.length, end), `needs the file's bytes up to offset ${end}; ${b.length} given`);
@@ -555,7 +579,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   if (fileLength < PROLOGUE) throw fail(0, `a file of ${fileLength} bytes is too short for a strata file`);
   have(PROLOGUE);
   const { major, minor } = checkPrologue(b, fileLength);
-  const dv = view(b);
+  let dv = view(b);
 
   // HEAD
   have(PROLOGUE + FRAME);
@@ -603,22 +627,27 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const skelSize = u64(b, pos + 8);
   const skeletonEnd = chunkEnd(pos, 'SKEL', skelSize, fileLength);
   const sp = pos + FRAME, se = sp + skelSize;
-  have(skeletonEnd);
-  {
+  const h = header;
+  const L = h.levels, N = h.nodes;
+  const v3 = major >= 3;
+  // Format 3 opened top first from a prefix (strata-v3.md §1.1): SKEL's sub-chunks up to the top
+  // two levels' pages, each checked by its own CRC; SKEL's CRC and the rest by completeSkeleton.
+  const partial = !!opts.topFirst && v3 && L > 2 && b.length < skeletonEnd;
+  const wholeSkel = () => {
+    have(skeletonEnd);
     const stored = u32(b, se), actual = crc32(b, sp, se);
     if (stored !== actual) throw chunkFail(se, 'SKEL', skelAt, `CRC ${hex(actual)} != stored ${hex(stored)}`);
-  }
-  zeroPadding(se + TRAILER, skeletonEnd, 'SKEL', skelAt);
-  const subs = subChunks(b, sp, se, sp, 'SKEL', skelAt);
+    zeroPadding(se + TRAILER, skeletonEnd, 'SKEL', skelAt);
+    return subChunks(b, sp, se, sp, 'SKEL', skelAt);
+  };
+  let subs = partial ? skelPrefix(b, sp, se, skelAt, Math.min(L, 2), have) : wholeSkel();
   const find = (want) => {
     const found = subs.filter((s) => s.id === want);
     if (found.length === 0) throw chunkFail(skelAt, 'SKEL', skelAt, `has no ${want} chunk`);
     if (found.length > 1) throw chunkFail(found[1].at, 'SKEL', skelAt, `has a second ${want} chunk`);
     return found[0];
   };
-  const levl = find('LEVL'), node = find('NODE'), nbrs = find('NBRS'), matl = find('MATL');
-  const h = header;
-  const L = h.levels, N = h.nodes;
+  const levl = find('LEVL'), matl = find('MATL');
 
   // LEVL
   const lerr = (at, msg) => chunkFail(at, 'LEVL', levl.at, msg);
@@ -642,15 +671,10 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   }
   if (expect !== N) throw lerr(levl.ps, `levels hold ${expect} nodes, HEAD says ${N}`);
 
-  // NBRS (entries are read after the node table, which says whose they are)
-  const width = nbrs.flags;
-  if (width !== 2 && width !== 4) throw chunkFail(nbrs.at + 4, 'NBRS', nbrs.at, `entry width ${width}; must be 2 or 4`);
-  if (nbrs.size % width !== 0) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `size ${nbrs.size} is not a multiple of ${width}`);
-  const nbEntries = nbrs.size / width;
-
-  // NODE
-  const nerr = (at, msg, i) => chunkFail(at, 'NODE', node.at, i === undefined ? msg : `node ${i}: ${msg}`, i);
-  if (node.size !== N * NODE_BYTES) throw nerr(node.ps, `holds ${node.size} bytes; ${N} nodes need ${N * NODE_BYTES}`);
+  // The node records and neighbour lists as pages, one per level from the top: format 2's NODE
+  // and NBRS hold every level, format 3 has one NODL per level (of which a prefix holds the first).
+  let pages = v3 ? pagesV3(subs, levels, skelAt, partial) : pagesV2(find('NODE'), find('NBRS'), levels);
+  const pageOf = (l) => pages[L - 1 - l];
   const { origin, step, bits: gbits } = h.grid;
   const last = 2 ** gbits - 1;
   const sk = new Skeleton();
@@ -672,30 +696,30 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const faces = new Uint32Array(N), vertices = new Uint32Array(N);
   const offset = new Float64Array(N), size = new Uint32Array(N), crc = new Uint32Array(N);
   const totals = new Float64Array(3 * L);
-  const neighborList = new Uint32Array(nbEntries);
+  const entriesOf = (ps) => (ps.length ? ps[ps.length - 1].entryBase + ps[ps.length - 1].entryCount : 0);
+  let neighborList = new Uint32Array(entriesOf(pages));
   const gl = [0, 0, 0], gh = [0, 0, 0], gc = [0, 0, 0];
   // Format 3: payloads back to back inside GEOS, unpadded, at least a byte each (strata-v3.md §1).
-  const v3 = major >= 3;
   const least = v3 ? 1 : FRAME + TRAILER;
   const boxMid = v3 ? new Uint32Array(3 * N) : null;
   let nbFirst = 0, geo = geometryStart(major, skeletonEnd), nextChild = 0, l = L - 1;
-  // Check and decode level l's records and neighbour lists (levels from the top down), then step
-  // to the level below.
+  // Check and decode level l's records (levels from the top down), then step to the level below.
   const decodeLevel = () => {
-    const lev = levels[l];
+    const lev = levels[l], pg = pageOf(l);
+    const nerr = (at, msg, i) => chunkFail(at, pg.id, pg.at, i === undefined ? msg : `node ${i}: ${msg}`, i);
     const end = lev.firstNode + lev.nodes;
     if (l + 1 < L && nextChild !== end) {
-      throw nerr(node.ps + NODE_BYTES * lev.firstNode, `the children of level ${l + 1} cover nodes up to ${nextChild}, level ${l} ends at ${end}`);
+      throw nerr(pg.recordsAt, `the children of level ${l + 1} cover nodes up to ${nextChild}, level ${l} ends at ${end}`);
     }
     nextChild = end;
     for (let i = lev.firstNode; i < end; i++) {
-      const at = node.ps + NODE_BYTES * i;
+      const at = pg.recordsAt + NODE_BYTES * (i - lev.firstNode);
       const cc = u16(b, at), nc = u16(b, at + 2);
       const first = cc > 0 ? nextChild : 0;
       if (l === 0 && cc > 0) throw nerr(at, `a level-0 node with ${cc} children`, i);
       nextChild += cc;
       if (l > 0 && nextChild > end + levels[l - 1].nodes) throw nerr(at, `children ${first}..+${cc} run past level ${l - 1}`, i);
-      if (nbFirst + nc > nbEntries) throw nerr(at, `neighbours run past the ${nbEntries} of NBRS`, i);
+      if (nbFirst + nc > pg.entryBase + pg.entryCount) throw nerr(at, `neighbours run past the ${pg.entryCount} of ${pg.entriesId}`, i);
       if (!(unpack(b, at + 12, gl) && unpack(b, at + 20, gh) && unpack(b, at + 28, gc) && onGrid(gl, last) && onGrid(gh, last) && onGrid(gc, last))) {
         throw nerr(at, `box or sphere center off the ${gbits}-bit grid`, i);
       }
@@ -740,33 +764,39 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     }
     l--;
   };
-  // Check level m's neighbour entries (its records decoded) and make them absolute node ids.
+  // Level m's totals against LEVL, once its records are decoded.
+  const levelTotals = (m) => {
+    const rec = levels[m];
+    const [tf, tv, tb] = [totals[3 * m], totals[3 * m + 1], totals[3 * m + 2]];
+    if (rec.faces !== tf || rec.vertices !== tv || rec.bytes !== tb) {
+      throw lerr(
+        levl.ps + m * LEVEL_BYTES,
+        `level ${m}: LEVL says ${rec.faces} faces, ${rec.vertices} vertices, ${rec.bytes} bytes; the nodes hold ${tf}, ${tv}, ${tb}`,
+      );
+    }
+  };
+  // With every level decoded: the geometry's end, the totals LEVL and HEAD state, the entries used.
+  const finish = () => {
+    if (geo > fileLength) throw chunkFail(skelAt, 'SKEL', skelAt, `geometry ends at ${geo}, past the end of the ${fileLength}-byte file`);
+    for (let m = 0; m < L; m++) levelTotals(m);
+    if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
+    const all = entriesOf(pages);
+    if (!v3 && nbFirst !== all) throw chunkFail(pages[0].entriesAt, 'NBRS', pages[0].at, `holds ${all} neighbours, the nodes use ${nbFirst}`);
+  };
+  // Level m's neighbour entries (its records decoded): as many as its nodes use (format 3's
+  // pages), each below the level's node count, made absolute node ids.
   const decodeEntries = (m) => {
-    const lev = levels[m];
+    const lev = levels[m], pg = pageOf(m);
+    const used = lev.nodes ? neighborFirst[lev.firstNode + lev.nodes - 1] + neighborCount[lev.firstNode + lev.nodes - 1] - neighborFirst[lev.firstNode] : 0;
+    if (v3 && used !== pg.entryCount) throw chunkFail(pg.entriesAt, 'NODL', pg.at, `holds ${pg.entryCount} neighbour entries, the level's nodes use ${used}`);
     for (let i = lev.firstNode, end = lev.firstNode + lev.nodes; i < end; i++) {
       for (let k = neighborFirst[i], e = k + neighborCount[i]; k < e; k++) {
-        const o = nbrs.ps + width * k;
-        const x = width === 2 ? u16(b, o) : u32(b, o);
-        if (x >= lev.nodes) throw chunkFail(o, 'NBRS', nbrs.at, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${m}`, i);
+        const o = pg.entriesAt + pg.width * (k - pg.entryBase);
+        const x = pg.width === 2 ? u16(b, o) : u32(b, o);
+        if (x >= lev.nodes) throw chunkFail(o, pg.entriesId, pg.entriesChunkAt, `node ${i}: neighbour ${x} of the ${lev.nodes} nodes of level ${m}`, i);
         neighborList[k] = x + lev.firstNode;
       }
     }
-  };
-  // With every level decoded: the totals LEVL states.
-  const finish = () => {
-    if (geo > fileLength) throw nerr(node.ps, `geometry chunks end at ${geo}, past the end of the ${fileLength}-byte file`);
-    for (let l = 0; l < L; l++) {
-      const rec = levels[l];
-      const [tf, tv, tb] = [totals[3 * l], totals[3 * l + 1], totals[3 * l + 2]];
-      if (rec.faces !== tf || rec.vertices !== tv || rec.bytes !== tb) {
-        throw lerr(
-          levl.ps + l * LEVEL_BYTES,
-          `level ${l}: LEVL says ${rec.faces} faces, ${rec.vertices} vertices, ${rec.bytes} bytes; the nodes hold ${tf}, ${tv}, ${tb}`,
-        );
-      }
-    }
-    if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
-    if (nbFirst !== nbEntries) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `holds ${nbEntries} neighbours, the nodes use ${nbFirst}`);
   };
   // The records of every level, the totals, then the neighbour entries (the order of the checks,
   // as in strata's reader); top first, the top level and the level below that its nodes' rules
@@ -774,6 +804,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const kept = opts.topFirst ? Math.min(L, 2) : L;
   for (let k = kept; k > 0; k--) decodeLevel();
   if (l < 0) finish();
+  else if (v3) for (let m = L - 1; m > l; m--) levelTotals(m);
   for (let m = L - 1; m >= L - kept; m--) decodeEntries(m);
   // Where the image levels start (§2): checked against the node table by finish().
   const levelsStart = geometryEnd(major, skeletonEnd, levels.reduce((sum, rec) => sum + rec.bytes, 0));
@@ -838,21 +869,109 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     size,
     crc,
   });
-  // Where the node table lies, for errors naming a node's record.
-  Object.defineProperty(sk, '_nodeTable', { value: { at: node.at, ps: node.ps }, enumerable: false });
+  // Where each node's record lies, for errors naming it.
+  Object.defineProperty(sk, '_recordAt', {
+    value: (i) => {
+      const m = level[i], pg = pageOf(m);
+      return { id: pg.id, chunkAt: pg.at, at: pg.recordsAt + NODE_BYTES * (i - levels[m].firstNode) };
+    },
+    enumerable: false,
+  });
   sk.decoded = l < 0 ? N : levels[l].firstNode;
   if (l >= 0) {
-    // Holds the skeleton's bytes until the rest is decoded.
+    // Holds the skeleton's bytes until the rest is decoded; a skeleton decoded from a prefix takes
+    // the file's bytes up to skeletonEnd (the prefix's own bytes among them).
     Object.defineProperty(sk, '_rest', {
-      value: () => {
+      value: (bytes) => {
+        if (partial) {
+          const prefix = subs;
+          b = bytes;
+          dv = view(b);
+          subs = wholeSkel();
+          for (let k = 0; k < prefix.length; k++) {
+            const s = subs[k];
+            if (!s || s.id !== prefix[k].id || s.at !== prefix[k].at || s.size !== prefix[k].size || u32(b, s.pe) !== u32(prefixBytes, s.pe)) {
+              throw chunkFail(prefix[k].at, 'SKEL', skelAt, 'its sub-chunks differ from the ones read before (the file changed between reads)');
+            }
+          }
+          pages = pagesV3(subs, levels, skelAt, false);
+          const list = new Uint32Array(entriesOf(pages));
+          list.set(neighborList);
+          sk.neighborList = neighborList = list;
+        }
         while (l >= 0) decodeLevel();
         finish();
         for (let m = L - kept - 1; m >= 0; m--) decodeEntries(m);
       },
       configurable: true,
     });
+    Object.defineProperty(sk, '_needs', { value: partial ? skeletonEnd : 0, configurable: true });
   }
   return sk;
+}
+
+/**
+ * SKEL's sub-chunks from its payload's start [sp, se) up to and including the `want`-th NODL page,
+ * read from a prefix of the file (strata-v3.md §1.1): each frame's bounds, CRC and padding checked.
+ */
+function skelPrefix(b, sp, se, skelAt, want, have) {
+  const out = [];
+  let pos = sp, pages = 0;
+  while (pages < want) {
+    if (pos + FRAME + TRAILER > se) throw chunkFail(Math.min(pos, se), 'SKEL', skelAt, `ends after ${pages} node pages (NODL); the top ${want} levels need theirs`);
+    have(pos + FRAME);
+    const e = pos + FRAME + u64(b, pos + 8) + TRAILER;
+    const end = e >= se ? se : Math.min(e + padding(e), se);
+    have(end);
+    const [s] = subChunks(b, pos, end, pos, 'SKEL', skelAt);
+    out.push(s);
+    if (s.id === 'NODL') pages++;
+    pos = end;
+  }
+  return out;
+}
+
+/** Format 2's pages: each level's slice of NODE, the entries of all levels in NBRS. */
+function pagesV2(node, nbrs, levels) {
+  const width = nbrs.flags;
+  if (width !== 2 && width !== 4) throw chunkFail(nbrs.at + 4, 'NBRS', nbrs.at, `entry width ${width}; must be 2 or 4`);
+  if (nbrs.size % width !== 0) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `size ${nbrs.size} is not a multiple of ${width}`);
+  const N = levels.reduce((n, lev) => n + lev.nodes, 0);
+  if (node.size !== N * NODE_BYTES) throw chunkFail(node.ps, 'NODE', node.at, `holds ${node.size} bytes; ${N} nodes need ${N * NODE_BYTES}`);
+  const entryCount = nbrs.size / width;
+  return levels
+    .map((lev) => ({ id: 'NODE', at: node.at, recordsAt: node.ps + NODE_BYTES * lev.firstNode, entriesId: 'NBRS', entriesChunkAt: nbrs.at, entriesAt: nbrs.ps, width, entryCount, entryBase: 0 }))
+    .reverse();
+}
+
+/**
+ * Format 3's pages (strata-v3.md §1.1): one NODL per level from the top, after every other
+ * sub-chunk; all of them, or with `prefix` the first ones read (the top two levels').
+ */
+function pagesV3(subs, levels, skelAt, prefix) {
+  const old = subs.find((s) => s.id === 'NODE' || s.id === 'NBRS');
+  if (old) throw chunkFail(old.at, 'SKEL', skelAt, `holds a ${old.id} chunk: format 3 keeps nodes in NODL pages`);
+  let first = subs.findIndex((s) => s.id === 'NODL');
+  if (first < 0) first = subs.length;
+  const after = subs.slice(first).find((s) => s.id !== 'NODL');
+  if (after) throw chunkFail(after.at, 'SKEL', skelAt, `has a ${after.id} chunk after the node pages`);
+  const L = levels.length, count = subs.length - first;
+  if (count < (prefix ? Math.min(L, 2) : L) || count > L) throw chunkFail(skelAt, 'SKEL', skelAt, `holds ${count} node pages (NODL) for ${L} levels`);
+  const out = [];
+  let base = 0;
+  for (let k = 0; k < count; k++) {
+    const s = subs[first + k], lev = levels[L - 1 - k];
+    const width = s.flags;
+    if (width !== 2 && width !== 4) throw chunkFail(s.at + 4, 'NODL', s.at, `entry width ${width}; must be 2 or 4`);
+    const records = NODE_BYTES * lev.nodes;
+    if (s.size < records || (s.size - records) % width !== 0) {
+      throw chunkFail(s.ps, 'NODL', s.at, `holds ${s.size} bytes: ${lev.nodes} node records and whole ${width}-byte entries do not fill it`);
+    }
+    const entryCount = (s.size - records) / width;
+    out.push({ id: 'NODL', at: s.at, recordsAt: s.ps, entriesId: 'NODL', entriesChunkAt: s.at, entriesAt: s.ps + records, width, entryCount, entryBase: base });
+    base += entryCount;
+  }
+  return out;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1135,9 +1254,8 @@ function coneHolds(t, dx, dy, dz) {
 
 /** Node i's rules on the skeleton: children, neighbours, HEAD bounds (rules::relations). */
 function relations(s, i) {
-  const table = s._nodeTable;
-  const at = table ? table.ps + NODE_BYTES * i : undefined;
-  const problem = (msg) => (table ? chunkFail(at, 'NODE', table.at, `node ${i}: ${msg}`, i) : fail(undefined, `node ${i}: ${msg}`, i));
+  const rec = s._recordAt ? s._recordAt(i) : null;
+  const problem = (msg) => (rec ? chunkFail(rec.at, rec.id, rec.chunkAt, `node ${i}: ${msg}`, i) : fail(undefined, `node ${i}: ${msg}`, i));
   const A = s.coneAxis, C = s.center, bmin = s.boxMin, bmax = s.boxMax;
   const i3 = 3 * i;
   const half = s.coneHalfAngle[i];

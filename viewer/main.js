@@ -3,7 +3,6 @@
 // drive it through `window.strata` (bottom of this file).
 
 import { Camera, add, cross, dot, length, scale, sub, unit } from './camera.js';
-import { completeSkeleton } from './format.js';
 import { Selector } from './select.js';
 import { FileSource, HttpSource } from './source.js';
 import { Streamer } from './stream.js';
@@ -475,8 +474,8 @@ window.strata = {
   },
   /** The front `strata stream --print-front` would print for this camera and limits (no loading);
    * `held`: node ids not refined (its first frame holds the top level, selection.md §6). */
-  select(json, limits, held = []) {
-    completeSkeleton(streamer.skeleton);
+  async select(json, limits, held = []) {
+    await streamer.loadSkeleton();
     const cut = new Selector(streamer.skeleton).select(new Camera(json), limits, new Set(held));
     return { shown: cut.shown, culled: cut.culled, faces: cut.faces };
   },

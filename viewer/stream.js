@@ -20,7 +20,7 @@
 // level that fits). Decoded levels count 4·w·h bytes against the same budget as the geometry and
 // are evicted with it, least recently used first.
 
-import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, isComplete, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
+import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, isComplete, skeletonNeeds, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
 import { Orderer } from './order.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
@@ -107,21 +107,37 @@ export class Streamer {
     const prefix = options.prefix ?? 16384;
     let bytes = await source.read(0, prefix);
     let range = openingRange(bytes, source.length);
-    while (range.need !== undefined) {
+    // Up to the skeleton's end, or in format 3 the end of its top pages (strata-v3.md §1.1).
+    while (range.need !== undefined || (range.pagesEnd === undefined && bytes.length < range.skeletonEnd)) {
       if (bytes.length >= (source.length ?? Infinity)) throw new FormatError(`${source.name}: the file ends at byte ${bytes.length}, before its skeleton`);
-      bytes = concat(bytes, await source.read(bytes.length, Math.max(range.need, bytes.length + prefix)));
+      const end = range.need !== undefined ? Math.max(range.need, bytes.length + prefix) : Math.min(range.skeletonEnd, bytes.length + prefix);
+      bytes = concat(bytes, await source.read(bytes.length, end));
       range = openingRange(bytes, source.length);
     }
-    const want = Math.max(range.topEnd ?? 0, range.skeletonEnd);
-    if (bytes.length < want) bytes = concat(bytes, await source.read(bytes.length, want));
+    const pagesEnd = range.pagesEnd ?? range.skeletonEnd;
+    // The top level's geometry: with the pages in one read, or beside them in a second read at the
+    // same time when the rest of the skeleton lies between.
+    let geo = { at: 0, bytes };
+    if (range.topEnd !== undefined && range.skeletonEnd - Math.max(bytes.length, pagesEnd) > (options.maxGapBytes ?? 16384)) {
+      const [pages, top] = await Promise.all([bytes.length < pagesEnd ? source.read(bytes.length, pagesEnd) : null, source.read(range.skeletonEnd, range.topEnd)]);
+      if (pages) bytes = concat(bytes, pages);
+      geo = { at: range.skeletonEnd, bytes: top };
+    } else {
+      const want = Math.max(range.topEnd ?? 0, pagesEnd);
+      if (bytes.length < want) bytes = concat(bytes, await source.read(bytes.length, want));
+      geo = { at: 0, bytes };
+    }
     // The first frame shows the top level: the rest of the node table is checked and decoded by
-    // the second update (selection.md §6).
+    // the second update (selection.md §6), once the rest of the skeleton is read.
     const skeleton = decodeSkeleton(bytes, source.length, { topFirst: true });
     const s = new Streamer(source, skeleton, options);
+    if (skeletonNeeds(skeleton) > bytes.length) s.skeletonPrefix = bytes;
     const [top0, top1] = skeleton.levelNodes(skeleton.top());
-    const topEnd = skeleton.offset[top1 - 1] + skeleton.size[top1 - 1];
-    if (bytes.length < topEnd) bytes = concat(bytes, await source.read(bytes.length, topEnd));
-    for (let i = top0; i < top1; i++) s.insert(i, bytes.subarray(skeleton.offset[i], skeleton.offset[i] + skeleton.size[i]));
+    const topStart = skeleton.offset[top0], topEnd = skeleton.offset[top1 - 1] + skeleton.size[top1 - 1];
+    if (!(topStart >= geo.at && topEnd <= geo.at + geo.bytes.length)) {
+      geo = topStart >= bytes.length ? { at: topStart, bytes: await source.read(topStart, topEnd) } : { at: 0, bytes: (bytes = concat(bytes, await source.read(bytes.length, topEnd))) };
+    }
+    for (let i = top0; i < top1; i++) s.insert(i, geo.bytes.subarray(skeleton.offset[i] - geo.at, skeleton.offset[i] - geo.at + skeleton.size[i]));
     s.openMs = performance.now() - t0;
     s.openRequests = source.requests;
     s.openBytes = source.bytes;
@@ -192,6 +208,9 @@ export class Streamer {
     this.planesError = null;
     this.missing = [];
     this.error = null;
+    /** A format-3 skeleton opened from its top pages: the bytes read, until the rest of SKEL is (skeletonBytes). */
+    this.skeletonPrefix = null;
+    this.skeletonBytes = null;
   }
 
   /** Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only leaves the order without them (planesError says why). */
@@ -228,6 +247,38 @@ export class Streamer {
     if (!this.closed) this.onChange();
   }
 
+  /** The whole node table decoded now, reading the rest of the skeleton first if need be (for callers that need every node). */
+  async loadSkeleton() {
+    if (isComplete(this.skeleton)) return;
+    if (this.skeletonPrefix) await (this.restRead ??= this.readSkeletonRest());
+    if (this.error) throw this.error;
+    completeSkeleton(this.skeleton, this.skeletonBytes);
+  }
+
+  /** Read the rest of a skeleton opened from its top pages (format 3), after the first frame. */
+  async readSkeletonRest() {
+    const prefix = this.skeletonPrefix, end = skeletonNeeds(this.skeleton);
+    this.inFlight++;
+    try {
+      for (;;) {
+        try {
+          this.skeletonBytes = concat(prefix, await this.source.read(prefix.length, end));
+          break;
+        } catch (e) {
+          if (++this.failures > 3 || this.closed) throw e;
+          await new Promise((r) => setTimeout(r, 500 * 2 ** this.failures));
+        }
+      }
+      this.failures = 0;
+      this.skeletonPrefix = null;
+    } catch (e) {
+      this.error = e;
+    } finally {
+      this.inFlight--;
+    }
+    if (!this.closed) this.onChange();
+  }
+
   /** Decode and check node i from its bytes and keep it. */
   insert(i, bytes) {
     if (this.cache.has(i)) return;
@@ -254,15 +305,16 @@ export class Streamer {
     const s = this.skeleton;
     this.frame++;
     if (!isComplete(s)) {
-      if (this.frame > 1) {
+      if (this.frame === 1) {
+        setTimeout(() => !this.closed && (this.skeletonPrefix ? (this.restRead ??= this.readSkeletonRest()) : this.onChange()), 0);
+      } else if (!this.skeletonPrefix) {
         try {
-          completeSkeleton(s);
+          completeSkeleton(s, this.skeletonBytes);
         } catch (e) {
           this.error = e;
           return this.drawn;
         }
-      } else {
-        setTimeout(() => !this.closed && this.onChange(), 0);
+        this.skeletonBytes = null;
       }
     }
     const limits = this.limits();

@@ -123,4 +123,5 @@ pub mod id {
     pub const ORDR: [u8; 4] = *b"ORDR";
     pub const GEOS: [u8; 4] = *b"GEOS";
     pub const CODE: [u8; 4] = *b"CODE";
+    pub const NODL: [u8; 4] = *b"NODL";
 }

@@ -41,9 +41,19 @@ pub struct Reader<S> {
     skeleton_end: u64,
     /// Whether the rules of spec §6 are checked at open and as each node is decoded.
     strict: bool,
-    /// With [`Reader::open_top`], the `SKEL` payload and offset until [`Reader::complete`].
-    pending: Option<(Vec<u8>, u64, [u16; 2])>,
+    /// With [`Reader::open_top`], what [`Reader::complete`] needs.
+    pending: Option<Pending>,
     georef: Option<Georef>,
+}
+
+/// What [`Reader::open_top`] leaves for [`Reader::complete`]: the `SKEL` payload (format 2), or
+/// the `SKEL` frame to read the rest of it (format 3, whose open read only the top levels' pages),
+/// at offset `pos`, of version `version`.
+struct Pending {
+    payload: Vec<u8>,
+    pos: u64,
+    version: [u16; 2],
+    rest: Option<Frame>,
 }
 
 impl Reader<File> {
@@ -87,9 +97,16 @@ impl<S: ByteSource> Reader<S> {
     /// Decode the node records [`Reader::open_top`] left (no-op otherwise). They were checked at
     /// open, so this fails only as open would have.
     pub fn complete(&mut self) -> Result<()> {
-        let Some((payload, pos, [major, minor])) = &self.pending else { return Ok(()) };
-        let ctx = Context { path: &self.path, major: *major, minor: *minor, file_size: self.len, geometry_start: self.skeleton_end };
-        let (s, _) = skeleton::decode_skel(&ctx, &self.skeleton.header, payload, *pos, false)?;
+        let Some(p) = &self.pending else { return Ok(()) };
+        let [major, minor] = p.version;
+        let whole = match p.rest {
+            Some(frame) => Some(self.payload_at(p.pos, &frame)?),
+            None => None,
+        };
+        let p = self.pending.as_ref().expect("pending");
+        let payload = whole.as_deref().unwrap_or(&p.payload);
+        let ctx = Context { path: &self.path, major, minor, file_size: self.len, geometry_start: self.skeleton_end };
+        let (s, _) = skeleton::decode_skel(&ctx, &self.skeleton.header, payload, p.pos, false)?;
         self.pending = None;
         self.skeleton = Skeleton { textures: std::mem::take(&mut self.skeleton.textures), ..s };
         Ok(())
@@ -172,7 +189,9 @@ impl<S: ByteSource> Reader<S> {
             rd.skeleton_chunks.push(ChunkInfo::new(&f, pos, 0));
             pos = rd.next(pos, &f)?;
         };
-        let payload = rd.payload_at(pos, &skel)?;
+        // Format 3 opened top first reads SKEL only through the top levels' pages (strata-v3.md §1.1).
+        let prefix = top_only && major >= 3;
+        let payload = if prefix { rd.skel_prefix(pos, &skel, header.levels)? } else { rd.payload_at(pos, &skel)? };
         rd.skeleton_chunks.push(ChunkInfo::new(&skel, pos, 0));
         rd.skeleton_end = rd.next(pos, &skel)?;
         let ctx = Context { geometry_start: rd.skeleton_end, ..ctx };
@@ -180,7 +199,7 @@ impl<S: ByteSource> Reader<S> {
         rd.skeleton = s;
         rd.skeleton_chunks.extend(subs);
         if top_only && rd.skeleton.nodes.len() < header.nodes as usize {
-            rd.pending = Some((payload, pos, [major, minor]));
+            rd.pending = Some(Pending { payload, pos, version: [major, minor], rest: prefix.then_some(skel) });
         }
         Ok(rd)
     }
@@ -484,6 +503,35 @@ impl<S: ByteSource> Reader<S> {
             Some(e) => Ok(e + chunk::padding(e)),
             None => Err(self.err(pos + 8, &f.id, pos, format!("size {} runs past the end of the file ({} bytes)", f.size, self.len))),
         }
+    }
+
+    /// The first sub-chunks of the `SKEL` chunk at `pos` (frame `skel`), each whole with its
+    /// padding, through the node page of the level below the top (or the top's, for one level):
+    /// what a format-3 reader needs for the top level. Their CRCs are checked as they are decoded;
+    /// `SKEL`'s own once the rest is read ([`Reader::complete`]).
+    fn skel_prefix(&self, pos: u64, skel: &Frame, levels: u32) -> Result<Vec<u8>> {
+        self.next(pos, skel)?;
+        let payload_end = pos + HEADER_BYTES + skel.size;
+        let (mut at, mut pages, mut out) = (pos + HEADER_BYTES, 0u32, Vec::new());
+        while pages < levels.clamp(1, 2) {
+            if at + HEADER_BYTES + TRAILER_BYTES > payload_end {
+                return Err(self.err(at, &id::SKEL, pos, format!("ends after {pages} node pages (NODL); {levels} levels need them")));
+            }
+            let f = self.frame_at(at)?;
+            let span = f.span().and_then(|s| at.checked_add(s)).filter(|&e| e <= payload_end);
+            let Some(after) = span else {
+                return Err(self.err(at + 8, &f.id, at, format!("size {} runs past its parent SKEL", f.size)));
+            };
+            let next = (after + chunk::padding(after)).min(payload_end);
+            out.extend_from_slice(&self.read_at(at, next - at)?);
+            pages += (f.id == id::NODL) as u32;
+            at = next;
+        }
+        if at == payload_end {
+            // Every page read: the whole SKEL, whose CRC can be checked now.
+            return self.payload_at(pos, skel);
+        }
+        Ok(out)
     }
 
     /// The payload of the chunk at `pos`, its CRC checked.

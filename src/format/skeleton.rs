@@ -238,7 +238,7 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
         }
         Ok(first)
     };
-    let (levl, node, nbrs, matl) = (find(id::LEVL)?, find(id::NODE)?, find(id::NBRS)?, find(id::MATL)?);
+    let (levl, matl) = (find(id::LEVL)?, find(id::MATL)?);
     let fields = |s: &Sub| Fields::new(ctx.path, &s.frame.id, s.offset, &payload[s.start..s.end], s.payload_offset());
     let h = header;
 
@@ -267,51 +267,39 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
         return Err(f.error(format!("levels hold {expect} nodes, HEAD says {}", h.nodes)));
     }
 
-    // NBRS
-    let nf = fields(nbrs);
-    let width = nbrs.frame.flags as u64;
-    if width != 2 && width != 4 {
-        return Err(nf.error_at(nbrs.offset + 4, format!("entry width {width}; must be 2 or 4")));
-    }
-    if nbrs.frame.size % width != 0 {
-        return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
-    }
-    let entries = &payload[nbrs.start..nbrs.end];
-    let entry = |k: usize| if width == 2 { LE::read_u16(&entries[2 * k..]) as u32 } else { LE::read_u32(&entries[4 * k..]) };
-    let entry_count = entries.len() as u64 / width;
-
-    // NODE
-    let f = fields(node);
-    let want = h.nodes as u64 * NODE_RECORD_BYTES;
-    if node.frame.size != want {
-        return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
-    }
-    // The size is checked: records are read from fixed 56-byte slices.
-    let mut records = payload[node.start..node.end].chunks_exact(NODE_RECORD_BYTES as usize);
-    let grid = h.grid;
+    // The node records and neighbour lists, as pages from the top level down: format 2's NODE and
+    // NBRS hold every level; format 3 has one NODL per level (strata-v3.md §1.1), of which a
+    // reader that opens top first has read the first few.
+    let pages = if ctx.major >= 3 {
+        pages_v3(ctx, pos, payload, &subs, &levels, top_only)?
+    } else {
+        pages_v2(ctx, payload, find(id::NODE)?, find(id::NBRS)?, h, &levels)?
+    };
+    let decoded = pages.len();
     // The top level, and the level below, which the top nodes' rules are checked against.
-    let keep = if top_only { levels.iter().rev().take(2).map(|l| l.nodes).sum() } else { h.nodes };
+    let keep: u32 = if top_only { levels.iter().rev().take(2).map(|l| l.nodes).sum() } else { h.nodes };
+    let grid = h.grid;
     let mut boxes: Vec<[u64; 2]> = Vec::with_capacity(keep as usize);
     let mut nodes: Vec<NodeRecord> = Vec::with_capacity(keep as usize);
-    // The neighbour entries of each level's nodes, which are consecutive.
-    let mut level_entries = vec![0..0u64; levels.len()];
     let mut neighbor_first = 0u64;
-    let v3 = ctx.major >= 3;
     let mut offset = geometry_layout(ctx.major, ctx.geometry_start, 0).0;
+    let v3 = ctx.major >= 3;
     // Children of the levels above are consecutive: node i's are those after its predecessors'.
     let mut next_child = 0u64;
-    // Faces, vertices and bytes per level, to check LEVL against.
+    // Per level: faces, vertices and bytes (to check LEVL against) and its neighbour entries.
     let mut totals = vec![(0u64, 0u64, 0u64); levels.len()];
-    for (l, lev) in levels.iter().enumerate().rev() {
+    let mut level_entries = vec![0..0u64; levels.len()];
+    for (page, (l, lev)) in pages.iter().zip(levels.iter().enumerate().rev()) {
+        let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.records_at);
         let end = lev.first_node as u64 + lev.nodes as u64;
         if l + 1 < levels.len() && next_child != end {
             return Err(f.error(format!("the children of level {} cover nodes up to {next_child}, level {l} ends at {end}", l + 1)));
         }
         next_child = end;
         let level_first_entry = neighbor_first;
-        for i in lev.first_node..lev.first_node + lev.nodes {
-            let at = node.payload_offset() + i as u64 * NODE_RECORD_BYTES;
-            let r = records.next().ok_or_else(|| f.error_at(at, format!("node {i}: past the end of the chunk")))?;
+        for (k, r) in page.records.chunks_exact(NODE_RECORD_BYTES as usize).enumerate() {
+            let i = lev.first_node + k as u32;
+            let at = page.records_at + k as u64 * NODE_RECORD_BYTES;
             let u16_at = |k: usize| LE::read_u16(&r[k..]);
             let u32_at = |k: usize| LE::read_u32(&r[k..]);
             let (child_count, neighbor_count) = (u16_at(0) as u32, u16_at(2) as u32);
@@ -326,11 +314,11 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
                 return Err(bad(format!("a level-0 node with {child_count} children")));
             }
             next_child += child_count as u64;
-            if l > 0 && next_child > (lev.first_node + lev.nodes) as u64 + levels[l - 1].nodes as u64 {
+            if l > 0 && next_child > end + levels[l - 1].nodes as u64 {
                 return Err(bad(format!("children {first_child}..+{child_count} run past level {}", l - 1)));
             }
-            if neighbor_first + neighbor_count as u64 > entry_count {
-                return Err(bad(format!("neighbours run past the {entry_count} of NBRS")));
+            if neighbor_first + neighbor_count as u64 > page.entry_base + page.entry_count {
+                return Err(bad(format!("neighbours run past the {} of {}", page.entry_count, chunk::id_str(&page.id))));
             }
             let on_grid = |g: Option<[u32; 3]>| g.filter(|g| g.iter().all(|&x| x <= grid.last()));
             let (Some(lo), Some(hi), Some(center)) = (on_grid(lo), on_grid(hi), on_grid(center)) else {
@@ -352,44 +340,36 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
             if !in_file {
                 return Err(bad(format!("geometry {size} bytes at offset {offset} runs past the end of the {}-byte file", ctx.file_size)));
             }
-            if i >= keep {
-                neighbor_first += neighbor_count as u64;
-                offset += padded;
-                continue;
+            if i < keep {
+                boxes.push([lo_bits, hi_bits]);
+                nodes.push(NodeRecord {
+                    level: l as u32,
+                    parent: NO_PARENT,
+                    first_child,
+                    child_count,
+                    neighbor_first: neighbor_first as u32,
+                    neighbor_count,
+                    cone: Cone { axis, half_angle: angle_decode(half) },
+                    center: grid.decode(center),
+                    radius,
+                    error,
+                    faces,
+                    vertices,
+                    offset,
+                    size,
+                    crc,
+                });
             }
-            boxes.push([lo_bits, hi_bits]);
-            nodes.push(NodeRecord {
-                level: l as u32,
-                parent: NO_PARENT,
-                first_child,
-                child_count,
-                neighbor_first: neighbor_first as u32,
-                neighbor_count,
-                cone: Cone { axis, half_angle: angle_decode(half) },
-                center: grid.decode(center),
-                radius,
-                error,
-                faces,
-                vertices,
-                offset,
-                size,
-                crc,
-            });
             neighbor_first += neighbor_count as u64;
             offset += padded;
         }
         level_entries[l] = level_first_entry..neighbor_first;
     }
-    for i in 0..nodes.len() {
-        let n = nodes[i];
-        for c in n.first_child..(n.first_child + n.child_count).min(keep) {
-            nodes[c as usize].parent = i as u32;
-        }
+    let complete = decoded == levels.len();
+    if complete && offset > ctx.file_size {
+        return Err(ctx.err(pos, &id::SKEL, pos, format!("geometry ends at {offset}, past the end of the {}-byte file", ctx.file_size)));
     }
-    if offset > ctx.file_size {
-        return Err(fields(node).error(format!("geometry chunks end at {offset}, past the end of the {}-byte file", ctx.file_size)));
-    }
-    for (l, (rec, t)) in levels.iter().zip(&totals).enumerate() {
+    for (l, (rec, t)) in levels.iter().zip(&totals).enumerate().filter(|(l, _)| *l + decoded >= levels.len()) {
         if (rec.faces, rec.vertices, rec.bytes) != *t {
             let at = levl.payload_offset() + l as u64 * LEVEL_RECORD_BYTES;
             return Err(fields(levl).error_at(
@@ -401,34 +381,54 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
             ));
         }
     }
-    if totals[0].0 != h.input_faces {
+    if complete && totals[0].0 != h.input_faces {
         return Err(fields(levl).error(format!("level 0's nodes hold {} faces, HEAD says the input has {}", totals[0].0, h.input_faces)));
     }
-    if neighbor_first != entry_count {
-        return Err(nf.error(format!("holds {entry_count} neighbours, the nodes use {neighbor_first}")));
+    for (page, (l, _)) in pages.iter().zip(levels.iter().enumerate().rev()) {
+        let used = level_entries[l].end - level_entries[l].start;
+        let holds = if v3 { page.entry_count } else { neighbor_first };
+        let uses = if v3 { used } else { page.entry_count };
+        if holds != uses && (v3 || complete) {
+            let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.entries_at);
+            return Err(f.error(if v3 {
+                format!("holds {holds} neighbour entries, the level's nodes use {uses}")
+            } else {
+                format!("holds {uses} neighbours, the nodes use {holds}")
+            }));
+        }
+        if !v3 {
+            break;
+        }
     }
     // Levels from the top, so that the first bad entry in node order is the one named.
-    for (l, (lev, range)) in levels.iter().zip(&level_entries).enumerate().rev() {
-        if let Some(k) = range.clone().find(|&k| entry(k as usize) >= lev.nodes) {
-            let at = nbrs.payload_offset() + width * k;
+    for (page, (l, lev)) in pages.iter().zip(levels.iter().enumerate().rev()) {
+        if let Some(k) = level_entries[l].clone().find(|&k| page.entry(k) >= lev.nodes) {
+            let at = page.entries_at + page.width * (k - page.entry_base);
             // The node whose list holds entry k, for the message.
-            let mut end = range.start;
-            let lister = (lev.first_node..lev.first_node + lev.nodes)
-                .find(|&i| {
-                    end += LE::read_u16(&payload[node.start + i as usize * NODE_RECORD_BYTES as usize + 2..]) as u64;
-                    k < end
+            let mut upto = level_entries[l].start;
+            let lister = (0..lev.nodes as usize)
+                .find(|&n| {
+                    upto += LE::read_u16(&page.records[n * NODE_RECORD_BYTES as usize + 2..]) as u64;
+                    k < upto
                 })
-                .unwrap_or(lev.first_node);
-            return Err(nf.error_at(at, format!("node {lister}: neighbour {} of the {} nodes of level {l}", entry(k as usize), lev.nodes)));
+                .map_or(lev.first_node, |n| lev.first_node + n as u32);
+            let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.entries_at);
+            return Err(f.error_at(at, format!("node {lister}: neighbour {} of the {} nodes of level {l}", page.entry(k), lev.nodes)));
         }
     }
     let neighbors: Vec<u32> = nodes
         .iter()
         .flat_map(|n| {
-            let base = levels[n.level as usize].first_node;
-            (n.neighbor_first..n.neighbor_first + n.neighbor_count).map(move |k| entry(k as usize) + base)
+            let (base, page) = (levels[n.level as usize].first_node, &pages[levels.len() - 1 - n.level as usize]);
+            (n.neighbor_first..n.neighbor_first + n.neighbor_count).map(move |k| page.entry(k as u64) + base)
         })
         .collect();
+    for i in 0..nodes.len() {
+        let n = nodes[i];
+        for c in n.first_child..(n.first_child + n.child_count).min(nodes.len() as u32) {
+            nodes[c as usize].parent = i as u32;
+        }
+    }
 
     // MATL
     let mut f = fields(matl);
@@ -478,6 +478,122 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
     Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures, code }, infos))
 }
 
+/// One level's node records and neighbour entries, where they lie in the file.
+struct Page<'a> {
+    /// The sub-chunk they are read from (`NODE` and `NBRS` in format 2, `NODL` in format 3), for errors.
+    id: [u8; 4],
+    chunk_at: u64,
+    records: &'a [u8],
+    records_at: u64,
+    entries: &'a [u8],
+    entries_at: u64,
+    /// Entry width in bytes, the number of entries, and the number of the first (entries are
+    /// numbered over all levels, as node records count them).
+    width: u64,
+    entry_count: u64,
+    entry_base: u64,
+}
+
+impl Page<'_> {
+    /// Entry `k` (numbered over all levels).
+    fn entry(&self, k: u64) -> u32 {
+        let at = ((k - self.entry_base) * self.width) as usize;
+        if self.width == 2 {
+            LE::read_u16(&self.entries[at..]) as u32
+        } else {
+            LE::read_u32(&self.entries[at..])
+        }
+    }
+}
+
+/// Format 2's pages: every level's slice of `NODE`, each reading the whole `NBRS`.
+fn pages_v2<'a>(ctx: &Context, payload: &'a [u8], node: &Sub, nbrs: &Sub, h: &Header, levels: &[LevelRecord]) -> Result<Vec<Page<'a>>> {
+    let nf = Fields::new(ctx.path, &nbrs.frame.id, nbrs.offset, &[], nbrs.payload_offset());
+    let width = nbrs.frame.flags as u64;
+    if width != 2 && width != 4 {
+        return Err(nf.error_at(nbrs.offset + 4, format!("entry width {width}; must be 2 or 4")));
+    }
+    if nbrs.frame.size % width != 0 {
+        return Err(nf.error(format!("size {} is not a multiple of {width}", nbrs.frame.size)));
+    }
+    let want = h.nodes as u64 * NODE_RECORD_BYTES;
+    if node.frame.size != want {
+        let f = Fields::new(ctx.path, &node.frame.id, node.offset, &[], node.payload_offset());
+        return Err(f.error(format!("holds {} bytes; {} nodes need {want}", node.frame.size, h.nodes)));
+    }
+    // The size is checked: records are read from fixed 56-byte slices.
+    let bytes = NODE_RECORD_BYTES as usize;
+    Ok(levels
+        .iter()
+        .rev()
+        .map(|l| {
+            let first = node.start + bytes * l.first_node as usize;
+            Page {
+                id: id::NODE,
+                chunk_at: node.offset,
+                records: &payload[first..first + bytes * l.nodes as usize],
+                records_at: node.payload_offset() + NODE_RECORD_BYTES * l.first_node as u64,
+                entries: &payload[nbrs.start..nbrs.end],
+                entries_at: nbrs.payload_offset(),
+                width,
+                entry_count: nbrs.frame.size / width,
+                entry_base: 0,
+            }
+        })
+        .collect())
+}
+
+/// Format 3's pages (strata-v3.md §1.1): one `NODL` per level from the top, after every other
+/// sub-chunk. All of them, or with `prefix` the first ones read (at least the top two levels').
+fn pages_v3<'a>(ctx: &Context, pos: u64, payload: &'a [u8], subs: &[Sub], levels: &[LevelRecord], prefix: bool) -> Result<Vec<Page<'a>>> {
+    let first = subs.iter().position(|s| s.frame.id == id::NODL).unwrap_or(subs.len());
+    if let Some(s) = subs.iter().find(|s| s.frame.id == id::NODE || s.frame.id == id::NBRS) {
+        return Err(ctx.err(
+            s.offset,
+            &id::SKEL,
+            pos,
+            format!("holds a {} chunk: format 3 keeps nodes in NODL pages", chunk::id_str(&s.frame.id)),
+        ));
+    }
+    if let Some(s) = subs[first..].iter().find(|s| s.frame.id != id::NODL) {
+        return Err(ctx.err(s.offset, &id::SKEL, pos, format!("has a {} chunk after the node pages", chunk::id_str(&s.frame.id))));
+    }
+    let count = subs.len() - first;
+    let least = if prefix { levels.len().min(2) } else { levels.len() };
+    if count < least || count > levels.len() {
+        return Err(ctx.err(pos, &id::SKEL, pos, format!("holds {count} node pages (NODL) for {} levels", levels.len())));
+    }
+    let mut base = 0u64;
+    let mut out = Vec::with_capacity(count);
+    for (s, lev) in subs[first..].iter().zip(levels.iter().rev()) {
+        let f = Fields::new(ctx.path, &s.frame.id, s.offset, &[], s.payload_offset());
+        let width = s.frame.flags as u64;
+        if width != 2 && width != 4 {
+            return Err(f.error_at(s.offset + 4, format!("entry width {width}; must be 2 or 4")));
+        }
+        let records = NODE_RECORD_BYTES * lev.nodes as u64;
+        if s.frame.size < records || (s.frame.size - records) % width != 0 {
+            return Err(
+                f.error(format!("holds {} bytes: {} node records and whole {width}-byte entries do not fill it", s.frame.size, lev.nodes))
+            );
+        }
+        let entry_count = (s.frame.size - records) / width;
+        out.push(Page {
+            id: id::NODL,
+            chunk_at: s.offset,
+            records: &payload[s.start..s.start + records as usize],
+            records_at: s.payload_offset(),
+            entries: &payload[s.start + records as usize..s.end],
+            entries_at: s.payload_offset() + records,
+            width,
+            entry_count,
+            entry_base: base,
+        });
+        base += entry_count;
+    }
+    Ok(out)
+}
+
 /// The `HEAD` chunk.
 pub fn encode_head(h: &Header) -> Vec<u8> {
     let mut p = Vec::with_capacity(160);
@@ -515,7 +631,9 @@ pub fn encode_head(h: &Header) -> Vec<u8> {
     out
 }
 
-/// The `SKEL` chunk: `LEVL`, `NODE`, `NBRS`, `MATL`, and `TEXR` when `texr` (its payload) is given.
+/// The `SKEL` chunk: levels, node records, neighbour lists, materials, images (`TEXR`) and, in
+/// format 3 (`code` given), the coding tables, with the node records and neighbour lists as one
+/// `NODL` page per level, top first (strata-v3.md §1.1); in format 2 as `NODE` and `NBRS`.
 pub fn encode_skel(
     levels: &[LevelRecord],
     records: &[NodeRecord],
@@ -536,8 +654,7 @@ pub fn encode_skel(
     }
     chunk::put(&mut payload, id::LEVL, 0, &p);
 
-    p.clear();
-    for (r, c) in records.iter().zip(codes) {
+    let record = |p: &mut Vec<u8>, r: &NodeRecord, c: &NodeCodes| {
         p.extend_from_slice(&(r.child_count as u16).to_le_bytes());
         p.extend_from_slice(&(r.neighbor_count as u16).to_le_bytes());
         p.extend(c.axis.iter().flat_map(|x| x.to_le_bytes()));
@@ -550,20 +667,17 @@ pub fn encode_skel(
         for x in [r.faces, r.vertices, r.size, r.crc] {
             p.extend_from_slice(&x.to_le_bytes());
         }
-    }
-    chunk::put(&mut payload, id::NODE, 0, &p);
-
-    p.clear();
-    let width = if levels.iter().all(|l| l.nodes <= 1 << 16) { 2 } else { 4 };
-    let mut next = neighbors.iter();
-    for r in records {
-        let first = levels[r.level as usize].first_node;
-        for &x in next.by_ref().take(r.neighbor_count as usize) {
-            p.extend_from_slice(&(x - first).to_le_bytes()[..width as usize]);
+    };
+    // Each node's list, relative to the first node of its level.
+    let lists = |p: &mut Vec<u8>, nodes: std::ops::Range<usize>, next: &mut std::slice::Iter<u32>, width: usize| {
+        for r in &records[nodes] {
+            let first = levels[r.level as usize].first_node;
+            for &x in next.by_ref().take(r.neighbor_count as usize) {
+                p.extend_from_slice(&(x - first).to_le_bytes()[..width]);
+            }
         }
-    }
-    chunk::put(&mut payload, id::NBRS, width, &p);
-
+    };
+    let mut materials_and_tables = Vec::new();
     p.clear();
     for m in materials {
         p.extend_from_slice(&(m.name.len() as u32).to_le_bytes());
@@ -575,12 +689,39 @@ pub fn encode_skel(
         p.extend_from_slice(&(tex.len() as u32).to_le_bytes());
         p.extend_from_slice(tex.as_bytes());
     }
-    chunk::put(&mut payload, id::MATL, 0, &p);
+    chunk::put(&mut materials_and_tables, id::MATL, 0, &p);
     if let Some(t) = texr {
-        chunk::put(&mut payload, id::TEXR, 0, t);
+        chunk::put(&mut materials_and_tables, id::TEXR, 0, t);
     }
-    if let Some(c) = code {
-        chunk::put(&mut payload, id::CODE, 0, c);
+
+    let mut next = neighbors.iter();
+    match code {
+        None => {
+            p.clear();
+            for (r, c) in records.iter().zip(codes) {
+                record(&mut p, r, c);
+            }
+            chunk::put(&mut payload, id::NODE, 0, &p);
+            p.clear();
+            let width = if levels.iter().all(|l| l.nodes <= 1 << 16) { 2 } else { 4 };
+            lists(&mut p, 0..records.len(), &mut next, width);
+            chunk::put(&mut payload, id::NBRS, width as u32, &p);
+            payload.extend_from_slice(&materials_and_tables);
+        }
+        Some(c) => {
+            payload.extend_from_slice(&materials_and_tables);
+            chunk::put(&mut payload, id::CODE, 0, c);
+            for l in levels.iter().rev() {
+                let nodes = l.first_node as usize..(l.first_node + l.nodes) as usize;
+                p.clear();
+                for (r, c) in records[nodes.clone()].iter().zip(&codes[nodes.clone()]) {
+                    record(&mut p, r, c);
+                }
+                let width = if l.nodes <= 1 << 16 { 2 } else { 4 };
+                lists(&mut p, nodes, &mut next, width);
+                chunk::put(&mut payload, id::NODL, width as u32, &p);
+            }
+        }
     }
 
     let mut out = Vec::with_capacity(payload.len() + 24);

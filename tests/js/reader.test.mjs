@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, NEWEST_MAJOR, MINOR3, FormatError, crc32, openingRange, completeSkeleton, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
+import { MAJOR, MINOR, NEWEST_MAJOR, MINOR3, FormatError, crc32, openingRange, completeSkeleton, skeletonNeeds, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -32,14 +32,16 @@ function decodeAll(bytes, opts) {
   return { sk, geoms, images, planes };
 }
 
-/** decodeAll with the skeleton decoded top first, as the viewer opens a file: the top level's
- * nodes, then completeSkeleton and every other node. */
+/** decodeAll with the skeleton decoded top first, as the viewer opens a file: from the prefix
+ * openingRange names (format 3: SKEL up to its top pages), the top level's nodes, then
+ * completeSkeleton and every other node. */
 function decodeTopFirst(bytes, opts) {
-  const sk = decodeSkeleton(bytes, bytes.length, { topFirst: true });
+  const r = openingRange(bytes, bytes.length);
+  const sk = decodeSkeleton(bytes.subarray(0, r.pagesEnd ?? r.skeletonEnd), bytes.length, { topFirst: true });
   const top = sk.levelNodes(sk.top())[1];
   const geoms = [];
   for (let i = 0; i < top; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
-  completeSkeleton(sk);
+  completeSkeleton(sk, bytes);
   for (let i = top; i < sk.nodeCount; i++) geoms.push(decodeNode(sk, i, nodeBytes(sk, i, bytes), opts));
   const images = sk.textures.levels.map((l, e) => decodeImageLevel(sk, e, bytes.subarray(l.offset, l.offset + l.size)));
   const planes = decodePlanes(sk, bytes.subarray(Math.min(planesOffset(sk), bytes.length)));
@@ -231,9 +233,44 @@ function parseTree(bytes) {
   const tree = { major: le(bytes).getUint16(8, true), minor: le(bytes).getUint16(10, true), chunks: parseChunks(bytes, 16, bytes.length) };
   // Format 3: the node payloads' sizes, to cut GEOS's payload into them when resealing.
   const skel = find(tree.chunks, 'SKEL');
-  const node = skel && find(skel.subs, 'NODE');
-  if (tree.major >= 3 && node) tree.payloadSizes = Array.from({ length: node.payload.length / 56 }, (_, i) => le(node.payload).getUint32(56 * i + 48, true));
+  if (tree.major >= 3 && skel) {
+    tree.payloadSizes = [];
+    for (let i = 0, r; (r = recordOf(skel, i)); i++) tree.payloadSizes.push(r[0].getUint32(r[1] + 48, true));
+  }
   return tree;
+}
+
+/** Where node i's record lies in SKEL: [DataView, offset] in NODE, or in its level's NODL page (format 3); null past the last. */
+function recordOf(skel, i) {
+  const node = find(skel.subs, 'NODE');
+  if (node) return 56 * i + 56 <= node.payload.length ? [le(node.payload), 56 * i] : null;
+  const levl = find(skel.subs, 'LEVL');
+  const pages = skel.subs.filter((s) => s.id === 'NODL');
+  if (!levl) return null;
+  const d = le(levl.payload);
+  for (let r = d.byteLength - 32, k = 0; r >= 0 && k < pages.length; r -= 32, k++) {
+    const first = d.getUint32(r, true), n = d.getUint32(r + 4, true);
+    if (i >= first && i < first + n && 56 * (i - first) + 56 <= pages[k].payload.length) return [le(pages[k].payload), 56 * (i - first)];
+  }
+  return null;
+}
+
+/** A format-2 SKEL's NODE and NBRS made format 3's NODL pages, one per level from the top, last in SKEL. */
+function toPages(skel) {
+  const node = find(skel.subs, 'NODE').payload, nbrs = find(skel.subs, 'NBRS');
+  const levl = le(find(skel.subs, 'LEVL').payload);
+  const width = nbrs.flags;
+  const pages = [];
+  let entry = 0;
+  for (let r = levl.byteLength - 32; r >= 0; r -= 32) {
+    const first = levl.getUint32(r, true), n = levl.getUint32(r + 4, true);
+    const records = node.slice(56 * first, 56 * (first + n));
+    let k = 0;
+    for (let i = 0; i < n; i++) k += le(records).getUint16(56 * i + 2, true);
+    pages.push({ id: 'NODL', flags: width, payload: concat([records, nbrs.payload.slice(width * entry, width * (entry + k))]) });
+    entry += k;
+  }
+  skel.subs = [...skel.subs.filter((s) => s.id !== 'NODE' && s.id !== 'NBRS'), ...pages];
 }
 
 function concat(parts) {
@@ -276,30 +313,28 @@ function serialize(tree, { totals = false } = {}) {
   const geoms = v3 ? cutPayloads(geos.payload, tree.payloadSizes) : tree.chunks.filter((c) => c.id === 'GEOM').map((c) => subsPayload(c.subs));
   const skel = find(tree.chunks, 'SKEL');
   if (skel) {
-    const node = find(skel.subs, 'NODE');
-    if (node) {
-      const d = le(node.payload);
-      geoms.forEach((g, i) => {
-        if (56 * i + 56 > node.payload.length) return;
-        d.setUint32(56 * i + 48, v3 ? g.length : 20 + g.length, true);
-        d.setUint32(56 * i + 52, crc32(g), true);
-      });
-      const levl = find(skel.subs, 'LEVL');
-      if (totals && levl) {
-        const l = le(levl.payload);
-        for (let r = 0; r + 32 <= levl.payload.length; r += 32) {
-          const first = l.getUint32(r, true), count = l.getUint32(r + 4, true);
-          let f = 0, v = 0, by = 0;
-          for (let i = first; i < first + count && 56 * i + 56 <= node.payload.length; i++) {
-            f += d.getUint32(56 * i + 40, true);
-            v += d.getUint32(56 * i + 44, true);
-            const s = d.getUint32(56 * i + 48, true);
-            by += v3 ? s : s + pad8(s);
-          }
-          l.setBigUint64(r + 8, BigInt(f), true);
-          l.setBigUint64(r + 16, BigInt(v), true);
-          l.setBigUint64(r + 24, BigInt(by), true);
+    geoms.forEach((g, i) => {
+      const rec = recordOf(skel, i);
+      if (!rec) return;
+      rec[0].setUint32(rec[1] + 48, v3 ? g.length : 20 + g.length, true);
+      rec[0].setUint32(rec[1] + 52, crc32(g), true);
+    });
+    const levl = find(skel.subs, 'LEVL');
+    if (totals && levl) {
+      const l = le(levl.payload);
+      for (let r = 0; r + 32 <= levl.payload.length; r += 32) {
+        const first = l.getUint32(r, true), count = l.getUint32(r + 4, true);
+        let f = 0, v = 0, by = 0;
+        for (let i = first, rec; i < first + count && (rec = recordOf(skel, i)); i++) {
+          const [d, o] = rec;
+          f += d.getUint32(o + 40, true);
+          v += d.getUint32(o + 44, true);
+          const s = d.getUint32(o + 48, true);
+          by += v3 ? s : s + pad8(s);
         }
+        l.setBigUint64(r + 8, BigInt(f), true);
+        l.setBigUint64(r + 16, BigInt(v), true);
+        l.setBigUint64(r + 24, BigInt(by), true);
       }
     }
   }
@@ -415,16 +450,21 @@ test('openingRange on every prefix: needs grow, then the true skeleton and top-l
     const geos = find(tree.chunks, 'GEOS');
     let sk, topEnd;
     if (geos) {
-      // Format 3: the top level's payloads from the first byte of GEOS's payload.
+      // Format 3: the top level's payloads from the first byte of GEOS's payload; the pages from
+      // SKEL's start to the end of the second NODL (SKEL's end if that is its last sub-chunk).
       sk = { skeletonEnd: geos.at };
       topEnd = geos.at + 16 + tree.payloadSizes.slice(0, topNodes).reduce((a, n) => a + n, 0);
+      const second = tree.chunks[skel].subs.filter((c) => c.id === 'NODL')[1];
+      const end = second && second.at + 20 + second.payload.length;
+      sk.pagesEnd = L <= 2 || end + pad8(end) >= geos.at - 4 - pad8(geos.at) ? sk.skeletonEnd : end + pad8(end);
     } else {
       sk = { skeletonEnd: geoms[0].at };
+      sk.pagesEnd = sk.skeletonEnd;
       const after = tree.chunks.find((c) => c.id !== 'GEOM' && c.at > geoms[geoms.length - 1].at);
       topEnd = topNodes < geoms.length ? geoms[topNodes].at : after ? after.at : bytes.length;
     }
     for (const fileLength of [bytes.length, undefined]) {
-      let need = 0, resolvedAt = -1, topAt = -1;
+      let need = 0, resolvedAt = -1, topAt = -1, pagesAt = -1;
       for (let p = 0; p <= bytes.length; p++) {
         const r = openingRange(bytes.subarray(0, p), fileLength);
         if (r.need !== undefined) {
@@ -441,6 +481,26 @@ test('openingRange on every prefix: needs grow, then the true skeleton and top-l
         } else {
           assert.equal(topAt, -1, `${name}: topEnd known at ${topAt}, lost at ${p}`);
         }
+        if (r.pagesEnd !== undefined) {
+          if (pagesAt < 0) pagesAt = p;
+          assert.equal(r.pagesEnd, sk.pagesEnd, `${name} prefix ${p}`);
+        } else {
+          assert.equal(pagesAt, -1, `${name}: pagesEnd known at ${pagesAt}, lost at ${p}`);
+        }
+      }
+      // The pages' end is known once the prefix holds them, and a top-first decode needs no more.
+      assert.ok(pagesAt >= resolvedAt && pagesAt <= sk.pagesEnd, `${name}: pages known at ${pagesAt}`);
+      if (fileLength !== undefined && !name.startsWith('refused')) {
+        const part = decodeSkeleton(bytes.subarray(0, sk.pagesEnd), fileLength, { topFirst: true });
+        const whole = decodeSkeleton(bytes, fileLength, { topFirst: true });
+        assert.deepEqual(part.levelNodes(part.top()), whole.levelNodes(whole.top()));
+        assert.equal(part.decoded, whole.decoded, name);
+        assert.ok(sk.pagesEnd === sk.skeletonEnd || skeletonNeeds(part) === sk.skeletonEnd, name);
+        completeSkeleton(part, bytes.subarray(0, sk.skeletonEnd));
+        completeSkeleton(whole);
+        for (const key of ['parent', 'firstChild', 'neighborFirst', 'neighborList', 'offset', 'crc', 'error', 'center']) {
+          assert.deepEqual(part[key], whole[key], `${name}: ${key}`);
+        }
       }
       assert.ok(resolvedAt > 0 && resolvedAt <= sk.skeletonEnd && topAt >= resolvedAt && topAt <= sk.skeletonEnd, `${name}: ${resolvedAt} ${topAt}`);
       // Following the needs from an empty prefix takes a few reads.
@@ -449,6 +509,35 @@ test('openingRange on every prefix: needs grow, then the true skeleton and top-l
       assert.ok(reads <= 4 && r.skeletonEnd === sk.skeletonEnd, `${name}: ${reads} reads`);
     }
   }
+});
+
+test('format 3 opened from its top pages: the rest of SKEL is checked by completeSkeleton, with the bytes it needs', () => {
+  const bytes = read('sphere-v3.strata');
+  const { pagesEnd, skeletonEnd } = openingRange(bytes, bytes.length);
+  assert.ok(pagesEnd < skeletonEnd, `pages end at ${pagesEnd}, SKEL at ${skeletonEnd}`);
+  const open = (b, end = pagesEnd) => decodeSkeleton(b.subarray(0, end), b.length, { topFirst: true });
+  assert.throws(() => open(bytes, pagesEnd - 1), (e) => e instanceof FormatError && e.message.includes(`up to offset ${pagesEnd}`));
+  // A byte of the third page flipped: the prefix opens; completing refuses it, and keeps refusing.
+  const bad = bytes.slice();
+  bad[pagesEnd + 20] ^= 1;
+  const damaged = open(bad);
+  assert.equal(skeletonNeeds(damaged), skeletonEnd);
+  assert.throws(() => completeSkeleton(damaged, bad), (e) => e instanceof FormatError && /SKEL.*CRC/.test(e.message));
+  assert.throws(() => completeSkeleton(damaged, bytes), /CRC/);
+  // Without the bytes, or too few: the caller's mistake, not the file's.
+  const sk = open(bytes);
+  assert.throws(() => completeSkeleton(sk), (e) => !(e instanceof FormatError) && /skeletonNeeds/.test(e.message));
+  assert.throws(() => completeSkeleton(sk, bytes.subarray(0, skeletonEnd - 1)), (e) => !(e instanceof FormatError));
+  // The file changed between the reads: the top page read before is not the one in SKEL now.
+  const tree = parseTree(bytes);
+  const [d] = recordOf(find(tree.chunks, 'SKEL'), 0);
+  d.setFloat32(36, d.getFloat32(36, true) * 2, true);
+  const changed = serialize(tree);
+  assert.equal(changed.length, bytes.length);
+  assert.throws(() => completeSkeleton(open(bytes), changed), (e) => e instanceof FormatError && /changed between reads/.test(e.message));
+  completeSkeleton(sk, bytes);
+  assert.equal(sk.decoded, sk.nodeCount);
+  assert.equal(skeletonNeeds(sk), 0);
 });
 
 test('openingRange refuses a bad prologue, an unsupported major version and a bad HEAD frame', () => {
@@ -793,7 +882,7 @@ test('the worked example of spec §9 and plane.strata decode to the values the s
     kn: fr(0.1),
     top_groups: 8,
   });
-  assert.deepEqual(openingRange(spec, spec.length), { skeletonEnd: 448, topEnd: 648 });
+  assert.deepEqual(openingRange(spec, spec.length), { skeletonEnd: 448, topEnd: 648, pagesEnd: 448 });
 
   const plane = read('plane.strata');
   const pl = decodeAll(plane);
@@ -894,6 +983,7 @@ function v3Example() {
   tree.minor = 0;
   const skel = find(tree.chunks, 'SKEL');
   skel.subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
+  toPages(skel);
   tree.chunks = tree.chunks.filter((c) => c.id !== 'GEOM');
   tree.chunks.push({ id: 'GEOS', flags: 0, payload });
   tree.payloadSizes = [payload.length];
@@ -962,7 +1052,8 @@ test('format 3: a node of many faces in few bytes decodes (the work bounded by i
   tree.major = 3;
   tree.minor = 0;
   find(tree.chunks, 'SKEL').subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
-  const node = le(find(find(tree.chunks, 'SKEL').subs, 'NODE').payload);
+  toPages(find(tree.chunks, 'SKEL'));
+  const [node] = recordOf(find(tree.chunks, 'SKEL'), 0);
   node.setUint32(40, N, true);
   node.setUint32(44, N + 2, true);
   le(find(tree.chunks, 'HEAD').payload).setBigUint64(64, BigInt(N), true);
@@ -998,7 +1089,35 @@ test('format 3: the CODE chunk is required and checked as strata checks it; a 2.
     assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}, not ${words}`));
   const withFreqs = (k, f) => freqs.map((x, j) => (j === k ? f : x));
   refusedWith(variant((v, subs) => subs.splice(subs.findIndex((c) => c.id === 'CODE'), 1)), ['SKEL', 'has no CODE']);
-  refusedWith(variant((v, subs) => subs.push({ ...find(subs, 'CODE') })), ['SKEL', 'second CODE']);
+  refusedWith(variant((v, subs) => subs.splice(subs.findIndex((c) => c.id === 'CODE'), 0, { ...find(subs, 'CODE') })), ['SKEL', 'second CODE']);
+  // The node pages come last, one per level, top first, and nothing else holds node records.
+  refusedWith(variant((v, subs) => subs.push({ ...find(subs, 'CODE') })), ['SKEL', 'CODE chunk after the node pages']);
+  refusedWith(variant((v, subs) => subs.pop()), ['SKEL', 'node pages (NODL) for']);
+  refusedWith(variant((v, subs) => subs.push({ ...subs[subs.length - 1] })), ['SKEL', 'node pages (NODL) for']);
+  refusedWith(variant((v, subs) => subs.splice(subs.findIndex((c) => c.id === 'CODE'), 0, { id: 'NODE', flags: 0, payload: new Uint8Array(56) })), ['SKEL', 'holds a NODE chunk']);
+  refusedWith(variant((v, subs) => (subs.find((c) => c.id === 'NODL').flags = 3)), ['NODL', 'entry width 3']);
+  refusedWith(
+    variant((v, subs) => {
+      const p = subs.find((c) => c.id === 'NODL');
+      p.payload = concat([p.payload, new Uint8Array(p.flags)]);
+    }),
+    ['NODL', 'neighbour entries, the level']
+  );
+  refusedWith(
+    variant((v, subs) => {
+      const p = subs.find((c) => c.id === 'NODL');
+      p.payload = p.payload.slice(0, p.payload.length - 1);
+    }),
+    ['NODL', 'do not fill it']
+  );
+  // Two pages swapped: the levels' record counts no longer fit them.
+  refusedWith(
+    variant((v, subs) => {
+      const k = subs.findIndex((c) => c.id === 'NODL');
+      [subs[k], subs[k + 1]] = [subs[k + 1], subs[k]];
+    }),
+    ['NODL']
+  );
   for (const nb of [0, 1, 17]) refusedWith(variant((v, subs) => setCode(subs, codeBytes(nb, 8, freqs))), ['CODE', `normal bits ${nb}`]);
   for (const cb of [0, 9]) refusedWith(variant((v, subs) => setCode(subs, codeBytes(8, cb, freqs))), ['CODE', `colour bits ${cb}`]);
   refusedWith(variant((v, subs) => (find(subs, 'CODE').payload[3] = 1)), ['CODE', 'reserved']);
@@ -1037,7 +1156,7 @@ test('format 3: versions, layout, hostile counts and damaged payloads are refuse
   const refusedWith = (b, words) =>
     assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}, not ${words}`));
   const head = (v) => find(v.chunks, 'HEAD').payload;
-  const node = (v) => le(find(find(v.chunks, 'SKEL').subs, 'NODE').payload);
+  const node = (v) => recordOf(find(v.chunks, 'SKEL'), 0)[0];
   // A newer minor of 3 reads as 3.0 does, with what it may add; 3.0 refuses the additions; 4.0 is refused.
   const newer = (minor) => (v) => {
     v.minor = minor;
