@@ -94,7 +94,7 @@ fn shared_grids_import_convert_verify_and_render_as_terrain() {
         assert!(o.status.success(), "{file}: {}", String::from_utf8_lossy(&o.stdout));
         let o = strata(&["inspect", "--json", out.to_str().unwrap()]);
         let ins: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        assert_eq!(ins["version"], "3.0", "{file}: strata convert writes format 3.0 by default");
+        assert_eq!(ins["version"], strata::format::VERSION3, "{file}: strata convert writes format 3 by default");
         assert_eq!(ins["georef"], *georef, "{file}: the file keeps the georeference");
         let png = dir.join(format!("{file}.png"));
         let o = strata(&["render", out.to_str().unwrap(), "-o", png.to_str().unwrap(), "--width", "128", "--height", "128"]);

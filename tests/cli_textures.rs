@@ -145,7 +145,7 @@ fn a_missing_image_is_a_warning_and_the_model_converts() {
     strata(&["verify", &out.display().to_string()]);
     let inspected: serde_json::Value = serde_json::from_slice(&strata(&["inspect", "--json", &out.display().to_string()]).stdout).unwrap();
     assert_eq!(inspected["images"], serde_json::json!([]));
-    assert_eq!(inspected["version"], "3.0", "format 3 by default");
+    assert_eq!(inspected["version"], strata::format::VERSION3, "format 3 by default");
     let v2 = dir.join("m2.strata");
     strata(&["convert", "-q", "--format-version", "2", &gltf.display().to_string(), &v2.display().to_string()]);
     let inspected: serde_json::Value = serde_json::from_slice(&strata(&["inspect", "--json", &v2.display().to_string()]).stdout).unwrap();
@@ -169,7 +169,7 @@ fn obj_maps_bring_their_images_and_export_beside_the_obj() {
     let inspected: serde_json::Value =
         serde_json::from_slice(&strata(&["inspect", "--json", &strata_file.display().to_string()]).stdout).unwrap();
     assert_eq!(inspected["images"].as_array().unwrap().len(), 1);
-    assert_eq!(inspected["version"], "3.0");
+    assert_eq!(inspected["version"], strata::format::VERSION3);
     let from_obj = render(&strata_file, &dir.join("obj.png"), "auto");
     let from_glb = render(&globe, &dir.join("glb.png"), "auto");
     let (_, diff) = compare(&from_obj, &from_glb);

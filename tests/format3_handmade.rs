@@ -145,8 +145,13 @@ fn chunk(out: &mut Vec<u8>, id: &[u8; 4], flags: u32, payload: &[u8]) {
     out.resize(out.len().next_multiple_of(8), 0);
 }
 
-/// The whole file of §7.
+/// The whole file of §7, of minor version 1 (or with `minor` 0, its node table as format 3.0's
+/// `NODE` and `NBRS`, §0).
 fn file() -> Vec<u8> {
+    file_of(1)
+}
+
+fn file_of(minor: u16) -> Vec<u8> {
     let (node, _) = payload();
     let p = strata::hierarchy::HierarchyParams::default();
     let mut head = Vec::new();
@@ -188,6 +193,21 @@ fn file() -> Vec<u8> {
         levl.extend_from_slice(&v.to_le_bytes());
     }
     chunk(&mut skel, b"LEVL", 0, &levl);
+    let mut rec = Vec::new();
+    for v in [0u16, 0, 0, 0, 0, RADIUS] {
+        rec.extend_from_slice(&v.to_le_bytes()); // children, neighbours, axis +z, half-angle 0, radius
+    }
+    for v in [0u64, ONE | ONE << 21, HALF | HALF << 21] {
+        rec.extend_from_slice(&v.to_le_bytes()); // box min, box max, sphere center
+    }
+    rec.extend_from_slice(&((STEP * 3f64.sqrt() / 2.0) as f32).to_le_bytes());
+    for v in [2u32, 4, node.len() as u32, crc32fast::hash(&node)] {
+        rec.extend_from_slice(&v.to_le_bytes());
+    }
+    if minor == 0 {
+        chunk(&mut skel, b"NODE", 0, &rec);
+        chunk(&mut skel, b"NBRS", 2, &[]);
+    }
     let mut matl = Vec::new();
     matl.extend_from_slice(&7u32.to_le_bytes());
     matl.extend_from_slice(b"default");
@@ -205,23 +225,14 @@ fn file() -> Vec<u8> {
         }
     }
     chunk(&mut skel, b"CODE", 0, &code);
-    // The one level's page (§1.1): its node record, then no neighbour entries (width 2).
-    let mut rec = Vec::new();
-    for v in [0u16, 0, 0, 0, 0, RADIUS] {
-        rec.extend_from_slice(&v.to_le_bytes()); // children, neighbours, axis +z, half-angle 0, radius
+    if minor >= 1 {
+        // The one level's page (§1.1): its node record, then no neighbour entries (width 2).
+        chunk(&mut skel, b"NODL", 2, &rec);
     }
-    for v in [0u64, ONE | ONE << 21, HALF | HALF << 21] {
-        rec.extend_from_slice(&v.to_le_bytes()); // box min, box max, sphere center
-    }
-    rec.extend_from_slice(&((STEP * 3f64.sqrt() / 2.0) as f32).to_le_bytes());
-    for v in [2u32, 4, node.len() as u32, crc32fast::hash(&node)] {
-        rec.extend_from_slice(&v.to_le_bytes());
-    }
-    chunk(&mut skel, b"NODL", 2, &rec);
 
     let mut out = b"\x89STRATA\n".to_vec();
     out.extend_from_slice(&3u16.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
+    out.extend_from_slice(&minor.to_le_bytes());
     let crc = crc32fast::hash(&out);
     out.extend_from_slice(&crc.to_le_bytes());
     chunk(&mut out, b"HEAD", 0, &head);
@@ -240,7 +251,7 @@ fn file() -> Vec<u8> {
 fn the_v3_example_of_the_spec_decodes_to_the_unit_square() {
     let bytes = file();
     let rd = Reader::open(Cursor::new(&bytes)).expect("the example opens");
-    assert_eq!((rd.header().major, rd.header().minor), (3, 0));
+    assert_eq!((rd.header().major, rd.header().minor), (3, 1));
     let g = rd.read_node(0).expect("node 0 decodes");
     let square = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
     assert_eq!(g.positions.iter().map(|p| p.to_array()).collect::<Vec<_>>(), square);
@@ -262,6 +273,32 @@ fn the_v3_example_of_the_spec_decodes_to_the_unit_square() {
             println!("alphabet {a:2} symbol {sym:2}  {note}");
         }
     }
+}
+
+#[test]
+fn a_format_3_0_file_with_node_and_nbrs_reads_as_3_1() {
+    let (new, old) = (file_of(1), file_of(0));
+    let read = |b: &[u8]| {
+        let rd = Reader::open(Cursor::new(b)).expect("opens");
+        assert_eq!(rd.nodes().len(), 1);
+        rd.read_node(0).expect("node 0 decodes")
+    };
+    let (a, b) = (read(&new), read(&old));
+    assert_eq!((a.positions, a.indices), (b.positions, b.indices));
+    assert!(format::verify(Cursor::new(&old), std::path::Path::new("3.0")).is_sound());
+    // Each version's node table is its own: 3.1 with NODE and NBRS, or 3.0 with NODL, is refused.
+    let mut swapped = old.clone();
+    swapped[10] = 1;
+    let crc = crc32fast::hash(&swapped[..12]);
+    swapped[12..16].copy_from_slice(&crc.to_le_bytes());
+    let e = Reader::open(Cursor::new(&swapped)).err().expect("3.1 with NODE refused").to_string();
+    assert!(e.contains("NODE") && e.contains("NODL"), "{e}");
+    let mut swapped = new.clone();
+    swapped[10] = 0;
+    let crc = crc32fast::hash(&swapped[..12]);
+    swapped[12..16].copy_from_slice(&crc.to_le_bytes());
+    let e = Reader::open(Cursor::new(&swapped)).err().expect("3.0 without NODE refused").to_string();
+    assert!(e.contains("no NODE chunk"), "{e}");
 }
 
 #[test]

@@ -1,5 +1,6 @@
-// The web viewer's reader of the strata chunk file, formats 2.x (format-spec/strata-v2.md) and 3.0
-// (format-spec/strata-v3.md: node geometry compressed, one GEOS chunk, coding tables in CODE).
+// The web viewer's reader of the strata chunk file, formats 2.x (format-spec/strata-v2.md) and 3.x
+// (format-spec/strata-v3.md: node geometry compressed, one GEOS chunk, coding tables in CODE, the
+// node table in pages from 3.1).
 //
 // A plain ES module without dependencies, for browsers and Node 20. It is written from the spec and
 // agrees with strata's Rust reader (src/format/) value for value: every decoded float is the f32 the
@@ -28,7 +29,7 @@
 /** The format 2 version this reader knows (2.3); it also reads format 3 up to NEWEST_MAJOR.MINOR3. */
 export const MAJOR = 2, MINOR = 3;
 /** The newest major version this reader reads (format 3, strata-v3.md) and the minor of it it knows. */
-export const NEWEST_MAJOR = 3, MINOR3 = 0;
+export const NEWEST_MAJOR = 3, MINOR3 = 1;
 
 /** The newest minor of `major` this reader knows: a newer minor only adds what older readers skip. */
 export const knownMinor = (major) => (major >= 3 ? MINOR3 : MINOR);
@@ -148,6 +149,8 @@ const padding = (end) => (8 - (end % 8)) % 8;
 
 /** Node 0's offset, SKEL (and its padding) ending at `start`: format 3's payloads lie in a GEOS chunk. */
 const geometryStart = (major, start) => (major >= 3 ? start + FRAME : start);
+/** Whether a file of this version keeps its node table in NODL pages (3.1 on, strata-v3.md §1.1) rather than NODE and NBRS. */
+const isPaged = (major, minor) => major > 3 || (major === 3 && minor >= 1);
 
 /** The end of node geometry, padding included, of `bytes` bytes (LEVL's sum) after SKEL's end `start`. */
 function geometryEnd(major, start, bytes) {
@@ -338,7 +341,8 @@ export function openingRange(prefix, fileLength) {
   const n = b.length;
   if (fileLength !== undefined && fileLength < PROLOGUE) throw fail(0, `a file of ${fileLength} bytes is too short for a strata file`);
   if (n < PROLOGUE) return { need: PROLOGUE };
-  const { major } = checkPrologue(b, fileLength);
+  const { major, minor } = checkPrologue(b, fileLength);
+  const paged = isPaged(major, minor);
   frameFits(PROLOGUE, fileLength);
   if (n < PROLOGUE + FRAME) return { need: PROLOGUE + FRAME };
   const head = checkHeadFrame(b, fileLength);
@@ -367,7 +371,7 @@ export function openingRange(prefix, fileLength) {
   const skeletonEnd = chunkEnd(pos, 'SKEL', skelSize, fileLength);
   // Hints, which decodeSkeleton checks: the top level's bytes from LEVL, if its record lies in the
   // prefix; in format 3, the end of the top two levels' NODL pages, if their frames do.
-  let topEnd, pagesEnd = major >= 3 && levels !== undefined && levels <= 2 ? skeletonEnd : undefined;
+  let topEnd, pagesEnd = paged && levels !== undefined && levels <= 2 ? skeletonEnd : undefined;
   const se = pos + FRAME + skelSize, payloadEnd = Math.min(se, n);
   let s = pos + FRAME, pages = 0;
   while (levels !== undefined && s + FRAME <= payloadEnd) {
@@ -380,7 +384,7 @@ export function openingRange(prefix, fileLength) {
         const end = geometryStart(major, skeletonEnd) + bytes;
         if (bytes !== Infinity && (fileLength === undefined || end <= fileLength)) topEnd = end;
       }
-      if (major < 3) break;
+      if (!paged) break;
     }
     const page = isId(b, s, 'NODL');
     const e = s + FRAME + size + TRAILER;
@@ -391,7 +395,7 @@ export function openingRange(prefix, fileLength) {
       break;
     }
   }
-  return major >= 3 ? { skeletonEnd, topEnd, pagesEnd } : { skeletonEnd, topEnd, pagesEnd: skeletonEnd };
+  return paged ? { skeletonEnd, topEnd, pagesEnd } : { skeletonEnd, topEnd, pagesEnd: skeletonEnd };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -629,10 +633,10 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const sp = pos + FRAME, se = sp + skelSize;
   const h = header;
   const L = h.levels, N = h.nodes;
-  const v3 = major >= 3;
-  // Format 3 opened top first from a prefix (strata-v3.md §1.1): SKEL's sub-chunks up to the top
+  const v3 = major >= 3, paged = isPaged(major, minor);
+  // Format 3.1 opened top first from a prefix (strata-v3.md §1.1): SKEL's sub-chunks up to the top
   // two levels' pages, each checked by its own CRC; SKEL's CRC and the rest by completeSkeleton.
-  const partial = !!opts.topFirst && v3 && L > 2 && b.length < skeletonEnd;
+  const partial = !!opts.topFirst && paged && L > 2 && b.length < skeletonEnd;
   const wholeSkel = () => {
     have(skeletonEnd);
     const stored = u32(b, se), actual = crc32(b, sp, se);
@@ -672,8 +676,9 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   if (expect !== N) throw lerr(levl.ps, `levels hold ${expect} nodes, HEAD says ${N}`);
 
   // The node records and neighbour lists as pages, one per level from the top: format 2's NODE
-  // and NBRS hold every level, format 3 has one NODL per level (of which a prefix holds the first).
-  let pages = v3 ? pagesV3(subs, levels, skelAt, partial) : pagesV2(find('NODE'), find('NBRS'), levels);
+  // and NBRS hold every level (format 2 and 3.0), 3.1 has one NODL per level (of which a prefix
+  // holds the first).
+  let pages = paged ? pagesPaged(subs, levels, skelAt, partial) : pagesWhole(find('NODE'), find('NBRS'), levels);
   const pageOf = (l) => pages[L - 1 - l];
   const { origin, step, bits: gbits } = h.grid;
   const last = 2 ** gbits - 1;
@@ -781,14 +786,14 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     for (let m = 0; m < L; m++) levelTotals(m);
     if (totals[0] !== h.inputFaces) throw lerr(levl.ps, `level 0's nodes hold ${totals[0]} faces, HEAD says the input has ${h.inputFaces}`);
     const all = entriesOf(pages);
-    if (!v3 && nbFirst !== all) throw chunkFail(pages[0].entriesAt, 'NBRS', pages[0].at, `holds ${all} neighbours, the nodes use ${nbFirst}`);
+    if (!paged && nbFirst !== all) throw chunkFail(pages[0].entriesAt, 'NBRS', pages[0].at, `holds ${all} neighbours, the nodes use ${nbFirst}`);
   };
   // Level m's neighbour entries (its records decoded): as many as its nodes use (format 3's
   // pages), each below the level's node count, made absolute node ids.
   const decodeEntries = (m) => {
     const lev = levels[m], pg = pageOf(m);
     const used = lev.nodes ? neighborFirst[lev.firstNode + lev.nodes - 1] + neighborCount[lev.firstNode + lev.nodes - 1] - neighborFirst[lev.firstNode] : 0;
-    if (v3 && used !== pg.entryCount) throw chunkFail(pg.entriesAt, 'NODL', pg.at, `holds ${pg.entryCount} neighbour entries, the level's nodes use ${used}`);
+    if (paged && used !== pg.entryCount) throw chunkFail(pg.entriesAt, 'NODL', pg.at, `holds ${pg.entryCount} neighbour entries, the level's nodes use ${used}`);
     for (let i = lev.firstNode, end = lev.firstNode + lev.nodes; i < end; i++) {
       for (let k = neighborFirst[i], e = k + neighborCount[i]; k < e; k++) {
         const o = pg.entriesAt + pg.width * (k - pg.entryBase);
@@ -804,7 +809,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const kept = opts.topFirst ? Math.min(L, 2) : L;
   for (let k = kept; k > 0; k--) decodeLevel();
   if (l < 0) finish();
-  else if (v3) for (let m = L - 1; m > l; m--) levelTotals(m);
+  else if (paged) for (let m = L - 1; m > l; m--) levelTotals(m);
   for (let m = L - 1; m >= L - kept; m--) decodeEntries(m);
   // Where the image levels start (§2): checked against the node table by finish().
   const levelsStart = geometryEnd(major, skeletonEnd, levels.reduce((sum, rec) => sum + rec.bytes, 0));
@@ -894,7 +899,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
               throw chunkFail(prefix[k].at, 'SKEL', skelAt, 'its sub-chunks differ from the ones read before (the file changed between reads)');
             }
           }
-          pages = pagesV3(subs, levels, skelAt, false);
+          pages = pagesPaged(subs, levels, skelAt, false);
           const list = new Uint32Array(entriesOf(pages));
           list.set(neighborList);
           sk.neighborList = neighborList = list;
@@ -931,8 +936,8 @@ function skelPrefix(b, sp, se, skelAt, want, have) {
   return out;
 }
 
-/** Format 2's pages: each level's slice of NODE, the entries of all levels in NBRS. */
-function pagesV2(node, nbrs, levels) {
+/** The pages of a node table in NODE and NBRS (format 2 and 3.0): each level's slice of NODE, the entries of all levels in NBRS. */
+function pagesWhole(node, nbrs, levels) {
   const width = nbrs.flags;
   if (width !== 2 && width !== 4) throw chunkFail(nbrs.at + 4, 'NBRS', nbrs.at, `entry width ${width}; must be 2 or 4`);
   if (nbrs.size % width !== 0) throw chunkFail(nbrs.ps, 'NBRS', nbrs.at, `size ${nbrs.size} is not a multiple of ${width}`);
@@ -945,10 +950,10 @@ function pagesV2(node, nbrs, levels) {
 }
 
 /**
- * Format 3's pages (strata-v3.md §1.1): one NODL per level from the top, after every other
+ * The pages of format 3.1 on (strata-v3.md §1.1): one NODL per level from the top, after every other
  * sub-chunk; all of them, or with `prefix` the first ones read (the top two levels').
  */
-function pagesV3(subs, levels, skelAt, prefix) {
+function pagesPaged(subs, levels, skelAt, prefix) {
   const old = subs.find((s) => s.id === 'NODE' || s.id === 'NBRS');
   if (old) throw chunkFail(old.at, 'SKEL', skelAt, `holds a ${old.id} chunk: format 3 keeps nodes in NODL pages`);
   let first = subs.findIndex((s) => s.id === 'NODL');
@@ -1679,7 +1684,7 @@ function decodeCode(b, c, attrs) {
   if (attrs.colors !== (cb !== 0) || cb > 8) throw err(1, `colour bits ${cb}; the file ${attrs.colors ? 'has' : 'has no'} colours (1..=8 bits)`);
   if (b[p0 + 2] !== 0 || b[p0 + 3] !== 0) throw err(2, 'reserved bytes are not zero');
   const count = u32(b, p0 + 4);
-  if (count !== ALPHABETS) throw err(4, `${count} alphabets; format 3.0 has ${ALPHABETS}`);
+  if (count !== ALPHABETS) throw err(4, `${count} alphabets; format 3 has ${ALPHABETS}`);
   const table = new Int32Array(ALPHABETS << PROB_BITS);
   const freqs = [];
   let o = 8;

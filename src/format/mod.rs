@@ -65,10 +65,17 @@ pub const NEWEST_MAJOR: u16 = 3;
 pub const MINOR: u16 = 3;
 /// The format version as the spec writes it.
 pub const VERSION: &str = "2.3";
-/// Minor version of format 3 this reader knows, and writers write.
-pub const MINOR3: u16 = 0;
+/// Minor version of format 3 this reader knows, and writers write: 1, the node table in pages
+/// (strata-v3.md §1.1); 3.0 files, whose node table is `NODE` and `NBRS` as in format 2, are read.
+pub const MINOR3: u16 = 1;
 /// Format 3's version as its spec writes it.
-pub const VERSION3: &str = "3.0";
+pub const VERSION3: &str = "3.1";
+
+/// Whether a file of this version keeps its node table in `NODL` pages, one per level (3.1 on),
+/// rather than in `NODE` and `NBRS`.
+pub fn paged(major: u16, minor: u16) -> bool {
+    (major, minor) >= (3, 1)
+}
 
 /// The newest minor version of `major` this reader knows: a file of a newer minor may carry
 /// fields and chunks it skips.

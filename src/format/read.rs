@@ -190,7 +190,7 @@ impl<S: ByteSource> Reader<S> {
             pos = rd.next(pos, &f)?;
         };
         // Format 3 opened top first reads SKEL only through the top levels' pages (strata-v3.md §1.1).
-        let prefix = top_only && major >= 3;
+        let prefix = top_only && super::paged(major, minor);
         let payload = if prefix { rd.skel_prefix(pos, &skel, header.levels)? } else { rd.payload_at(pos, &skel)? };
         rd.skeleton_chunks.push(ChunkInfo::new(&skel, pos, 0));
         rd.skeleton_end = rd.next(pos, &skel)?;

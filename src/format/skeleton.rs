@@ -270,10 +270,11 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
     // The node records and neighbour lists, as pages from the top level down: format 2's NODE and
     // NBRS hold every level; format 3 has one NODL per level (strata-v3.md §1.1), of which a
     // reader that opens top first has read the first few.
-    let pages = if ctx.major >= 3 {
-        pages_v3(ctx, pos, payload, &subs, &levels, top_only)?
+    let paged = super::paged(ctx.major, ctx.minor);
+    let pages = if paged {
+        pages_paged(ctx, pos, payload, &subs, &levels, top_only)?
     } else {
-        pages_v2(ctx, payload, find(id::NODE)?, find(id::NBRS)?, h, &levels)?
+        pages_whole(ctx, payload, find(id::NODE)?, find(id::NBRS)?, h, &levels)?
     };
     let decoded = pages.len();
     // The top level, and the level below, which the top nodes' rules are checked against.
@@ -386,17 +387,17 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
     }
     for (page, (l, _)) in pages.iter().zip(levels.iter().enumerate().rev()) {
         let used = level_entries[l].end - level_entries[l].start;
-        let holds = if v3 { page.entry_count } else { neighbor_first };
-        let uses = if v3 { used } else { page.entry_count };
-        if holds != uses && (v3 || complete) {
+        let holds = if paged { page.entry_count } else { neighbor_first };
+        let uses = if paged { used } else { page.entry_count };
+        if holds != uses && (paged || complete) {
             let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.entries_at);
-            return Err(f.error(if v3 {
+            return Err(f.error(if paged {
                 format!("holds {holds} neighbour entries, the level's nodes use {uses}")
             } else {
                 format!("holds {uses} neighbours, the nodes use {holds}")
             }));
         }
-        if !v3 {
+        if !paged {
             break;
         }
     }
@@ -506,8 +507,9 @@ impl Page<'_> {
     }
 }
 
-/// Format 2's pages: every level's slice of `NODE`, each reading the whole `NBRS`.
-fn pages_v2<'a>(ctx: &Context, payload: &'a [u8], node: &Sub, nbrs: &Sub, h: &Header, levels: &[LevelRecord]) -> Result<Vec<Page<'a>>> {
+/// The pages of a node table in `NODE` and `NBRS` (format 2 and 3.0): every level's slice of
+/// `NODE`, each reading the whole `NBRS`.
+fn pages_whole<'a>(ctx: &Context, payload: &'a [u8], node: &Sub, nbrs: &Sub, h: &Header, levels: &[LevelRecord]) -> Result<Vec<Page<'a>>> {
     let nf = Fields::new(ctx.path, &nbrs.frame.id, nbrs.offset, &[], nbrs.payload_offset());
     let width = nbrs.frame.flags as u64;
     if width != 2 && width != 4 {
@@ -543,9 +545,16 @@ fn pages_v2<'a>(ctx: &Context, payload: &'a [u8], node: &Sub, nbrs: &Sub, h: &He
         .collect())
 }
 
-/// Format 3's pages (strata-v3.md §1.1): one `NODL` per level from the top, after every other
+/// The pages of format 3.1 on (strata-v3.md §1.1): one `NODL` per level from the top, after every other
 /// sub-chunk. All of them, or with `prefix` the first ones read (at least the top two levels').
-fn pages_v3<'a>(ctx: &Context, pos: u64, payload: &'a [u8], subs: &[Sub], levels: &[LevelRecord], prefix: bool) -> Result<Vec<Page<'a>>> {
+fn pages_paged<'a>(
+    ctx: &Context,
+    pos: u64,
+    payload: &'a [u8],
+    subs: &[Sub],
+    levels: &[LevelRecord],
+    prefix: bool,
+) -> Result<Vec<Page<'a>>> {
     let first = subs.iter().position(|s| s.frame.id == id::NODL).unwrap_or(subs.len());
     if let Some(s) = subs.iter().find(|s| s.frame.id == id::NODE || s.frame.id == id::NBRS) {
         return Err(ctx.err(
@@ -632,8 +641,10 @@ pub fn encode_head(h: &Header) -> Vec<u8> {
 }
 
 /// The `SKEL` chunk: levels, node records, neighbour lists, materials, images (`TEXR`) and, in
-/// format 3 (`code` given), the coding tables, with the node records and neighbour lists as one
-/// `NODL` page per level, top first (strata-v3.md §1.1); in format 2 as `NODE` and `NBRS`.
+/// format 3 (`code` given), the coding tables; with `paged` (format 3.1 on) the node records and
+/// neighbour lists as one `NODL` page per level, top first (strata-v3.md §1.1), else as `NODE` and
+/// `NBRS`.
+#[allow(clippy::too_many_arguments)]
 pub fn encode_skel(
     levels: &[LevelRecord],
     records: &[NodeRecord],
@@ -642,6 +653,7 @@ pub fn encode_skel(
     materials: &[Material],
     texr: Option<&[u8]>,
     code: Option<&[u8]>,
+    paged: bool,
 ) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
@@ -695,7 +707,7 @@ pub fn encode_skel(
     }
 
     let mut next = neighbors.iter();
-    match code {
+    match code.filter(|_| paged) {
         None => {
             p.clear();
             for (r, c) in records.iter().zip(codes) {
@@ -707,6 +719,9 @@ pub fn encode_skel(
             lists(&mut p, 0..records.len(), &mut next, width);
             chunk::put(&mut payload, id::NBRS, width as u32, &p);
             payload.extend_from_slice(&materials_and_tables);
+            if let Some(c) = code {
+                chunk::put(&mut payload, id::CODE, 0, c);
+            }
         }
         Some(c) => {
             payload.extend_from_slice(&materials_and_tables);

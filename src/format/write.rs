@@ -543,7 +543,9 @@ impl<W: Write> Writer<W> {
         let image_order = texture::layout_order(images);
         let texr = (!images.is_empty()).then(|| texture::encode_texr(images, &image_order, &self.opts.materials, &density));
         let code_payload = code.as_ref().map(|(t, _)| t.encode());
-        let skel = encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref(), code_payload.as_deref());
+        let paged = super::paged(header.major, header.minor);
+        let skel =
+            encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref(), code_payload.as_deref(), paged);
         let geor = self.opts.georef.as_ref().map(georef::encode).unwrap_or_default();
         let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + geor.len() as u64 + skel.len() as u64;
         let image_bytes: u64 = image_order

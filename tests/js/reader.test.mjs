@@ -255,7 +255,7 @@ function recordOf(skel, i) {
   return null;
 }
 
-/** A format-2 SKEL's NODE and NBRS made format 3's NODL pages, one per level from the top, last in SKEL. */
+/** A SKEL's NODE and NBRS (format 2, 3.0) made format 3.1's NODL pages, one per level from the top, last in SKEL. */
 function toPages(skel) {
   const node = find(skel.subs, 'NODE').payload, nbrs = find(skel.subs, 'NBRS');
   const levl = le(find(skel.subs, 'LEVL').payload);
@@ -271,6 +271,28 @@ function toPages(skel) {
     entry += k;
   }
   skel.subs = [...skel.subs.filter((s) => s.id !== 'NODE' && s.id !== 'NBRS'), ...pages];
+}
+
+/** A format-3.1 SKEL's NODL pages made format 3.0's NODE and NBRS (after LEVL, as 3.0 writers put them). */
+function fromPages(skel) {
+  const pages = skel.subs.filter((s) => s.id === 'NODL');
+  const levl = le(find(skel.subs, 'LEVL').payload);
+  const records = [], entries = [];
+  pages.forEach((p, k) => {
+    const n = levl.getUint32(levl.byteLength - 32 * (k + 1) + 4, true);
+    records.push(p.payload.slice(0, 56 * n));
+    const e = p.payload.slice(56 * n);
+    for (let o = 0; o < e.length; o += p.flags) {
+      const x = new Uint8Array(4);
+      le(x).setUint32(0, p.flags === 2 ? le(e).getUint16(o, true) : le(e).getUint32(o, true), true);
+      entries.push(x);
+    }
+  });
+  const width = pages.every((p) => p.flags === 2) ? 2 : 4;
+  const rest = skel.subs.filter((s) => s.id !== 'NODL');
+  const at = rest.findIndex((s) => s.id === 'LEVL') + 1;
+  rest.splice(at, 0, { id: 'NODE', flags: 0, payload: concat(records) }, { id: 'NBRS', flags: width, payload: concat(entries.map((x) => x.subarray(0, width))) });
+  skel.subs = rest;
 }
 
 function concat(parts) {
@@ -538,6 +560,32 @@ test('format 3 opened from its top pages: the rest of SKEL is checked by complet
   completeSkeleton(sk, bytes);
   assert.equal(sk.decoded, sk.nodeCount);
   assert.equal(skeletonNeeds(sk), 0);
+});
+
+test('a format-3.0 file (its node table in NODE and NBRS) reads as its 3.1 twin; each version keeps its own table', () => {
+  for (const name of ['sphere-v3', 'textured-v3', 'plane-v3']) {
+    const bytes = read(`${name}.strata`);
+    const tree = parseTree(bytes);
+    const old = clone(tree);
+    old.minor = 0;
+    fromPages(find(old.chunks, 'SKEL'));
+    const b = serialize(old, { totals: true });
+    const [a, z] = [decodeAll(bytes), decodeAll(b)];
+    assert.equal(z.sk.minor, 0);
+    assert.deepEqual(z.geoms, a.geoms, name);
+    for (const key of ['parent', 'firstChild', 'neighborList', 'error', 'center', 'size', 'crc']) assert.deepEqual(z.sk[key], a.sk[key], `${name}: ${key}`);
+    assert.deepEqual(decodeTopFirst(b).geoms, a.geoms);
+    // 3.0's pages end where its SKEL does.
+    const r = openingRange(b, b.length);
+    assert.equal(r.pagesEnd, r.skeletonEnd);
+    // The other version's table is refused.
+    const swapped = clone(old);
+    swapped.minor = 1;
+    assert.throws(() => decodeAll(serialize(swapped)), (e) => (e instanceof FormatError && /NODE chunk: format 3 keeps nodes in NODL/.test(e.message)) || assert.fail(e.message));
+    const paged = clone(tree);
+    paged.minor = 0;
+    assert.throws(() => decodeAll(serialize(paged)), (e) => (e instanceof FormatError && /no NODE chunk/.test(e.message)) || assert.fail(e.message));
+  }
 });
 
 test('openingRange refuses a bad prologue, an unsupported major version and a bad HEAD frame', () => {
@@ -980,7 +1028,7 @@ function v3Example() {
   const payload = payloadBytes(ransEncode(out.symbols, tables), out.bits);
   const tree = parseTree(specExample());
   tree.major = 3;
-  tree.minor = 0;
+  tree.minor = MINOR3;
   const skel = find(tree.chunks, 'SKEL');
   skel.subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
   toPages(skel);
@@ -999,7 +1047,7 @@ test('the example of strata-v3.md §7, encoded here from the spec, decodes to th
   const hexBytes = (b) => Array.from(b, (x) => x.toString(16).padStart(2, '0')).join(' ');
   assert.equal(hexBytes(payload), quoted.slice(1).join(' '));
   const { sk, geoms } = decodeAll(bytes);
-  assert.deepEqual([sk.major, sk.minor], [3, 0]);
+  assert.deepEqual([sk.major, sk.minor], [3, MINOR3]);
   const g = geoms[0];
   assert.deepEqual([...g.positions], [0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0]);
   assert.deepEqual([...g.indices], [0, 1, 2, 0, 2, 3]);
@@ -1050,7 +1098,7 @@ test('format 3: a node of many faces in few bytes decodes (the work bounded by i
   const payload = payloadBytes(ransEncode(out.symbols, tables), out.bits);
   const tree = parseTree(specExample());
   tree.major = 3;
-  tree.minor = 0;
+  tree.minor = MINOR3;
   find(tree.chunks, 'SKEL').subs.push({ id: 'CODE', flags: 0, payload: codeBytes(0, 0, tables) });
   toPages(find(tree.chunks, 'SKEL'));
   const [node] = recordOf(find(tree.chunks, 'SKEL'), 0);
@@ -1168,7 +1216,7 @@ test('format 3: versions, layout, hostile counts and damaged payloads are refuse
   assert.equal(`${n.sk.major}.${n.sk.minor}`, `3.${MINOR3 + 1}`);
   assert.deepEqual(n.geoms, base.geoms);
   refusedWith(variant(newer(MINOR3)), ['unknown attribute bits']);
-  refusedWith(variant((v) => (v.major = 4)), ['format version 4.0', 'newer']);
+  refusedWith(variant((v) => (v.major = 4)), [`format version 4.${MINOR3}`, 'newer']);
   // GEOS before SKEL; a node of no bytes; a payload longer than its stream and raw bits.
   refusedWith(variant((v) => v.chunks.splice(1, 0, find(v.chunks, 'GEOS'))), ['GEOS', 'expected the SKEL chunk']);
   const sizes = tree.payloadSizes;

@@ -239,7 +239,7 @@ impl CodeTables {
         }
         let n = u32::from_le_bytes(p[4..8].try_into().expect("4 bytes")) as usize;
         if n != a::ALPHABETS {
-            return Err((4, format!("{n} alphabets; format 3.0 has {}", a::ALPHABETS)));
+            return Err((4, format!("{n} alphabets; format 3 has {}", a::ALPHABETS)));
         }
         let mut at = 8usize;
         let mut freqs = Vec::with_capacity(n);
