@@ -25,12 +25,15 @@ fn a_nan_node_error_is_refused_by_every_command() {
     assert!(strata(&["convert", cube.to_str().unwrap(), good.to_str().unwrap(), "--quiet"]).status.success());
     let mut bytes = std::fs::read(&good).unwrap();
     let rd = Reader::open(Cursor::new(&bytes)).unwrap();
-    let at = |id: &str| rd.skeleton_chunks().iter().find(|c| c.id == id).unwrap().offset as usize;
-    let (node, skel) = (at("NODE"), at("SKEL"));
+    // Format 3.1 keeps the node table in pages, one per level from the top: the last node is the
+    // last record of the last page (level 0's).
+    let at = |id: &str| rd.skeleton_chunks().iter().rev().find(|c| c.id == id).unwrap().offset as usize;
+    let (node, skel) = (at("NODL"), at("SKEL"));
     let last = rd.nodes().len() - 1;
+    let level0 = rd.nodes().iter().filter(|n| n.level == 0).count();
     drop(rd);
     // The last node's geometric error (record offset 36) becomes NaN.
-    let field = node + 16 + 56 * last + 36;
+    let field = node + 16 + 56 * (level0 - 1) + 36;
     bytes[field..field + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     reseal(&mut bytes, node);
     reseal(&mut bytes, skel);
