@@ -325,7 +325,11 @@ fn main() {
     println!("covering a pixel center if drawn alone;");
     println!("visible: of those, reaching a pixel of the image (id buffer of the front); ideal: hidden share of front+frus;");
     println!("nodes / clusters of it: share of the ideal in nodes (clusters at level 0) none of whose faces is visible;");
-    println!("culled of it: share of the ideal in the faces the renderer's occlusion test skipped (nodes' boxes and 32-face blocks, per 32-row strip).");
+    println!(
+        "culled of it: share of the ideal in the faces the renderer's occlusion test skipped (nodes' boxes and {}-face blocks, per {}-row strip).",
+        strata::render::BLOCK_FACES,
+        strata::render::STRIP_ROWS
+    );
     println!("drawn: faces drawn per frame in the planes' order without and with occlusion culling (ratio: with / without);");
     println!("px shade: fragments shaded per covered pixel in node order, ordered: in the planes' order; draw ms: strip renderer,");
     println!("ordered, without and with culling (identical images, checked); order µs: ordering each frame's front, mean;");

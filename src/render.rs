@@ -301,7 +301,7 @@ fn encode(width: u32, height: u32, rgba: &[u8]) -> std::result::Result<Vec<u8>, 
 /// Rows per strip of [`Strips`].
 pub const STRIP_ROWS: u32 = 32;
 /// Faces per block of a part: the unit of the per-strip tests.
-pub const BLOCK_FACES: usize = 32;
+pub const BLOCK_FACES: usize = 16;
 /// Rows a face's pixels may reach beyond the rows of its corners' projections (rounding and
 /// clipping error), for the strip test.
 const ROW_MARGIN: i32 = 2;
@@ -1320,7 +1320,7 @@ mod tests {
             assert!(stats.parts_hidden >= 4, "from {}: {stats:?}", camera.eye);
             assert!(stats.faces < faces);
             assert!(stats.faces_hidden > 0);
-            // Without boxes, the blocks of 32 faces are still tested.
+            // Without boxes, the blocks of faces are still tested.
             let unboxed: Vec<Part> = parts.iter().map(|p| Part { bounds: None, ..*p }).collect();
             let (unboxed_image, unboxed_stats) = draw_occluded(&camera, &unboxed, width, height);
             assert!(unboxed_image == plain);

@@ -86,7 +86,10 @@ impl Cache {
                 let expected = rec.map_or(0, |n| record_bytes(&n, reader.header().attributes));
                 self.evict_to(b.saturating_sub(expected));
             }
-            let geometry = reader.read_node(a)?;
+            let mut geometry = reader.read_node(a)?;
+            if reader.header().major >= 3 {
+                super::face_order::morton(&mut geometry);
+            }
             let bytes = geometry_bytes(&geometry);
             self.resident += bytes;
             self.displayed += bytes;

@@ -4,6 +4,8 @@
 //! - [`refine`]: front selection, breadth-first with the neighbour rule, largest projected error or
 //!   the paper's priority first;
 //! - [`cache`]: resident geometry under a memory budget, LRU;
+//! - [`face_order`]: a format-3 node's faces put in Morton order as it is read, for the renderer's
+//!   occlusion test;
 //! - [`images`]: which image levels the front needs, and those held (selection.md §4);
 //! - [`order`]: the front from front to back, by the file's separating planes (selection.md §5);
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
@@ -13,6 +15,7 @@
 
 pub mod budget;
 pub mod cache;
+pub mod face_order;
 pub mod images;
 pub mod order;
 pub mod play;
