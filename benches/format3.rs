@@ -171,6 +171,26 @@ fn main() {
                 share(&i2, &i2m, 32)
             );
         }
+        // Sampled surface distance (fractions of the bounding-box diagonal, mean and largest):
+        // level 0 of each format to the input, and each level of format 3 to the same level of
+        // format 2, whose positions are the grid's without the lattices' and the codec's rounding.
+        let input_mesh = strata::import::import(input, None).expect("import").mesh;
+        let (rd2, rd3) = (Reader::open_path(&f2).expect("open"), Reader::open_path(&f3).expect("open"));
+        let level = |rd: &Reader<std::fs::File>, l: u32| strata::assemble::to_mesh(rd, l).expect("level");
+        let diag = input_mesh.diagonal();
+        let d = |a: &strata::mesh::Mesh, b: &strata::mesh::Mesh| {
+            let d = strata::distance::surface_distance(a, b, 20_000, 7);
+            format!("{:.2e} / {:.2e}", d.mean / diag, d.max / diag)
+        };
+        println!(
+            "  sampled distance / diagonal (mean / max), level 0 to the input: format 2 {}, format 3 {}",
+            d(&level(&rd2, 0), &input_mesh),
+            d(&level(&rd3, 0), &input_mesh)
+        );
+        let per_level: Vec<String> =
+            (0..rd3.levels().len() as u32).map(|l| format!("{l}: {}", d(&level(&rd3, l), &level(&rd2, l)))).collect();
+        println!("  each level of format 3 to its format-2 self: {}", per_level.join(", "));
+        drop((rd2, rd3));
         let rounds = (2_000_000.0 / faces).ceil().max(1.0) as usize;
         let (r2, r3) = (decode_rate(&f2, rounds), decode_rate(&f3, rounds));
         println!("  decode, M faces/s (one core): format 2 {:.1}, format 3 {:.1}", r2 / 1e6, r3 / 1e6);
