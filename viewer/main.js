@@ -1,11 +1,13 @@
 // The viewer page: opens a chunk file (?file=URL, a dropped or chosen file), streams it with
 // stream.js, draws with render.js, and gives orbit, pan, zoom, fit, picking and measuring. Tests
-// drive it through `window.strata` (bottom of this file).
+// drive it through `window.strata` (bottom of this file). Nodes below the top level are decoded in
+// Workers (decoder.js): `?workers=N` sets how many, 0 decodes on the main thread.
 
 import { Camera, add, cross, dot, length, scale, sub, unit } from './camera.js';
 import { Selector } from './select.js';
 import { FileSource, HttpSource } from './source.js';
 import { Streamer } from './stream.js';
+import { DecoderPool } from './decoder.js';
 import { Renderer } from './render.js';
 
 const $ = (id) => document.getElementById(id);
@@ -158,6 +160,7 @@ function stats() {
     showWarning([streamer.source.warning, streamer.planesError, ...streamer.imageErrors.values()].filter(Boolean).join(' '));
   }
   $('s-frame').textContent = `${frameMs.toFixed(1)} ms`;
+  $('s-decoding').textContent = decoding();
   $('s-first').textContent = firstFrameMs === null ? '–' : `${firstFrameMs.toFixed(0)} ms, ${firstFrameRequests} requests, ${fmtBytes(firstFrameBytes)}`;
 }
 
@@ -174,11 +177,13 @@ async function open(source) {
   $('name').textContent = source.name;
   firstFrameMs = null;
   firstTextured = null;
+  const decoder = DecoderPool.create(workerCount);
   try {
     // The first read goes out before WebGL starts up, which takes a while in a software renderer.
     const opening = Streamer.open(source, {
       budget: budgetBytes(),
       pixelError: pixelError(),
+      decoder,
       onLoad: (i, g) => renderer.upload(g),
       onEvict: (i, handle) => renderer.release(handle),
       onImage: (image, level, bytes, mime) => renderer.uploadImage(bytes, mime),
@@ -200,6 +205,7 @@ async function open(source) {
     resize();
     fit();
   } catch (e) {
+    decoder?.close();
     if (generation === opens) fail(e);
     throw e;
   }
@@ -426,7 +432,13 @@ controls();
 settings();
 resize();
 requestAnimationFrame(frame);
-const file = new URLSearchParams(location.search).get('file');
+const params = new URLSearchParams(location.search);
+/** Decoding workers: one per core beyond the page's own, at least one, at most four. */
+const workerCount = params.has('workers') ? Number(params.get('workers')) : Math.min(4, Math.max(1, (navigator.hardwareConcurrency ?? 2) - 1));
+const decoding = () =>
+  streamer?.decoder ? `${streamer.decoder.size} worker${streamer.decoder.size > 1 ? 's' : ''}, ${streamer.decoder.decoded} nodes`
+    : streamer?.decoderError ? `main thread (${streamer.decoderError})` : 'main thread';
+const file = params.get('file');
 if (file) opened = open(new HttpSource(new URL(file, location.href).href)).catch(() => {});
 else showWarning('No model yet: add ?file=URL to the address, or drop a .strata file here.');
 
@@ -518,6 +530,10 @@ window.strata = {
       firstFrameRequests,
       firstFrameBytes,
       frameMs,
+      decoding: decoding(),
+      workerDecoded: streamer?.decoder?.decoded ?? 0,
+      mainDecoded: streamer?.mainDecoded ?? 0,
+      mainDecodeMs: streamer?.mainDecodeMs ?? 0,
       log: streamer?.source.log ?? [],
       message: $('message').textContent,
       warning: $('warning').hidden ? '' : $('warning').textContent,

@@ -100,7 +100,8 @@ export class Streamer {
    * before a range's remaining nodes wait for the next task), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
    * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`; for images, `maps` (the map kinds
    * drawn, whose images are read: `['baseColor']`), `onImage(image, level, fileBytes, mime)` → a handle or a promise of
-   * one (the renderer's texture; a rejection leaves that level out), `onImageEvict(image, level, handle)`.
+   * one (the renderer's texture; a rejection leaves that level out), `onImageEvict(image, level, handle)`; `decoder`:
+   * a DecoderPool (decoder.js) that decodes nodes below the top level off the main thread (the streamer closes it).
    */
   static async open(source, options = {}) {
     const t0 = performance.now();
@@ -132,6 +133,8 @@ export class Streamer {
     const skeleton = decodeSkeleton(bytes, source.length, { topFirst: true });
     const s = new Streamer(source, skeleton, options);
     if (skeletonNeeds(skeleton) > bytes.length) s.skeletonPrefix = bytes;
+    // The workers decode their own skeleton from the same bytes while the top level is decoded here.
+    s.decoder?.open(bytes, source.length, s.localOrigin);
     const [top0, top1] = skeleton.levelNodes(skeleton.top());
     const topStart = skeleton.offset[top0], topEnd = skeleton.offset[top1 - 1] + skeleton.size[top1 - 1];
     if (!(topStart >= geo.at && topEnd <= geo.at + geo.bytes.length)) {
@@ -164,6 +167,12 @@ export class Streamer {
     this.maxRequestBytes = options.maxRequestBytes ?? 1 << 20;
     this.maxGapBytes = options.maxGapBytes ?? 16384;
     this.sliceMs = options.sliceMs ?? 8;
+    this.decoder = options.decoder ?? null;
+    /** Why decoding moved back to the main thread (a worker failed), or null. */
+    this.decoderError = null;
+    /** Nodes decoded on the main thread (the top level at open, and all others without a decoder), and the time it took. */
+    this.mainDecoded = 0;
+    this.mainDecodeMs = 0;
     this.onLoad = options.onLoad ?? (() => null);
     this.onEvict = options.onEvict ?? (() => {});
     this.onChange = options.onChange ?? (() => {});
@@ -252,7 +261,14 @@ export class Streamer {
     if (isComplete(this.skeleton)) return;
     if (this.skeletonPrefix) await (this.restRead ??= this.readSkeletonRest());
     if (this.error) throw this.error;
+    this.completeTable();
+  }
+
+  /** Decode the rest of the node table (its bytes read), here and in the decoder's workers. */
+  completeTable() {
+    if (isComplete(this.skeleton)) return;
     completeSkeleton(this.skeleton, this.skeletonBytes);
+    this.decoder?.complete(this.skeletonBytes);
   }
 
   /** Read the rest of a skeleton opened from its top pages (format 3), after the first frame. */
@@ -282,7 +298,16 @@ export class Streamer {
   /** Decode and check node i from its bytes and keep it. */
   insert(i, bytes) {
     if (this.cache.has(i)) return;
+    const t0 = performance.now();
     const geometry = decodeNode(this.skeleton, i, bytes, { localOrigin: this.localOrigin });
+    this.mainDecodeMs += performance.now() - t0;
+    this.mainDecoded++;
+    this.keep(i, geometry);
+  }
+
+  /** Keep node i, decoded and checked. */
+  keep(i, geometry) {
+    if (this.cache.has(i)) return;
     const size = recordBytes(this.skeleton, i);
     const handle = this.onLoad(i, geometry);
     // What picking needs stays on this side; the rest lives in the renderer's buffers.
@@ -309,7 +334,7 @@ export class Streamer {
         setTimeout(() => !this.closed && (this.skeletonPrefix ? (this.restRead ??= this.readSkeletonRest()) : this.onChange()), 0);
       } else if (!this.skeletonPrefix) {
         try {
-          completeSkeleton(s, this.skeletonBytes);
+          this.completeTable();
         } catch (e) {
           this.error = e;
           return this.drawn;
@@ -536,6 +561,7 @@ export class Streamer {
       this.source
         .read(start, s.offset[last] + s.size[last])
         .then(async (bytes) => {
+          if (this.decoder) return this.decodeInWorkers(nodes, bytes, start);
           let slice = performance.now();
           for (const i of nodes) {
             if (this.closed) return;
@@ -569,6 +595,40 @@ export class Streamer {
           if (!this.closed) this.onChange();
         });
     }
+  }
+
+  /** Decode and keep `nodes`, read as `bytes` from offset `start`, in the decoder's workers, all at once. */
+  async decodeInWorkers(nodes, bytes, start) {
+    const s = this.skeleton;
+    const results = await Promise.allSettled(
+      nodes.map(async (i) => {
+        const at = s.offset[i] - start;
+        if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
+        let geometry = null;
+        if (this.decoder) {
+          try {
+            geometry = await this.decoder.decode(i, bytes.slice(at, at + s.size[i]));
+          } catch (e) {
+            if (this.closed) return;
+            if (e instanceof FormatError) throw e;
+            // A worker that failed: this node and the rest decode here.
+            if (this.decoder) {
+              this.decoderError = e.message;
+              this.decoder.close();
+              this.decoder = null;
+            }
+          }
+        }
+        if (this.closed) return;
+        geometry ??= decodeNode(s, i, bytes.subarray(at, at + s.size[i]), { localOrigin: this.localOrigin });
+        this.keep(i, geometry);
+        this.onChange();
+      }),
+    );
+    const failed = results.find((r) => r.status === 'rejected');
+    if (failed) throw failed.reason;
+    this.failures = 0;
+    this.evict();
   }
 
   /**
@@ -613,6 +673,7 @@ export class Streamer {
   /** Release everything; reads still in flight are dropped when they land. */
   close() {
     this.closed = true;
+    this.decoder?.close();
     for (const [i, e] of this.cache) this.onEvict(i, e.handle);
     this.cache.clear();
     for (const v of this.levelCache.values()) this.onImageEvict(v.image, v.level, v.handle);

@@ -97,6 +97,18 @@ async function page(url) {
   p.on('request', (r) => requests.push({ url: r.url(), range: r.headers().range }));
   const errors = [];
   p.on('pageerror', (e) => errors.push(e.message));
+  await p.addInitScript(() => {
+    // Animation frames the page got, and the longest wait between two.
+    window.frames = { count: 0, last: 0, longest: 0 };
+    const tick = (now) => {
+      const f = window.frames;
+      if (f.last) f.longest = Math.max(f.longest, now - f.last);
+      f.count++;
+      f.last = now;
+      requestAnimationFrame(tick);
+    };
+    requestAnimationFrame(tick);
+  });
   await p.goto(url);
   return { p, requests, errors };
 }
@@ -239,6 +251,60 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       assert.deepEqual(errors, []);
       await p.close();
     }
+  });
+
+  await sub('decodes nodes in Workers: the same front and image as decoding on the main thread', async (t) => {
+    const name = models.cthead3 ? 'cthead3' : 'sphere3';
+    const runs = {};
+    // STRATA_WORKERS=0,1,2 measures more counts; the checks compare 0 with the last.
+    const counts = (process.env.STRATA_WORKERS ?? '0,2').split(',').map(Number);
+    for (const workers of counts) {
+      const { p, errors } = await page(`${viewer(name)}&workers=${workers}`);
+      await within(p.evaluate(() => window.strata.ready()), 60000, `${name}, ${workers} workers: first frame`);
+      const h = JSON.parse(run(strataBin(), ['inspect', models[name], '--json'])).header;
+      const center = h.min.map((m, k) => (m + h.max[k]) / 2);
+      const radius = Math.hypot(...h.max.map((m, k) => m - h.min[k])) / 2;
+      const cam = Camera.framing(center, radius, [0.3, 0.4, 1.0], (45 * Math.PI) / 180, W, H);
+      const t0 = Date.now();
+      const opened = await p.evaluate(() => {
+        window.frames.count = 0;
+        window.frames.longest = 0;
+        return window.strata.state();
+      });
+      await p.evaluate(([c]) => {
+        window.strata.setColor('plain');
+        window.strata.setLimits({ pixelError: 0 });
+        window.strata.setCamera(c);
+      }, [cam.toJSON()]);
+      await within(p.evaluate(() => window.strata.idle()), 300000, `${name}, ${workers} workers: full detail`);
+      const ms = Date.now() - t0;
+      const st = await p.evaluate(() => window.strata.state());
+      const frames = await p.evaluate(() => window.frames);
+      const pixels = await p.evaluate(() => {
+        const c = document.getElementById('view');
+        const g = document.createElement('canvas');
+        [g.width, g.height] = [c.width, c.height];
+        const x = g.getContext('2d');
+        x.drawImage(c, 0, 0);
+        return Array.from(x.getImageData(0, 0, g.width, g.height).data);
+      });
+      t.diagnostic(
+        `${name} to full detail with ${workers} workers: ${ms} ms; decoding: ${st.decoding}; on the main thread ${st.mainDecoded} nodes in ${st.mainDecodeMs.toFixed(0)} ms ` +
+          `(${opened.mainDecoded} at open); ${frames.count} animation frames while streaming, the longest wait ${frames.longest.toFixed(0)} ms`,
+      );
+      runs[workers] = { st, opened, pixels };
+      assert.deepEqual(errors, []);
+      await p.close();
+    }
+    const [here, there] = [runs[0], runs[counts.at(-1)]];
+    assert.equal(here.st.decoding, 'main thread');
+    assert.equal(here.st.workerDecoded, 0);
+    assert.ok(there.st.workerDecoded > 0, `decoding: ${there.st.decoding}`);
+    assert.equal(there.st.mainDecoded, there.opened.mainDecoded, 'with workers, the main thread decodes the top level at open only');
+    assert.deepEqual(there.st.drawn, here.st.drawn, 'the same front drawn');
+    let differ = 0;
+    for (let k = 0; k < here.pixels.length; k++) differ += here.pixels[k] !== there.pixels[k];
+    assert.equal(differ, 0, `${differ} channel values differ between the two images`);
   });
 
   await sub('selects the fronts strata stream selects, and draws them once resident', async (t) => {

@@ -6,6 +6,7 @@ import { existsSync, mkdirSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { Camera } from '../../viewer/camera.js';
 
 export const root = resolve(dirname(fileURLToPath(import.meta.url)), '../..');
 
@@ -31,4 +32,18 @@ export function converted(name, mesh, args) {
   const out = `${scratch()}/${name}.strata`;
   if (!existsSync(out)) run(strataBin(), ['convert', mesh, out, '-q', ...args]);
   return out;
+}
+
+/** A 640×480 camera on skeleton `s`'s model from `direction`, at `distance` times the framing distance. */
+export function cameraFrom(s, direction, distance) {
+  const h = s.header;
+  const center = h.min.map((m, i) => (m + h.max[i]) / 2);
+  const radius = Math.hypot(...h.max.map((m, i) => m - h.min[i])) / 2;
+  const cam = Camera.framing(center, radius, direction, 1.0, 640, 480);
+  const dir = cam.eye.map((e, i) => e - center[i]);
+  cam.eye = center.map((c, i) => c + dir[i] * distance);
+  const d = Math.hypot(...dir) * distance;
+  cam.near = Math.max(d - radius, d * 1e-3);
+  cam.far = d + radius;
+  return cam;
 }

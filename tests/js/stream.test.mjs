@@ -10,7 +10,7 @@ import { existsSync, readFileSync } from 'node:fs';
 import { Streamer, levelBytes, neededLevel, usedImages, wantedLevels } from '../../viewer/stream.js';
 import { Camera } from '../../viewer/camera.js';
 import { IMAGE_MIME, decodeNode, decodeSkeleton, imageSize, planesOffset } from '../../viewer/format.js';
-import { root, converted } from './helpers.mjs';
+import { root, converted, cameraFrom } from './helpers.mjs';
 
 /** The bytes of a file served with a delay per read; records reads and the most in flight. */
 class SlowSource {
@@ -54,17 +54,8 @@ async function settle(streamer, camera) {
 }
 
 function orbitCamera(s, k, n, distance) {
-  const h = s.header;
-  const center = h.min.map((m, i) => (m + h.max[i]) / 2);
-  const radius = Math.hypot(...h.max.map((m, i) => m - h.min[i])) / 2;
   const a = (2 * Math.PI * k) / n;
-  const cam = Camera.framing(center, radius, [Math.sin(a), 0.3 * Math.cos(3 * a), Math.cos(a)], 1.0, 640, 480);
-  const dir = cam.eye.map((e, i) => e - center[i]);
-  cam.eye = center.map((c, i) => c + dir[i] * distance);
-  const d = Math.hypot(...dir) * distance;
-  cam.near = Math.max(d - radius, d * 1e-3);
-  cam.far = d + radius;
-  return cam;
+  return cameraFrom(s, [Math.sin(a), 0.3 * Math.cos(3 * a), Math.cos(a)], distance);
 }
 
 // Format 3 (strata-v3.md): the same fixtures with compressed node geometry.

@@ -1,0 +1,118 @@
+// Decoding in workers (viewer/decoder.js, viewer/decode_worker.js) against decoding on the main
+// thread: the same nodes, the same arrays, the same errors. Node has no Web Workers: the stand-in
+// below runs the worker's handler in later tasks and passes every message through structuredClone
+// with its transfer list, as postMessage does (the browser test runs real Workers).
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { existsSync, readFileSync } from 'node:fs';
+import { Streamer } from '../../viewer/stream.js';
+import { DecoderPool } from '../../viewer/decoder.js';
+import { decodeHandler } from '../../viewer/decode_worker.js';
+import { FormatError } from '../../viewer/format.js';
+import { root, converted, cameraFrom } from './helpers.mjs';
+
+class StandInWorker {
+  constructor({ crashAfter = Infinity } = {}) {
+    this.handle = decodeHandler();
+    this.crashAfter = crashAfter;
+    this.decodes = 0;
+  }
+  postMessage(msg, transfer = []) {
+    const m = structuredClone(msg, { transfer });
+    if (m.op === 'decode' && ++this.decodes > this.crashAfter) {
+      setTimeout(() => this.onerror?.({ message: 'stand-in crash' }), 0);
+      return;
+    }
+    setTimeout(() => {
+      const r = this.handle(m);
+      if (r) this.onmessage?.({ data: structuredClone(r.reply, { transfer: r.transfer }) });
+    }, 0);
+  }
+  terminate() {}
+}
+
+class MemorySource {
+  constructor(bytes) {
+    this.bytesOf = bytes;
+    this.name = 'memory';
+    this.length = bytes.length;
+    this.requests = 0;
+    this.bytes = 0;
+  }
+  async read(start, end) {
+    this.requests++;
+    await new Promise((r) => setTimeout(r, 0));
+    const body = this.bytesOf.subarray(start, Math.min(end, this.length));
+    this.bytes += body.length;
+    return body;
+  }
+}
+
+/** Stream `bytes` to full detail for two cameras; every geometry handed to onLoad, by node. */
+async function stream(bytes, decoder) {
+  const loaded = new Map();
+  const st = await Streamer.open(new MemorySource(bytes), { pixelError: 0.5, decoder, onLoad: (i, g) => loaded.set(i, g) });
+  for (const distance of [1, 0.4]) {
+    const cam = cameraFrom(st.skeleton, [0.4, 0.3, 1.0], distance);
+    for (let k = 0; ; k++) {
+      assert.ok(k < 20000, 'the front never became resident');
+      st.update(cam);
+      if (st.error) return { st, loaded };
+      if (st.idle()) break;
+      await new Promise((r) => setTimeout(r, 0));
+    }
+  }
+  return { st, loaded };
+}
+
+const inputs = [['noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3']], ['noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '2']], ['colored_sphere', `${root}/fixtures/colored_sphere.ply`, []], ['textured_globe', `${root}/fixtures/textured_globe.glb`, []]];
+const ct = `${root}/../shared/meshes/large/cthead_skin_native.ply`;
+if (existsSync(ct)) inputs.push(['cthead', ct, []]);
+
+for (const [name, mesh, args] of inputs) {
+  test(`nodes decoded in workers equal nodes decoded on the main thread (${name})`, async (t) => {
+    const bytes = new Uint8Array(readFileSync(converted(name, mesh, args)));
+    const here = await stream(bytes, null);
+    const pool = new DecoderPool([new StandInWorker(), new StandInWorker()]);
+    const there = await stream(bytes, pool);
+    assert.equal(there.st.error, null);
+    assert.deepEqual(there.st.drawn, here.st.drawn);
+    assert.deepEqual([...there.loaded.keys()].sort((a, b) => a - b), [...here.loaded.keys()].sort((a, b) => a - b));
+    for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+    const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
+    assert.equal(pool.decoded, here.loaded.size - (top[1] - top[0]), 'every node below the top level came from a worker');
+    assert.ok(pool.decoded > 0);
+    t.diagnostic(`${name}: ${here.loaded.size} nodes, ${pool.decoded} decoded in the workers`);
+  });
+}
+
+test('a damaged node fails with the same error in a worker as on the main thread', async () => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+  const probe = await stream(bytes, null);
+  const s = probe.st.skeleton;
+  // A byte in the middle of the deepest node drawn: its CRC fails.
+  const node = Math.min(...probe.st.drawn);
+  assert.ok(s.level[node] < s.top());
+  const damaged = bytes.slice();
+  damaged[s.offset[node] + (s.size[node] >> 1)] ^= 0x10;
+  const here = await stream(damaged, null);
+  const there = await stream(damaged, new DecoderPool([new StandInWorker()]));
+  assert.ok(here.st.error instanceof FormatError, String(here.st.error));
+  assert.ok(there.st.error instanceof FormatError, String(there.st.error));
+  assert.equal(there.st.error.message, here.st.error.message);
+  assert.equal(there.st.error.node, here.st.error.node);
+  assert.match(there.st.error.message, new RegExp(`node ${node}`));
+});
+
+test('when a worker fails, decoding moves back to the main thread and the stream still completes', async () => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+  const here = await stream(bytes, null);
+  const pool = new DecoderPool([new StandInWorker({ crashAfter: 3 })]);
+  const there = await stream(bytes, pool);
+  assert.equal(there.st.error, null);
+  assert.match(there.st.decoderError, /stand-in crash/);
+  assert.equal(there.st.decoder, null);
+  assert.deepEqual(there.st.drawn, here.st.drawn);
+  for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+});
