@@ -68,6 +68,28 @@ pub fn read_everything(bytes: &[u8]) -> Reached {
         let _ = inspect::dump(&rd);
     }
     reached.sound = format::verify(Cursor::new(bytes), Path::new("<fuzz>")).is_sound();
+    // Top first (format 3.1: the top pages, then the rest): the same file accepted or refused,
+    // and once complete, the same node table.
+    let whole = Reader::open(Cursor::new(bytes));
+    let top = Reader::open_top(Cursor::new(bytes), Path::new("<fuzz>")).and_then(|mut rd| {
+        let top = rd.levels().len().checked_sub(1).map_or(0..0, |t| rd.level_nodes(t as u32));
+        for i in top {
+            rd.read_node(i)?;
+        }
+        rd.complete()?;
+        Ok(rd)
+    });
+    match (&whole, &top) {
+        (Ok(a), Ok(b)) => assert_eq!(a.nodes(), b.nodes(), "opened whole and top first, the node tables differ"),
+        (Ok(_), Err(e)) => {
+            // Opened whole, a top-level node may still break its rules (read_node checks them).
+            let a = whole.as_ref().unwrap();
+            let top = a.levels().len().checked_sub(1).map_or(0..0, |t| a.level_nodes(t as u32));
+            assert!(top.into_iter().any(|i| a.read_node(i).is_err()), "opened whole, refused top first: {e}");
+        }
+        (Err(e), Ok(_)) => panic!("refused whole, opened top first: {e}"),
+        (Err(_), Err(_)) => {}
+    }
     reached
 }
 

@@ -152,6 +152,11 @@ fn file() -> Vec<u8> {
 }
 
 fn file_of(minor: u16) -> Vec<u8> {
+    file_with(minor, None)
+}
+
+/// [`file_of`] with one more sub-chunk of SKEL at its end, after the node table.
+fn file_with(minor: u16, last: Option<(&[u8; 4], u32, &[u8])>) -> Vec<u8> {
     let (node, _) = payload();
     let p = strata::hierarchy::HierarchyParams::default();
     let mut head = Vec::new();
@@ -229,6 +234,9 @@ fn file_of(minor: u16) -> Vec<u8> {
         // The one level's page (§1.1): its node record, then no neighbour entries (width 2).
         chunk(&mut skel, b"NODL", 2, &rec);
     }
+    if let Some((id, flags, payload)) = last {
+        chunk(&mut skel, id, flags, payload);
+    }
 
     let mut out = b"\x89STRATA\n".to_vec();
     out.extend_from_slice(&3u16.to_le_bytes());
@@ -298,7 +306,85 @@ fn a_format_3_0_file_with_node_and_nbrs_reads_as_3_1() {
     let crc = crc32fast::hash(&swapped[..12]);
     swapped[12..16].copy_from_slice(&crc.to_le_bytes());
     let e = Reader::open(Cursor::new(&swapped)).err().expect("3.0 without NODE refused").to_string();
-    assert!(e.contains("no NODE chunk"), "{e}");
+    assert!(e.contains("holds a NODL page"), "{e}");
+}
+
+/// Both ways of opening: whole, and top first (`Reader::open_top`, then `complete` and a node read).
+fn both_opens(b: &[u8]) -> [std::result::Result<(), String>; 2] {
+    let whole = Reader::open(Cursor::new(b)).and_then(|r| r.read_node(0).map(|_| ())).map_err(|e| e.to_string());
+    let top = Reader::open_top(Cursor::new(b), std::path::Path::new("top"))
+        .and_then(|mut r| {
+            r.complete()?;
+            r.read_node(0).map(|_| ())
+        })
+        .map_err(|e| e.to_string());
+    [whole, top]
+}
+
+#[test]
+fn opened_top_first_a_file_whose_pages_are_all_of_skel_is_checked_whole() {
+    // One level: its page is every page, so open_top reads all of SKEL and checks what follows it
+    // and SKEL's CRC, as open does.
+    let [whole, top] = both_opens(&file_with(1, Some((b"JUNK", 0, &[1, 2, 3]))));
+    for e in [whole, top] {
+        let e = e.expect_err("a chunk after the node pages");
+        assert!(e.contains("JUNK chunk after the node pages"), "{e}");
+    }
+    let mut bad = file();
+    let skel = bad.windows(4).position(|w| w == b"SKEL").unwrap();
+    let size = u64::from_le_bytes(bad[skel + 8..skel + 16].try_into().unwrap()) as usize;
+    bad[skel + 16 + size] ^= 1;
+    for e in both_opens(&bad) {
+        let e = e.expect_err("SKEL's CRC");
+        assert!(e.contains("CRC"), "{e}");
+    }
+    // A 3.0 file keeps its nodes in NODE and NBRS: a NODL page as well is refused (§0).
+    let [whole, top] = both_opens(&file_with(0, Some((b"NODL", 2, &[0u8; 56]))));
+    for e in [whole, top] {
+        let e = e.expect_err("3.0 with a NODL page");
+        assert!(e.contains("NODL"), "{e}");
+    }
+}
+
+#[test]
+fn a_file_with_fewer_pages_than_levels_is_refused_whichever_way_it_is_opened() {
+    // The golden sphere (several levels) with its top two pages only, every size and CRC made
+    // right: the prefix reaches SKEL's end, so it is the whole table, and it lacks pages.
+    let mut b = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec/vectors/sphere-v3.strata")).unwrap();
+    let rd = Reader::open(Cursor::new(&b)).unwrap();
+    assert!(rd.levels().len() >= 3 && rd.header().nodes > 0);
+    drop(rd);
+    let skel = b.windows(4).position(|w| w == b"SKEL").unwrap();
+    let size = u64::from_le_bytes(b[skel + 8..skel + 16].try_into().unwrap()) as usize;
+    let (mut sub, mut pages, mut last) = (skel + 16, 0, None);
+    while sub < skel + 16 + size {
+        let s = u64::from_le_bytes(b[sub + 8..sub + 16].try_into().unwrap()) as usize;
+        pages += (&b[sub..sub + 4] == b"NODL") as usize;
+        if pages == 3 && last.is_none() {
+            last = Some(sub);
+        }
+        sub = (sub + 20 + s).next_multiple_of(8);
+    }
+    // SKEL ends where its last page began: its CRC, padding, then the geometry as before.
+    let (last, end) = (last.unwrap(), skel + 16 + size);
+    let rest = b.split_off((end + 4).next_multiple_of(8));
+    b.truncate(last);
+    b.extend_from_slice(&[0; 4]);
+    b.resize(b.len().next_multiple_of(8), 0);
+    b.extend_from_slice(&rest);
+    b[skel + 8..skel + 16].copy_from_slice(&((last - skel - 16) as u64).to_le_bytes());
+    let len = b.len() as u64;
+    b[32..40].copy_from_slice(&len.to_le_bytes());
+    let head_size = u64::from_le_bytes(b[24..32].try_into().unwrap()) as usize;
+    let crc = crc32fast::hash(&b[32..32 + head_size]);
+    b[32 + head_size..36 + head_size].copy_from_slice(&crc.to_le_bytes());
+    reseal(&mut b);
+    for e in both_opens(&b) {
+        let e = e.expect_err("a page missing");
+        assert!(e.contains("node pages (NODL) for"), "{e}");
+    }
+    let e = Reader::open_top(Cursor::new(&b), std::path::Path::new("top")).err().expect("refused at open");
+    assert!(e.to_string().contains("holds 2 node pages (NODL)"), "{e}");
 }
 
 #[test]

@@ -169,3 +169,32 @@ fn the_cli_reads_format_3_and_names_damage() {
     assert!(!bad.status.success(), "{said}");
     assert!(said.contains("damaged.strata") && said.contains("byte"), "the error names the file and the byte: {said}");
 }
+
+/// Opened top first, the rest of the node table is read later: image levels wait for it (their
+/// offsets rest on every level's bytes), and a file rewritten in between is refused, even where
+/// its SKEL is sound again.
+#[test]
+fn opened_top_first_images_wait_for_the_table_and_the_table_must_not_change() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("textured.strata");
+    convert_to(&fixture("textured_globe.glb"), &path, Encoding::V3(Precision::default()));
+    let mut rd = Reader::open_top_path(&path).unwrap();
+    assert!(!rd.is_complete() && !rd.textures().images.is_empty());
+    let e = rd.read_image_level(0, 0).unwrap_err().to_string();
+    assert!(e.contains("node table is complete"), "{e}");
+    rd.complete().unwrap();
+    assert!(!rd.read_image_level(0, 0).unwrap().is_empty());
+
+    let mut rd = Reader::open_top_path(&path).unwrap();
+    let mut b = std::fs::read(&path).unwrap();
+    // A byte of the first material's name (in the part read at open), and SKEL's CRC made right.
+    let skel = b.windows(4).position(|w| w == b"SKEL").unwrap();
+    let matl = skel + b[skel..].windows(4).position(|w| w == b"MATL").unwrap();
+    b[matl + 20] ^= 0x20;
+    let size = u64::from_le_bytes(b[skel + 8..skel + 16].try_into().unwrap()) as usize;
+    let crc = crc32fast::hash(&b[skel + 16..skel + 16 + size]);
+    b[skel + 16 + size..skel + 20 + size].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(&path, &b).unwrap();
+    let e = rd.complete().unwrap_err().to_string();
+    assert!(e.contains("changed since the file was opened"), "{e}");
+}

@@ -674,6 +674,12 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     expect += rec.nodes;
   }
   if (expect !== N) throw lerr(levl.ps, `levels hold ${expect} nodes, HEAD says ${N}`);
+  // Every node has a record inside SKEL: nothing is sized by a count SKEL could not hold (a prefix
+  // has not seen the lower levels' pages yet).
+  if (N * NODE_BYTES > skelSize) throw lerr(levl.ps, `${N} nodes need ${N * NODE_BYTES} bytes of node records; SKEL holds ${skelSize}`);
+  if (v3 && !paged && subs.some((s) => s.id === 'NODL')) {
+    throw chunkFail(subs.find((s) => s.id === 'NODL').at, 'SKEL', skelAt, 'holds a NODL page: format 3.0 keeps nodes in NODE and NBRS');
+  }
 
   // The node records and neighbour lists as pages, one per level from the top: format 2's NODE
   // and NBRS hold every level (format 2 and 3.0), 3.1 has one NODL per level (of which a prefix

@@ -259,7 +259,7 @@ export class Streamer {
   /** The whole node table decoded now, reading the rest of the skeleton first if need be (for callers that need every node). */
   async loadSkeleton() {
     if (isComplete(this.skeleton)) return;
-    if (this.skeletonPrefix) await (this.restRead ??= this.readSkeletonRest());
+    if (this.skeletonPrefix) await this.readSkeletonRest();
     if (this.error) throw this.error;
     this.completeTable();
   }
@@ -269,10 +269,15 @@ export class Streamer {
     if (isComplete(this.skeleton)) return;
     completeSkeleton(this.skeleton, this.skeletonBytes);
     this.decoder?.complete(this.skeletonBytes);
+    this.skeletonBytes = null;
   }
 
-  /** Read the rest of a skeleton opened from its top pages (format 3), after the first frame. */
-  async readSkeletonRest() {
+  /** Read the rest of a skeleton opened from its top pages (format 3), after the first frame: one read, however often asked. */
+  readSkeletonRest() {
+    return (this.restRead ??= this.readRest());
+  }
+
+  async readRest() {
     const prefix = this.skeletonPrefix, end = skeletonNeeds(this.skeleton);
     this.inFlight++;
     try {
@@ -331,7 +336,7 @@ export class Streamer {
     this.frame++;
     if (!isComplete(s)) {
       if (this.frame === 1) {
-        setTimeout(() => !this.closed && (this.skeletonPrefix ? (this.restRead ??= this.readSkeletonRest()) : this.onChange()), 0);
+        setTimeout(() => !this.closed && (this.skeletonPrefix ? this.readSkeletonRest() : this.onChange()), 0);
       } else if (!this.skeletonPrefix) {
         try {
           this.completeTable();
@@ -339,7 +344,6 @@ export class Streamer {
           this.error = e;
           return this.drawn;
         }
-        this.skeletonBytes = null;
       }
     }
     const limits = this.limits();

@@ -104,9 +104,15 @@ impl<S: ByteSource> Reader<S> {
             None => None,
         };
         let p = self.pending.as_ref().expect("pending");
+        if let Some(w) = &whole {
+            // The records already in use must be the ones just read: a file rewritten since open is refused.
+            if w.get(..p.payload.len()) != Some(&p.payload[..]) {
+                return Err(self.err(p.pos, &id::SKEL, p.pos, "changed since the file was opened"));
+            }
+        }
         let payload = whole.as_deref().unwrap_or(&p.payload);
         let ctx = Context { path: &self.path, major, minor, file_size: self.len, geometry_start: self.skeleton_end };
-        let (s, _) = skeleton::decode_skel(&ctx, &self.skeleton.header, payload, p.pos, false)?;
+        let (s, _) = skeleton::decode_skel(&ctx, &self.skeleton.header, payload, p.pos, false, false)?;
         self.pending = None;
         self.skeleton = Skeleton { textures: std::mem::take(&mut self.skeleton.textures), ..s };
         Ok(())
@@ -190,16 +196,19 @@ impl<S: ByteSource> Reader<S> {
             pos = rd.next(pos, &f)?;
         };
         // Format 3 opened top first reads SKEL only through the top levels' pages (strata-v3.md §1.1).
-        let prefix = top_only && super::paged(major, minor);
-        let payload = if prefix { rd.skel_prefix(pos, &skel, header.levels)? } else { rd.payload_at(pos, &skel)? };
+        let (payload, partial) = if top_only && super::paged(major, minor) {
+            rd.skel_prefix(pos, &skel, header.levels)?
+        } else {
+            (rd.payload_at(pos, &skel)?, false)
+        };
         rd.skeleton_chunks.push(ChunkInfo::new(&skel, pos, 0));
         rd.skeleton_end = rd.next(pos, &skel)?;
         let ctx = Context { geometry_start: rd.skeleton_end, ..ctx };
-        let (s, subs) = skeleton::decode_skel(&ctx, &header, &payload, pos, top_only)?;
+        let (s, subs) = skeleton::decode_skel(&ctx, &header, &payload, pos, top_only, partial)?;
         rd.skeleton = s;
         rd.skeleton_chunks.extend(subs);
         if top_only && rd.skeleton.nodes.len() < header.nodes as usize {
-            rd.pending = Some(Pending { payload, pos, version: [major, minor], rest: prefix.then_some(skel) });
+            rd.pending = Some(Pending { payload, pos, version: [major, minor], rest: partial.then_some(skel) });
         }
         Ok(rd)
     }
@@ -258,6 +267,14 @@ impl<S: ByteSource> Reader<S> {
     /// Read level `level` (0 = full) of image `image`: the `TEXL` chunk is checked (ID, size,
     /// CRC, the image header's size); returns the image file's bytes (PNG or JPEG).
     pub fn read_image_level(&self, image: u32, level: u32) -> Result<Vec<u8>> {
+        if !self.is_complete() {
+            // TEXL offsets rest on every level's byte count, checked with the rest of the node table.
+            return Err(Error::at_element(
+                &self.path,
+                format!("image {image} level {level}"),
+                "read before the node table is complete (Reader::complete)",
+            ));
+        }
         let t = &self.skeleton.textures;
         let (Some(rec), Some(lv)) = (t.images.get(image as usize), t.level(image, level)) else {
             return Err(Error::at_element(
@@ -508,8 +525,10 @@ impl<S: ByteSource> Reader<S> {
     /// The first sub-chunks of the `SKEL` chunk at `pos` (frame `skel`), each whole with its
     /// padding, through the node page of the level below the top (or the top's, for one level):
     /// what a format-3 reader needs for the top level. Their CRCs are checked as they are decoded;
-    /// `SKEL`'s own once the rest is read ([`Reader::complete`]).
-    fn skel_prefix(&self, pos: u64, skel: &Frame, levels: u32) -> Result<Vec<u8>> {
+    /// `SKEL`'s own once the rest is read ([`Reader::complete`]). Where those are every page (one
+    /// or two levels) or all of SKEL, the whole payload instead, its CRC checked; the flag says
+    /// whether the payload is a prefix.
+    fn skel_prefix(&self, pos: u64, skel: &Frame, levels: u32) -> Result<(Vec<u8>, bool)> {
         self.next(pos, skel)?;
         let payload_end = pos + HEADER_BYTES + skel.size;
         let (mut at, mut pages, mut out) = (pos + HEADER_BYTES, 0u32, Vec::new());
@@ -527,11 +546,11 @@ impl<S: ByteSource> Reader<S> {
             pages += (f.id == id::NODL) as u32;
             at = next;
         }
-        if at == payload_end {
-            // Every page read: the whole SKEL, whose CRC can be checked now.
-            return self.payload_at(pos, skel);
+        if at == payload_end || pages >= levels {
+            // Every page read, or all of SKEL: the whole payload, whose CRC and end are checked now.
+            return Ok((self.payload_at(pos, skel)?, false));
         }
-        Ok(out)
+        Ok((out, true))
     }
 
     /// The payload of the chunk at `pos`, its CRC checked.

@@ -225,8 +225,17 @@ pub fn decode_head(ctx: &Context, payload: &[u8], pos: u64) -> Result<Header> {
 /// file (spec §10, steps 4 and 5); also the sub-chunks found, for listings. With `top_only`, every
 /// record is still checked, but only the top two levels' nodes are decoded into the [`Skeleton`]
 /// with their boxes and neighbour lists: a viewer that shows the top level first need not touch
-/// the memory of the rest (104 bytes a node and the lists) before its first frame.
-pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top_only: bool) -> Result<(Skeleton, Vec<ChunkInfo>)> {
+/// the memory of the rest (104 bytes a node and the lists) before its first frame. With
+/// `partial`, `payload` is the first part of a format-3.1 SKEL, through at least the top two
+/// levels' pages (strata-v3.md §1.1), and only those are checked.
+pub fn decode_skel(
+    ctx: &Context,
+    header: &Header,
+    payload: &[u8],
+    pos: u64,
+    top_only: bool,
+    partial: bool,
+) -> Result<(Skeleton, Vec<ChunkInfo>)> {
     let base = pos + HEADER_BYTES;
     let subs = chunk::subs(ctx.path, &id::SKEL, pos, payload, base)?;
     let infos = subs.iter().map(|s| ChunkInfo::new(&s.frame, s.offset, 1)).collect();
@@ -266,13 +275,21 @@ pub fn decode_skel(ctx: &Context, header: &Header, payload: &[u8], pos: u64, top
     if expect != h.nodes as u64 {
         return Err(f.error(format!("levels hold {expect} nodes, HEAD says {}", h.nodes)));
     }
+    // Every node has a 56-byte record inside SKEL, which ends before the geometry (strata-v3.md §1.1).
+    let room = ctx.geometry_start.saturating_sub(pos + HEADER_BYTES + TRAILER_BYTES);
+    if expect * NODE_RECORD_BYTES > room {
+        return Err(f.error(format!("{expect} nodes need {} bytes of node records; SKEL holds at most {room}", expect * NODE_RECORD_BYTES)));
+    }
 
     // The node records and neighbour lists, as pages from the top level down: format 2's NODE and
     // NBRS hold every level; format 3 has one NODL per level (strata-v3.md §1.1), of which a
     // reader that opens top first has read the first few.
     let paged = super::paged(ctx.major, ctx.minor);
+    if let Some(s) = subs.iter().find(|s| ctx.major >= 3 && !paged && s.frame.id == id::NODL) {
+        return Err(ctx.err(s.offset, &id::SKEL, pos, "holds a NODL page: format 3.0 keeps nodes in NODE and NBRS"));
+    }
     let pages = if paged {
-        pages_paged(ctx, pos, payload, &subs, &levels, top_only)?
+        pages_paged(ctx, pos, payload, &subs, &levels, partial)?
     } else {
         pages_whole(ctx, payload, find(id::NODE)?, find(id::NBRS)?, h, &levels)?
     };

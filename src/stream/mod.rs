@@ -248,7 +248,8 @@ impl<S: ByteSource> Streamer<S> {
             }
         }
         self.cache.update(&added, &removed, &self.reader)?;
-        if !self.reader.textures().is_empty() {
+        // Image levels wait for the whole node table (strata-v3.md §1.1): their offsets rest on it.
+        if !self.reader.textures().is_empty() && self.reader.is_complete() {
             let (cache, materials) = (&self.cache, self.reader.materials());
             let wanted = images::wanted(self.reader.skeleton(), camera, &cut.shown, &|i| {
                 cache.get(i).map(|g| images::base_color_images(g, materials))

@@ -584,7 +584,7 @@ test('a format-3.0 file (its node table in NODE and NBRS) reads as its 3.1 twin;
     assert.throws(() => decodeAll(serialize(swapped)), (e) => (e instanceof FormatError && /NODE chunk: format 3 keeps nodes in NODL/.test(e.message)) || assert.fail(e.message));
     const paged = clone(tree);
     paged.minor = 0;
-    assert.throws(() => decodeAll(serialize(paged)), (e) => (e instanceof FormatError && /no NODE chunk/.test(e.message)) || assert.fail(e.message));
+    assert.throws(() => decodeAll(serialize(paged)), (e) => (e instanceof FormatError && /holds a NODL page: format 3.0 keeps nodes in NODE and NBRS/.test(e.message)) || assert.fail(e.message));
   }
 });
 
@@ -1426,5 +1426,30 @@ test('files strata converts agree with `strata inspect --json`, and every node d
     }
   } finally {
     rmSync(dir, { recursive: true, force: true });
+  }
+});
+
+test('a prefix whose node counts SKEL could not hold is refused before anything is sized by them', () => {
+  const file = read('sphere-v3.strata');
+  const dv = (b) => new DataView(b.buffer, b.byteOffset, b.byteLength);
+  const headSize = Number(dv(file).getBigUint64(24, true));
+  const skel = 32 + headSize + 4 + ((8 - ((32 + headSize + 4) % 8)) % 8);
+  assert.equal(String.fromCharCode(...file.subarray(skel, skel + 4)), 'SKEL');
+  const levl = skel + 16;
+  assert.equal(String.fromCharCode(...file.subarray(levl, levl + 4)), 'LEVL');
+  const levlSize = Number(dv(file).getBigUint64(levl + 8, true));
+  for (const extra of [50_000_000, 2 ** 32 - 2 - dv(file).getUint32(32 + 48, true)]) {
+    const b = file.slice();
+    const v = dv(b);
+    // HEAD's node count and level 0's (LEVL's first record), each chunk's CRC made right; SKEL's
+    // own CRC, which a prefix reader checks only with the rest, left as it was.
+    v.setUint32(32 + 48, v.getUint32(32 + 48, true) + extra, true);
+    v.setUint32(32 + headSize, crc32(b, 32, 32 + headSize), true);
+    v.setUint32(levl + 16 + 4, v.getUint32(levl + 16 + 4, true) + extra, true);
+    v.setUint32(levl + 16 + levlSize, crc32(b, levl + 16, levl + 16 + levlSize), true);
+    const r = openingRange(b.subarray(0, 16384), b.length);
+    assert.ok(r.pagesEnd < r.skeletonEnd, 'a prefix');
+    assert.throws(() => decodeSkeleton(b.slice(0, r.pagesEnd), b.length, { topFirst: true }), (e) => e instanceof FormatError && /bytes of node records; SKEL holds/.test(e.message));
+    assert.throws(() => decodeSkeleton(b, b.length), (e) => e instanceof FormatError);
   }
 });
