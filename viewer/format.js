@@ -334,7 +334,8 @@ function checkHeadFrame(b, fileLength) {
  * topEnd, where the top level's geometry ends, is undefined unless SKEL's LEVL sub-chunk lies in
  * the prefix; pagesEnd, the bytes `decodeSkeleton(…, { topFirst: true })` needs, is skeletonEnd in
  * format 2, and in format 3 the end of the top two levels' NODL pages (strata-v3.md §1.1),
- * undefined unless the frames up to them lie in the prefix.
+ * undefined unless the frames up to them lie in the prefix; then nextFrame, where it is known, is
+ * the offset of the next sub-chunk's frame, beyond the prefix (read on from there).
  */
 export function openingRange(prefix, fileLength) {
   const b = prefix;
@@ -395,7 +396,10 @@ export function openingRange(prefix, fileLength) {
       break;
     }
   }
-  return paged ? { skeletonEnd, topEnd, pagesEnd } : { skeletonEnd, topEnd, pagesEnd: skeletonEnd };
+  // Where the scan stopped for want of bytes: the next sub-chunk's frame, past the prefix (the
+  // sub-chunks before it, whatever their size, need no further look to be stepped over).
+  const nextFrame = paged && pagesEnd === undefined && s < se && s + FRAME > n ? s : undefined;
+  return paged ? { skeletonEnd, topEnd, pagesEnd, nextFrame } : { skeletonEnd, topEnd, pagesEnd: skeletonEnd };
 }
 
 // ---------------------------------------------------------------------------------------------

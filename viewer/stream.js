@@ -111,7 +111,9 @@ export class Streamer {
     // Up to the skeleton's end, or in format 3 the end of its top pages (strata-v3.md §1.1).
     while (range.need !== undefined || (range.pagesEnd === undefined && bytes.length < range.skeletonEnd)) {
       if (bytes.length >= (source.length ?? Infinity)) throw new FormatError(`${source.name}: the file ends at byte ${bytes.length}, before its skeleton`);
-      const end = range.need !== undefined ? Math.max(range.need, bytes.length + prefix) : Math.min(range.skeletonEnd, bytes.length + prefix);
+      // A sub-chunk larger than the prefix (TEXR: 2 bytes a node) is stepped over in one read.
+      const from = Math.max(bytes.length, range.nextFrame ?? 0);
+      const end = range.need !== undefined ? Math.max(range.need, bytes.length + prefix) : Math.min(range.skeletonEnd, from + prefix);
       bytes = concat(bytes, await source.read(bytes.length, end));
       range = openingRange(bytes, source.length);
     }

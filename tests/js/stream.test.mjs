@@ -394,3 +394,24 @@ test('an image level the renderer cannot take is left out: a coarser level stand
   assert.deepEqual([...st.imageErrors.keys()], [tex.images[0].levels[0]]);
   assert.match([...st.imageErrors.values()][0], /^image 0 \(.+\) level 0: cannot decode$/);
 });
+
+test('opening with a short first read steps over sub-chunks larger than it in one read each', async () => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, V3)));
+  const whole = await Streamer.open(new SlowSource(bytes, 0));
+  const s = whole.skeleton;
+  // SKEL's sub-chunks through the second page: each may cost a read for its frame, none more.
+  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const skel = bytes.findIndex((_, k) => String.fromCharCode(...bytes.subarray(k, k + 4)) === 'SKEL');
+  let at = skel + 16, subs = 0, pages = 0;
+  while (pages < 2) {
+    const id = String.fromCharCode(...bytes.subarray(at, at + 4));
+    pages += id === 'NODL';
+    subs++;
+    at += 16 + Number(dv.getBigUint64(at + 8, true)) + 4;
+    at += (8 - (at % 8)) % 8;
+  }
+  const src = new SlowSource(bytes, 0);
+  const st = await Streamer.open(src, { prefix: 256 });
+  assert.ok(src.requests <= 2 + subs, `${src.requests} reads for ${subs} sub-chunks`);
+  assert.deepEqual([...st.skeleton.offset.subarray(0, st.skeleton.decoded)], [...s.offset.subarray(0, s.decoded)]);
+});
