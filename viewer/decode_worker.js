@@ -54,4 +54,6 @@ if (typeof WorkerGlobalScope !== 'undefined' && globalThis instanceof WorkerGlob
     const r = handle(e.data);
     if (r) globalThis.postMessage(r.reply, r.transfer);
   };
+  // A message that cannot be read leaves a decode unanswered: the pool's timeout hands its work back.
+  globalThis.onmessageerror = () => globalThis.close();
 }

@@ -9,8 +9,10 @@ export class DecoderPool {
    * A pool over `workers`: objects with `postMessage(msg, transfer)`, `onmessage`, `onerror` and
    * `terminate()` (Web Workers, or stand-ins in tests). Use `DecoderPool.create` in a page.
    */
-  constructor(workers) {
+  constructor(workers, { timeoutMs = 10000 } = {}) {
     this.workers = workers.map((w) => ({ w, busy: 0 }));
+    /** A decode not answered in this long means a worker that is gone (killed without an error event). */
+    this.timeoutMs = timeoutMs;
     this.pending = new Map();
     this.nextId = 1;
     /** Why the pool stopped (a worker failed to load or crashed): every decode then rejects with it. */
@@ -27,7 +29,16 @@ export class DecoderPool {
   /** `count` module Workers, or null where the page has none (or count < 1). */
   static create(count, url = new URL('./decode_worker.js', import.meta.url)) {
     if (typeof Worker === 'undefined' || !(count >= 1)) return null;
-    return new DecoderPool(Array.from({ length: count }, () => new Worker(url, { type: 'module' })));
+    const workers = [];
+    try {
+      for (let k = 0; k < Math.min(count, 16); k++) workers.push(new Worker(url, { type: 'module' }));
+    } catch (e) {
+      // A page that may not start workers (a worker-src policy, a file:// page) decodes on its own thread.
+      for (const w of workers) w.terminate();
+      DecoderPool.unavailable = e?.message ?? String(e);
+      return null;
+    }
+    return new DecoderPool(workers);
   }
 
   get size() {
@@ -51,7 +62,8 @@ export class DecoderPool {
     const id = this.nextId++;
     slot.busy++;
     return new Promise((resolve, reject) => {
-      this.pending.set(id, { slot, resolve, reject });
+      const timer = setTimeout(() => this.fail(new Error(`a decoding worker did not answer in ${this.timeoutMs} ms`)), this.timeoutMs);
+      this.pending.set(id, { slot, resolve, reject, timer });
       slot.w.postMessage({ op: 'decode', id, node, bytes }, [bytes.buffer]);
     });
   }
@@ -60,10 +72,12 @@ export class DecoderPool {
     const p = this.pending.get(msg?.id);
     if (!p) return;
     this.pending.delete(msg.id);
+    clearTimeout(p.timer);
     slot.busy--;
     if (msg.error) {
       const e = msg.error;
-      p.reject(e.format ? new FormatError(e.message, { offset: e.offset, node: e.node }) : new Error(e.message));
+      // A file's fault, or an exception of the decoder on this node (the worker itself is fine).
+      p.reject(e.format ? new FormatError(e.message, { offset: e.offset, node: e.node }) : new NodeDecodeError(e.message));
     } else {
       this.decoded++;
       p.resolve(msg.geometry);
@@ -72,7 +86,10 @@ export class DecoderPool {
 
   fail(error) {
     this.failed ??= error;
-    for (const p of this.pending.values()) p.reject(this.failed);
+    for (const p of this.pending.values()) {
+      clearTimeout(p.timer);
+      p.reject(this.failed);
+    }
     this.pending.clear();
     for (const slot of this.workers) slot.busy = 0;
   }
@@ -80,6 +97,14 @@ export class DecoderPool {
   close() {
     this.fail(new Error('the decoder is closed'));
     for (const { w } of this.workers) w.terminate();
+  }
+}
+
+/** An exception a worker met decoding one node that is not the file's fault (the pool stays up). */
+export class NodeDecodeError extends Error {
+  constructor(message) {
+    super(message);
+    this.name = 'NodeDecodeError';
   }
 }
 

@@ -437,7 +437,8 @@ const params = new URLSearchParams(location.search);
 const workerCount = params.has('workers') ? Number(params.get('workers')) : Math.min(4, Math.max(1, (navigator.hardwareConcurrency ?? 2) - 1));
 const decoding = () =>
   streamer?.decoder ? `${streamer.decoder.size} worker${streamer.decoder.size > 1 ? 's' : ''}, ${streamer.decoder.decoded} nodes`
-    : streamer?.decoderError ? `main thread (${streamer.decoderError})` : 'main thread';
+    : streamer?.decoderError ? `main thread (${streamer.decoderError})`
+      : DecoderPool.unavailable && workerCount > 0 ? `main thread (no workers: ${DecoderPool.unavailable})` : 'main thread';
 const file = params.get('file');
 if (file) opened = open(new HttpSource(new URL(file, location.href).href)).catch(() => {});
 else showWarning('No model yet: add ?file=URL to the address, or drop a .strata file here.');

@@ -22,6 +22,7 @@
 
 import { FormatError, IMAGE_MIME, MAP_KINDS, completeSkeleton, isComplete, skeletonNeeds, decodeImageLevel, decodeNode, decodePlanes, decodeSkeleton, openingRange, planesOffset } from './format.js';
 import { Orderer } from './order.js';
+import { NodeDecodeError } from './decoder.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
 
@@ -104,6 +105,15 @@ export class Streamer {
    * a DecoderPool (decoder.js) that decodes nodes below the top level off the main thread (the streamer closes it).
    */
   static async open(source, options = {}) {
+    try {
+      return await Streamer.#open(source, options);
+    } catch (e) {
+      options.decoder?.close();
+      throw e;
+    }
+  }
+
+  static async #open(source, options) {
     const t0 = performance.now();
     const prefix = options.prefix ?? 16384;
     let bytes = await source.read(0, prefix);
@@ -305,11 +315,16 @@ export class Streamer {
   /** Decode and check node i from its bytes and keep it. */
   insert(i, bytes) {
     if (this.cache.has(i)) return;
+    this.keep(i, this.decodeHere(i, bytes));
+  }
+
+  /** Node i decoded and checked on this thread, counted. */
+  decodeHere(i, bytes) {
     const t0 = performance.now();
     const geometry = decodeNode(this.skeleton, i, bytes, { localOrigin: this.localOrigin });
     this.mainDecodeMs += performance.now() - t0;
     this.mainDecoded++;
-    this.keep(i, geometry);
+    return geometry;
   }
 
   /** Keep node i, decoded and checked. */
@@ -617,8 +632,9 @@ export class Streamer {
           } catch (e) {
             if (this.closed) return;
             if (e instanceof FormatError) throw e;
-            // A worker that failed: this node and the rest decode here.
-            if (this.decoder) {
+            // An exception on this node alone is decoded here again (and met again, or not); a
+            // worker that failed or went silent hands this node and the rest to this thread.
+            if (this.decoder && !(e instanceof NodeDecodeError)) {
               this.decoderError = e.message;
               this.decoder.close();
               this.decoder = null;
@@ -626,13 +642,13 @@ export class Streamer {
           }
         }
         if (this.closed) return;
-        geometry ??= decodeNode(s, i, bytes.subarray(at, at + s.size[i]), { localOrigin: this.localOrigin });
+        geometry ??= this.decodeHere(i, bytes.subarray(at, at + s.size[i]));
         this.keep(i, geometry);
         this.onChange();
       }),
     );
-    const failed = results.find((r) => r.status === 'rejected');
-    if (failed) throw failed.reason;
+    const failed = results.filter((r) => r.status === 'rejected').map((r) => r.reason);
+    if (failed.length) throw failed.find((e) => e instanceof FormatError) ?? failed[0];
     this.failures = 0;
     this.evict();
   }

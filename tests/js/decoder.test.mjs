@@ -13,23 +13,32 @@ import { FormatError } from '../../viewer/format.js';
 import { root, converted, cameraFrom } from './helpers.mjs';
 
 class StandInWorker {
-  constructor({ crashAfter = Infinity } = {}) {
+  /** `crashAfter` decodes, then an error event; `silentAfter`, then no answer; `throwOn`: a node whose decode throws a plain Error. */
+  constructor({ crashAfter = Infinity, silentAfter = Infinity, throwOn = -1 } = {}) {
     this.handle = decodeHandler();
-    this.crashAfter = crashAfter;
+    Object.assign(this, { crashAfter, silentAfter, throwOn });
     this.decodes = 0;
+    this.terminated = false;
   }
   postMessage(msg, transfer = []) {
+    if (msg.op === 'decode') {
+      // The node's bytes move, whole: a view of a larger buffer would be copied with all of it.
+      assert.ok(transfer.includes(msg.bytes.buffer) && msg.bytes.byteLength === msg.bytes.buffer.byteLength, 'the bytes are transferred, alone');
+    }
     const m = structuredClone(msg, { transfer });
     if (m.op === 'decode' && ++this.decodes > this.crashAfter) {
       setTimeout(() => this.onerror?.({ message: 'stand-in crash' }), 0);
       return;
     }
+    if (m.op === 'decode' && this.decodes > this.silentAfter) return;
     setTimeout(() => {
-      const r = this.handle(m);
+      const r = m.op === 'decode' && m.node === this.throwOn ? { reply: { id: m.id, error: { message: 'stand-in exception', format: false } }, transfer: [] } : this.handle(m);
       if (r) this.onmessage?.({ data: structuredClone(r.reply, { transfer: r.transfer }) });
     }, 0);
   }
-  terminate() {}
+  terminate() {
+    this.terminated = true;
+  }
 }
 
 class MemorySource {
@@ -50,9 +59,9 @@ class MemorySource {
 }
 
 /** Stream `bytes` to full detail for two cameras; every geometry handed to onLoad, by node. */
-async function stream(bytes, decoder) {
+async function stream(bytes, decoder, prefix = 16384) {
   const loaded = new Map();
-  const st = await Streamer.open(new MemorySource(bytes), { pixelError: 0.5, decoder, onLoad: (i, g) => loaded.set(i, g) });
+  const st = await Streamer.open(new MemorySource(bytes), { pixelError: 0.5, decoder, prefix, onLoad: (i, g) => loaded.set(i, g) });
   for (const distance of [1, 0.4]) {
     const cam = cameraFrom(st.skeleton, [0.4, 0.3, 1.0], distance);
     for (let k = 0; ; k++) {
@@ -70,12 +79,15 @@ const inputs = [['noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--for
 const ct = `${root}/../shared/meshes/large/cthead_skin_native.ply`;
 if (existsSync(ct)) inputs.push(['cthead', ct, []]);
 
-for (const [name, mesh, args] of inputs) {
-  test(`nodes decoded in workers equal nodes decoded on the main thread (${name})`, async (t) => {
+// A 256-byte first read: format 3's skeleton opens from its top pages, and the workers complete
+// theirs from the bytes the page completes its own from.
+for (const [name, mesh, args, prefix] of [...inputs, ['noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'], 256]]) {
+  test(`nodes decoded in workers equal nodes decoded on the main thread (${name}${prefix ? `, a ${prefix}-byte first read` : ''})`, async (t) => {
     const bytes = new Uint8Array(readFileSync(converted(name, mesh, args)));
-    const here = await stream(bytes, null);
-    const pool = new DecoderPool([new StandInWorker(), new StandInWorker()]);
-    const there = await stream(bytes, pool);
+    const here = await stream(bytes, null, prefix);
+    const workers = [new StandInWorker(), new StandInWorker()];
+    const pool = new DecoderPool(workers);
+    const there = await stream(bytes, pool, prefix);
     assert.equal(there.st.error, null);
     assert.deepEqual(there.st.drawn, here.st.drawn);
     assert.deepEqual([...there.loaded.keys()].sort((a, b) => a - b), [...here.loaded.keys()].sort((a, b) => a - b));
@@ -83,6 +95,9 @@ for (const [name, mesh, args] of inputs) {
     const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
     assert.equal(pool.decoded, here.loaded.size - (top[1] - top[0]), 'every node below the top level came from a worker');
     assert.ok(pool.decoded > 0);
+    if (prefix) assert.ok(there.st.skeleton.decoded === there.st.skeleton.nodeCount && here.st.openBytes < bytes.length / 2, 'opened from a prefix');
+    there.st.close();
+    assert.ok(workers.every((w) => w.terminated), 'closing the streamer ends its workers');
     t.diagnostic(`${name}: ${here.loaded.size} nodes, ${pool.decoded} decoded in the workers`);
   });
 }
@@ -114,5 +129,29 @@ test('when a worker fails, decoding moves back to the main thread and the stream
   assert.match(there.st.decoderError, /stand-in crash/);
   assert.equal(there.st.decoder, null);
   assert.deepEqual(there.st.drawn, here.st.drawn);
+  for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+});
+
+test('a worker that stops answering hands its work to the main thread after the timeout', async () => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+  const here = await stream(bytes, null);
+  const there = await stream(bytes, new DecoderPool([new StandInWorker({ silentAfter: 3 })], { timeoutMs: 50 }));
+  assert.equal(there.st.error, null);
+  assert.match(there.st.decoderError, /did not answer in 50 ms/);
+  assert.deepEqual(there.st.drawn, here.st.drawn);
+  for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+});
+
+test('an exception on one node is met on the main thread, and the workers stay', async () => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+  const here = await stream(bytes, null);
+  const node = Math.max(...here.st.drawn);
+  const pool = new DecoderPool([new StandInWorker({ throwOn: node })]);
+  const there = await stream(bytes, pool);
+  assert.equal(there.st.error, null);
+  assert.equal(there.st.decoder, pool, 'the pool is kept');
+  assert.equal(there.st.decoderError, null);
+  const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
+  assert.equal(there.st.mainDecoded, top[1] - top[0] + 1, 'the top level at open, and that node');
   for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
 });
