@@ -579,7 +579,7 @@ function decodeGeoref(b, dv, pos, size, major, minor) {
  */
 export function decodeSkeleton(bytes, fileLength, opts = {}) {
   let b = bytes;
-  const prefixBytes = bytes;
+  let prefixBytes = bytes;
   if (!(Number.isSafeInteger(fileLength) && fileLength >= 0)) throw fail(undefined, `file length ${fileLength} is not a byte count`);
   const have = (end) => {
     if (b.length < end) throw fail(Math.min(b.length, end), `needs the file's bytes up to offset ${end}; ${b.length} given`);
@@ -917,10 +917,14 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
         while (l >= 0) decodeLevel();
         finish();
         for (let m = L - kept - 1; m >= 0; m--) decodeEntries(m);
+        // The closures kept with the skeleton (_recordAt) share this scope: let the bytes go.
+        b = dv = prefixBytes = null;
       },
       configurable: true,
     });
     Object.defineProperty(sk, '_needs', { value: partial ? skeletonEnd : 0, configurable: true });
+  } else {
+    b = dv = prefixBytes = null;
   }
   return sk;
 }

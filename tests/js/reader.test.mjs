@@ -1453,3 +1453,23 @@ test('a prefix whose node counts SKEL could not hold is refused before anything 
     assert.throws(() => decodeSkeleton(b, b.length), (e) => e instanceof FormatError);
   }
 });
+
+test('a completed skeleton lets go of the bytes it was decoded from', async () => {
+  const v8 = await import('node:v8');
+  v8.setFlagsFromString('--expose-gc');
+  const gc = (await import('node:vm')).runInNewContext('gc');
+  const file = read('sphere-v3.strata');
+  const refs = [];
+  const keep = (() => {
+    const r = openingRange(file.subarray(0, 16384), file.length);
+    const prefix = file.slice(0, r.pagesEnd), whole = file.slice(0, r.skeletonEnd);
+    refs.push(new WeakRef(prefix.buffer), new WeakRef(whole.buffer));
+    const sk = decodeSkeleton(prefix, file.length, { topFirst: true });
+    completeSkeleton(sk, whole);
+    return sk;
+  })();
+  await new Promise((r) => setImmediate(r));
+  gc();
+  assert.equal(keep.decoded, keep.nodeCount);
+  assert.deepEqual(refs.map((r) => r.deref() === undefined), [true, true], 'both buffers collected');
+});
