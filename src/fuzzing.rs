@@ -72,8 +72,7 @@ pub fn read_everything(bytes: &[u8]) -> Reached {
     // and once complete, the same node table.
     let whole = Reader::open(Cursor::new(bytes));
     let top = Reader::open_top(Cursor::new(bytes), Path::new("<fuzz>")).and_then(|mut rd| {
-        let top = rd.levels().len().checked_sub(1).map_or(0..0, |t| rd.level_nodes(t as u32));
-        for i in top {
+        for i in top_level(&rd) {
             rd.read_node(i)?;
         }
         rd.complete()?;
@@ -84,13 +83,17 @@ pub fn read_everything(bytes: &[u8]) -> Reached {
         (Ok(_), Err(e)) => {
             // Opened whole, a top-level node may still break its rules (read_node checks them).
             let a = whole.as_ref().unwrap();
-            let top = a.levels().len().checked_sub(1).map_or(0..0, |t| a.level_nodes(t as u32));
-            assert!(top.into_iter().any(|i| a.read_node(i).is_err()), "opened whole, refused top first: {e}");
+            assert!(top_level(a).any(|i| a.read_node(i).is_err()), "opened whole, refused top first: {e}");
         }
         (Err(e), Ok(_)) => panic!("refused whole, opened top first: {e}"),
         (Err(_), Err(_)) => {}
     }
     reached
+}
+
+/// The nodes of `rd`'s top level (none without levels).
+fn top_level<S: crate::format::ByteSource>(rd: &Reader<S>) -> std::ops::Range<u32> {
+    rd.levels().len().checked_sub(1).map_or(0..0, |t| rd.level_nodes(t as u32))
 }
 
 /// [`reseal`] the bytes, then [`read_everything`].

@@ -35,6 +35,13 @@ function concat(a, b) {
   return c;
 }
 
+/** Node i's bytes within `bytes`, read from file offset `start`. */
+function nodeIn(s, i, bytes, start) {
+  const at = s.offset[i] - start;
+  if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
+  return bytes.subarray(at, at + s.size[i]);
+}
+
 /** Bytes a decoded image level counts against the memory budget (RGBA8, selection.md §4). */
 export const levelBytes = (entry) => 4 * entry.width * entry.height;
 
@@ -582,20 +589,21 @@ export class Streamer {
       this.source
         .read(start, s.offset[last] + s.size[last])
         .then(async (bytes) => {
-          if (this.decoder) return this.decodeInWorkers(nodes, bytes, start);
-          let slice = performance.now();
-          for (const i of nodes) {
-            if (this.closed) return;
-            const at = s.offset[i] - start;
-            if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
-            this.insert(i, bytes.subarray(at, at + s.size[i]));
-            // A range holds up to maxRequestBytes of nodes (format 3: some 300k faces a megabyte,
-            // tens of ms to decode): past sliceMs, let a frame draw what has come.
-            if (performance.now() - slice > this.sliceMs) {
-              this.evict();
-              this.onChange();
-              await new Promise((r) => setTimeout(r, 0));
-              slice = performance.now();
+          if (this.decoder) {
+            if (!(await this.decodeInWorkers(nodes, bytes, start))) return;
+          } else {
+            let slice = performance.now();
+            for (const i of nodes) {
+              if (this.closed) return;
+              this.insert(i, nodeIn(s, i, bytes, start));
+              // A range holds up to maxRequestBytes of nodes (format 3: some 300k faces a megabyte,
+              // tens of ms to decode): past sliceMs, let a frame draw what has come.
+              if (performance.now() - slice > this.sliceMs) {
+                this.evict();
+                this.onChange();
+                await new Promise((r) => setTimeout(r, 0));
+                slice = performance.now();
+              }
             }
           }
           this.failures = 0;
@@ -618,17 +626,19 @@ export class Streamer {
     }
   }
 
-  /** Decode and keep `nodes`, read as `bytes` from offset `start`, in the decoder's workers, all at once. */
+  /**
+   * Decode and keep `nodes`, read as `bytes` from offset `start`, in the decoder's workers, all at
+   * once; false if the streamer was closed meanwhile.
+   */
   async decodeInWorkers(nodes, bytes, start) {
     const s = this.skeleton;
     const results = await Promise.allSettled(
       nodes.map(async (i) => {
-        const at = s.offset[i] - start;
-        if (at + s.size[i] > bytes.length) throw new FormatError(`node ${i}: the file ends before its geometry (byte ${s.offset[i] + s.size[i]})`);
+        const own = nodeIn(s, i, bytes, start);
         let geometry = null;
         if (this.decoder) {
           try {
-            geometry = await this.decoder.decode(i, bytes.slice(at, at + s.size[i]));
+            geometry = await this.decoder.decode(i, own.slice());
           } catch (e) {
             if (this.closed) return;
             if (e instanceof FormatError) throw e;
@@ -642,15 +652,14 @@ export class Streamer {
           }
         }
         if (this.closed) return;
-        geometry ??= this.decodeHere(i, bytes.subarray(at, at + s.size[i]));
+        geometry ??= this.decodeHere(i, own);
         this.keep(i, geometry);
         this.onChange();
       }),
     );
     const failed = results.filter((r) => r.status === 'rejected').map((r) => r.reason);
     if (failed.length) throw failed.find((e) => e instanceof FormatError) ?? failed[0];
-    this.failures = 0;
-    this.evict();
+    return !this.closed;
   }
 
   /**

@@ -285,7 +285,8 @@ pub fn decode_skel(
     // NBRS hold every level; format 3 has one NODL per level (strata-v3.md §1.1), of which a
     // reader that opens top first has read the first few.
     let paged = super::paged(ctx.major, ctx.minor);
-    if let Some(s) = subs.iter().find(|s| ctx.major >= 3 && !paged && s.frame.id == id::NODL) {
+    let nodl = subs.iter().find(|s| s.frame.id == id::NODL);
+    if let Some(s) = nodl.filter(|_| ctx.major >= 3 && !paged) {
         return Err(ctx.err(s.offset, &id::SKEL, pos, "holds a NODL page: format 3.0 keeps nodes in NODE and NBRS"));
     }
     let pages = if paged {
