@@ -436,3 +436,19 @@ fn reseal(b: &mut [u8]) {
         pos = (pos + 20 + size).next_multiple_of(8);
     }
 }
+
+/// `strata stream` opens top first: the damage open_top now checks is reported by the command,
+/// naming the file and the byte, without a panic.
+#[test]
+fn the_cli_opening_top_first_names_what_follows_the_pages() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("junk-after-pages.strata");
+    std::fs::write(&path, file_with(1, Some((b"JUNK", 0, &[1, 2, 3])))).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_strata")).args(["stream", path.to_str().unwrap(), "--json"]).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(!out.status.success() && out.status.code().is_some(), "{said}");
+    assert!(
+        said.contains("junk-after-pages.strata") && said.contains("byte") && said.contains("JUNK chunk after the node pages"),
+        "{said}"
+    );
+}
