@@ -105,7 +105,8 @@ export class Streamer {
    * levels' records and the top level's geometry (the rest of the node table by the second update).
    * `options`: `prefix` (first read, bytes), `budget` (resident bytes), `maxInFlight`,
    * `maxRequestBytes`, `maxGapBytes` (bytes of other nodes a range may span), `sliceMs` (the longest run of node decoding
-   * before a range's remaining nodes wait for the next task), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
+   * on this thread before the nodes left wait for the next task), `yieldTask()` (how they wait: a promise, by default of
+   * a `setTimeout` of 0), `pixelError`, `maxFaces`, `priority`, `onLoad(i, geometry)` → a handle
    * kept with the node (the renderer's buffers), `onEvict(i, handle)`, `onChange()`; for images, `maps` (the map kinds
    * drawn, whose images are read: `['baseColor']`), `onImage(image, level, fileBytes, mime)` → a handle or a promise of
    * one (the renderer's texture; a rejection leaves that level out), `onImageEvict(image, level, handle)`; `decoder`:
@@ -186,6 +187,10 @@ export class Streamer {
     this.maxRequestBytes = options.maxRequestBytes ?? 1 << 20;
     this.maxGapBytes = options.maxGapBytes ?? 16384;
     this.sliceMs = options.sliceMs ?? 8;
+    this.yieldTask = options.yieldTask ?? (() => new Promise((r) => setTimeout(r, 0)));
+    /** Nodes waiting to be decoded on this thread (decodeSliced), and whether their loop runs. */
+    this.sliced = [];
+    this.slicing = false;
     this.decoder = options.decoder ?? null;
     /** Why decoding moved back to the main thread (a worker failed), or null. */
     this.decoderError = null;
@@ -589,23 +594,7 @@ export class Streamer {
       this.source
         .read(start, s.offset[last] + s.size[last])
         .then(async (bytes) => {
-          if (this.decoder) {
-            if (!(await this.decodeInWorkers(nodes, bytes, start))) return;
-          } else {
-            let slice = performance.now();
-            for (const i of nodes) {
-              if (this.closed) return;
-              this.insert(i, nodeIn(s, i, bytes, start));
-              // A range holds up to maxRequestBytes of nodes (format 3: some 300k faces a megabyte,
-              // tens of ms to decode): past sliceMs, let a frame draw what has come.
-              if (performance.now() - slice > this.sliceMs) {
-                this.evict();
-                this.onChange();
-                await new Promise((r) => setTimeout(r, 0));
-                slice = performance.now();
-              }
-            }
-          }
+          if (!(await this.decodeRange(nodes, bytes, start))) return;
           this.failures = 0;
           this.evict();
         })
@@ -627,10 +616,11 @@ export class Streamer {
   }
 
   /**
-   * Decode and keep `nodes`, read as `bytes` from offset `start`, in the decoder's workers, all at
-   * once; false if the streamer was closed meanwhile.
+   * Decode and keep `nodes`, read as `bytes` from offset `start`: in the decoder's workers, all at
+   * once, or on this thread in the slices of decodeSliced; false if the streamer was
+   * closed meanwhile.
    */
-  async decodeInWorkers(nodes, bytes, start) {
+  async decodeRange(nodes, bytes, start) {
     const s = this.skeleton;
     const results = await Promise.allSettled(
       nodes.map(async (i) => {
@@ -652,7 +642,8 @@ export class Streamer {
           }
         }
         if (this.closed) return;
-        geometry ??= this.decodeHere(i, own);
+        geometry ??= await this.decodeSliced(i, own);
+        if (this.closed || !geometry) return;
         this.keep(i, geometry);
         this.onChange();
       }),
@@ -660,6 +651,45 @@ export class Streamer {
     const failed = results.filter((r) => r.status === 'rejected').map((r) => r.reason);
     if (failed.length) throw failed.find((e) => e instanceof FormatError) ?? failed[0];
     return !this.closed;
+  }
+
+  /**
+   * Node i decoded and checked on this thread, once the nodes asked before it are: one queue for
+   * every range in flight, decoded in runs of at most `sliceMs` with a task between runs, so that
+   * frames draw while a range (up to maxRequestBytes of nodes, tens of ms to decode) or the work a
+   * failed worker pool hands back is decoded. Resolves to null if the streamer closes first.
+   */
+  decodeSliced(i, bytes) {
+    return new Promise((resolve, reject) => {
+      this.sliced.push({ i, bytes, resolve, reject });
+      // Started after the caller's synchronous work, so that a range's nodes queue before any runs.
+      if (!this.slicing) {
+        this.slicing = true;
+        queueMicrotask(() => this.runSlices());
+      }
+    });
+  }
+
+  async runSlices() {
+    let slice = performance.now();
+    while (this.sliced.length > 0) {
+      if (this.closed) {
+        for (const job of this.sliced.splice(0)) job.resolve(null);
+        break;
+      }
+      const job = this.sliced.shift();
+      try {
+        job.resolve(this.decodeHere(job.i, job.bytes));
+      } catch (e) {
+        job.reject(e);
+      }
+      // At least one node a run, however short sliceMs is.
+      if (this.sliced.length > 0 && performance.now() - slice > this.sliceMs) {
+        await this.yieldTask();
+        slice = performance.now();
+      }
+    }
+    this.slicing = false;
   }
 
   /**

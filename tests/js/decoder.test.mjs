@@ -59,9 +59,9 @@ class MemorySource {
 }
 
 /** Stream `bytes` to full detail for two cameras; every geometry handed to onLoad, by node. */
-async function stream(bytes, decoder, prefix = 16384) {
+async function stream(bytes, decoder, prefix = 16384, options = {}) {
   const loaded = new Map();
-  const st = await Streamer.open(new MemorySource(bytes), { pixelError: 0.5, decoder, prefix, onLoad: (i, g) => loaded.set(i, g) });
+  const st = await Streamer.open(new MemorySource(bytes), { pixelError: 0.5, decoder, prefix, onLoad: (i, g) => loaded.set(i, g), ...options });
   for (const distance of [1, 0.4]) {
     const cam = cameraFrom(st.skeleton, [0.4, 0.3, 1.0], distance);
     for (let k = 0; ; k++) {
@@ -155,3 +155,38 @@ test('an exception on one node is met on the main thread, and the workers stay',
   assert.equal(there.st.mainDecoded, top[1] - top[0] + 1, 'the top level at open, and that node');
   for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
 });
+
+// With sliceMs 0 every node decoded on the page's thread is a task of its own: the nodes a failed
+// pool hands back (all the ranges in flight at once) go through the same queue as without workers.
+for (const [what, pool] of [['without workers', () => null], ['after the pool fails', () => new DecoderPool([new StandInWorker({ crashAfter: 3 })])]]) {
+  test(`decoding on the page's thread yields between nodes at sliceMs 0 (${what})`, async (t) => {
+    const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+    const here = await stream(bytes, null);
+    // Nodes decoded on the page's thread at each start of the streamer's decoding loop and at each
+    // of its yields (both called as its methods): between two of them, one run.
+    const marks = [];
+    const yieldTask = function () {
+      marks.push(this.mainDecoded);
+      return new Promise((r) => setTimeout(r, 0));
+    };
+    const runSlices = Streamer.prototype.runSlices;
+    Streamer.prototype.runSlices = function () {
+      marks.push(this.mainDecoded);
+      return runSlices.call(this);
+    };
+    t.after(() => {
+      Streamer.prototype.runSlices = runSlices;
+    });
+    const there = await stream(bytes, pool(), 16384, { sliceMs: 0, yieldTask });
+    assert.equal(there.st.error, null);
+    for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+    const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
+    const opened = top[1] - top[0];
+    const sliced = there.st.mainDecoded - opened;
+    assert.ok(sliced > 10, `${sliced} nodes decoded on the page's thread after open`);
+    marks.push(there.st.mainDecoded);
+    const runs = marks.slice(1).map((n, k) => n - marks[k]);
+    assert.equal(marks[0], opened, 'the top level decoded at open');
+    assert.ok(Math.max(...runs) === 1, `runs of up to ${Math.max(...runs)} nodes`);
+  });
+}
