@@ -1874,17 +1874,15 @@ function growVertices(n) {
 }
 
 /**
- * Connectivity (§5.3): the faces of runs between `cuts` by traversal, and each vertex's
- * prediction; then W3.border, whether each vertex lies on an edge not zipped. Returns the faces'
- * corners: `out` (3·nf), or, without it, a fresh copy of W3.idx. The connectivity symbols are
- * decoded inline (Payload.sym), the rare values through `r`.
+ * Connectivity (§5.3): the faces of runs between `cuts` by traversal, their corners into W3.idx,
+ * and each vertex's prediction; then W3.border, whether each vertex lies on an edge not zipped.
+ * The connectivity symbols are decoded inline (Payload.sym), the rare values through `r`.
  */
-function connectivity3(r, cuts, nf, nv, out) {
-  // Room for every face when `out` is given (its caller checked nf against the payload's bytes),
-  // else for what a plausible payload holds, more as faces come.
-  growFaces(out ? nf : Math.min(nf, 16 * (r.end - r.start) + 256));
+function connectivity3(r, cuts, nf, nv) {
+  // Room for what a plausible payload holds, more as faces come.
+  growFaces(Math.min(nf, 16 * (r.end - r.start) + 256));
   let limit = 3 * Math.floor((W3.cap - 3) / 3);
-  let E = W3.edges, queue = W3.queue, skipped = W3.skipped, preds = W3.preds, idx = out ?? W3.idx;
+  let E = W3.edges, queue = W3.queue, skipped = W3.skipped, preds = W3.preds, idx = W3.idx;
   const T = r.T, b = r.b, end = r.end;
   let x = r.x, pos = r.pos;
   // ne: the next edge's offset; nvd: vertices so far; ni: corners so far.
@@ -1898,8 +1896,7 @@ function connectivity3(r, cuts, nf, nv, out) {
         // More faces than the first guess: grow toward the node's count.
         growFaces(Math.min(nf, (2 * limit) / 3));
         limit = 3 * Math.floor((W3.cap - 3) / 3);
-        ({ edges: E, queue, skipped, preds } = W3);
-        if (!out) idx = W3.idx;
+        ({ edges: E, queue, skipped, preds, idx } = W3);
       }
       let e, sy = -1;
       if (pending >= 0) {
@@ -2050,7 +2047,6 @@ function connectivity3(r, cuts, nf, nv, out) {
       border[E[e + E_V1]] = 1;
     }
   }
-  return out ?? idx.slice(0, 3 * nf);
 }
 
 /**
@@ -2543,20 +2539,36 @@ function decodeNode3(s, i, b, opts) {
     }
   }
   cuts.push(nf);
-  const sorted = Float64Array.from(cuts).sort();
-  const runs = [sorted[0]];
-  for (let k = 1; k < sorted.length; k++) if (sorted[k] !== sorted[k - 1]) runs.push(sorted[k]);
+  cuts.sort((a, b) => a - b);
+  const runs = [cuts[0]];
+  for (let k = 1; k < cuts.length; k++) if (cuts[k] !== cuts[k - 1]) runs.push(cuts[k]);
 
-  const indices = connectivity3(r, runs, nf, nv, nf <= 16 * len + 256 ? new Uint32Array(3 * nf) : null);
-  const positions = new Float32Array(3 * nv);
+  connectivity3(r, runs, nf, nv);
+  // The arrays in two buffers, one allocation each: what a viewer keeps after upload (indices and
+  // the positions it draws), and the rest.
   const lo = opts.localOrigin;
-  const local = lo ? new Float32Array(3 * nv) : null;
+  const kept = new ArrayBuffer(12 * nf + 12 * nv);
+  const indices = new Uint32Array(kept, 0, 3 * nf);
+  indices.set(W3.idx.subarray(0, 3 * nf));
+  const drawn = new Float32Array(kept, 12 * nf, 3 * nv);
+  const restBytes = (lo ? 12 : 0) + (attrs.normals ? 12 : 0) + (attrs.uvs ? 8 : 0) + (attrs.colors ? 4 : 0);
+  const rest = new ArrayBuffer(restBytes * nv);
+  let filled = 0;
+  const part = (T, per) => {
+    const a = new T(rest, filled, per * nv);
+    filled += per * nv * T.BYTES_PER_ELEMENT;
+    return a;
+  };
+  const positions = lo ? part(Float32Array, 3) : drawn;
+  const local = lo ? drawn : null;
+  const normals = attrs.normals ? part(Float32Array, 3) : null;
+  const uvs = attrs.uvs ? part(Float32Array, 2) : null;
+  const colors = attrs.colors ? part(Uint8Array, 4) : null;
   const mid = [s.boxMid[3 * i], s.boxMid[3 * i + 1], s.boxMid[3 * i + 2]];
   positions3(r, nv, shift, bits, mid, h.grid, positions, local, lo);
-  let normals = null, colors = null, uvs = null;
-  if (attrs.normals) normals3(r, nv, nf, indices, code, (normals = new Float32Array(3 * nv)));
-  if (attrs.colors) colors3(r, nv, code.colorBits, (colors = new Uint8Array(4 * nv)));
-  if (attrs.uvs) uvs3(r, nv, uvBits, (uvs = new Float32Array(2 * nv)));
+  if (normals) normals3(r, nv, nf, indices, code, normals);
+  if (colors) colors3(r, nv, code.colorBits, colors);
+  if (uvs) uvs3(r, nv, uvBits, uvs);
   // The ends (§4.1, §4.4): every byte of the stream read, the state back at RANS_L, the raw bits
   // ending in the payload's last byte.
   if (r.pos !== end) throw fail(end, `${end - r.pos} bytes after the symbol stream's end`);
