@@ -475,29 +475,20 @@ impl StripFrame<'_> {
     fn block_bounds(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [Block]) {
         cache.next_generation();
         let n = part.positions.len();
-        let edge = self.width as f32 + 16.0;
         for (block, bounds) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
             let mut b = Block { rows: (i32::MAX, i32::MIN), cols: (i32::MAX, i32::MIN), z: f32::INFINITY };
             for tri in block.chunks_exact(3) {
-                if tri.iter().any(|&i| i as usize >= n) {
-                    continue;
-                }
-                let c = [0, 1, 2].map(|k| self.corner(part, tri[k], false, cache));
-                let r = c.map(|c| c.row);
-                if r.contains(&BAD_ROW) {
-                    continue;
-                }
-                if r.contains(&NO_ROW) {
-                    b = ANYWHERE;
-                    break;
-                }
-                b.rows = (b.rows.0.min(r[0].min(r[1]).min(r[2]) - ROW_MARGIN), b.rows.1.max(r[0].max(r[1]).max(r[2]) + ROW_MARGIN));
-                for p in c.map(|c| c.clip.p) {
-                    // w > 0 here (the row is usable); a corner before the near plane has a depth
-                    // below -1 that clipping replaces: no depth bound then.
-                    let x = ((p.x / p.w + 1.0) * 0.5 * self.width as f32).clamp(-16.0, edge).floor() as i32;
-                    b.cols = (b.cols.0.min(x - ROW_MARGIN), b.cols.1.max(x + ROW_MARGIN));
-                    b.z = if p.z < -p.w { f32::NEG_INFINITY } else { b.z.min(p.z / p.w) };
+                match self.face_bounds(part, [tri[0], tri[1], tri[2]], n, false, cache) {
+                    None => continue,
+                    Some(f) if f.rows == ALL_ROWS => {
+                        b = ANYWHERE;
+                        break;
+                    }
+                    Some(f) => {
+                        b.rows = (b.rows.0.min(f.rows.0), b.rows.1.max(f.rows.1));
+                        b.cols = (b.cols.0.min(f.cols.0), b.cols.1.max(f.cols.1));
+                        b.z = b.z.min(f.z);
+                    }
                 }
             }
             if !b.z.is_finite() {
@@ -505,6 +496,52 @@ impl StripFrame<'_> {
             }
             *bounds = b;
         }
+    }
+
+    /// Where face `tri` of `part` may reach ([`Block`] of one face; [`ANYWHERE`] when a corner
+    /// has no screen row), or None when it is not drawn at all (an index past `n` vertices, a
+    /// corner not finite). `smooth` as the strip draws the part, for the cache's sake.
+    fn face_bounds(&self, part: &Part<'_>, tri: [u32; 3], n: usize, smooth: bool, cache: &mut VertexCache) -> Option<Block> {
+        if tri.iter().any(|&i| i as usize >= n) {
+            return None;
+        }
+        let c = tri.map(|i| self.corner(part, i, smooth, cache));
+        let r = c.map(|c| c.row);
+        if r.contains(&BAD_ROW) {
+            return None;
+        }
+        if r.contains(&NO_ROW) {
+            return Some(ANYWHERE);
+        }
+        let edge = self.width as f32 + 16.0;
+        let mut b = Block {
+            rows: (r[0].min(r[1]).min(r[2]) - ROW_MARGIN, r[0].max(r[1]).max(r[2]) + ROW_MARGIN),
+            cols: (i32::MAX, i32::MIN),
+            z: f32::INFINITY,
+        };
+        for p in c.map(|c| c.clip.p) {
+            // w > 0 here (the row is usable); a corner before the near plane has a depth below
+            // -1 that clipping replaces: no depth bound then.
+            let x = ((p.x / p.w + 1.0) * 0.5 * self.width as f32).clamp(-16.0, edge).floor() as i32;
+            b.cols = (b.cols.0.min(x - ROW_MARGIN), b.cols.1.max(x + ROW_MARGIN));
+            b.z = if p.z < -p.w { f32::NEG_INFINITY } else { b.z.min(p.z / p.w) };
+        }
+        Some(b)
+    }
+
+    /// Whether every face of block `b` of `part` lies behind the depths of the strip of `rows` by its
+    /// own rectangle and least corner depth, or has no pixel there: the block test made tight
+    /// where one rectangle for the block reaches pixels none of its faces covers.
+    fn faces_behind(&self, part: &Part<'_>, b: usize, rows: (u32, u32), depth: &[f32], smooth: bool, cache: &mut VertexCache) -> bool {
+        let n = part.positions.len();
+        let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
+        part.indices[3 * b * BLOCK_FACES..end].chunks_exact(3).all(|tri| {
+            match self.face_bounds(part, [tri[0], tri[1], tri[2]], n, smooth, cache) {
+                None => true,
+                Some(f) if f.rows == ALL_ROWS || !f.z.is_finite() => false,
+                Some(f) => behind(f.rows, f.cols, f.z - HULL_DEPTH_MARGIN, rows.0, rows.1, self.width, depth) != Some(false),
+            }
+        })
     }
 
     /// Draw every face reaching strip `strip` (rows `strip · STRIP_ROWS ..`) into its buffers, in
@@ -551,6 +588,11 @@ impl StripFrame<'_> {
                             // Outside the image: its faces have no pixel here.
                             None => continue,
                             Some(true) => {
+                                state.fetch_max(HIDDEN, Ordering::Relaxed);
+                                self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
+                                continue;
+                            }
+                            Some(false) if self.faces_behind(part, b, (first, last), depth, smooth, &mut s.cache) => {
                                 state.fetch_max(HIDDEN, Ordering::Relaxed);
                                 self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
                                 continue;
@@ -745,7 +787,8 @@ impl Strips {
 
     /// Occlusion culling: parts with [`Part::bounds`] are skipped in a strip where their box lies
     /// behind what the parts before them drew there, and so are blocks of [`BLOCK_FACES`] faces
-    /// whose corners' screen rectangle does (at the corners' least depth). Drawn front to back,
+    /// whose corners' screen rectangle does (at the corners' least depth), or failing that, each
+    /// of whose faces' rectangles does (at its own corners' least depth). Drawn front to back,
     /// this skips much of what is hidden; the image is the same pixel for pixel either way (the
     /// tests are conservative).
     pub fn set_occlusion(&mut self, on: bool) {
@@ -1332,6 +1375,36 @@ mod tests {
             assert_eq!(stats.parts_hidden, 0);
             assert!(stats.writes > stats.covered, "back to front shades pixels more than once");
         }
+    }
+
+    #[test]
+    fn a_block_is_hidden_when_each_of_its_faces_is_though_its_rectangle_is_not() {
+        // Two near squares with a gap between them; behind them one block of two small faces, one
+        // behind each square: the block's rectangle spans the gap, each face's does not.
+        let square =
+            |x0: f32, x1: f32, z: f32| [Vec3::new(x0, -0.5, z), Vec3::new(x1, -0.5, z), Vec3::new(x1, 0.5, z), Vec3::new(x0, 0.5, z)];
+        let (left, right) = (square(-0.9, -0.1, 1.0), square(0.1, 0.9, 1.0));
+        let quad = [0, 1, 2, 0, 2, 3];
+        let back = [
+            Vec3::new(-0.7, -0.2, -1.0),
+            Vec3::new(-0.3, -0.2, -1.0),
+            Vec3::new(-0.5, 0.2, -1.0),
+            Vec3::new(0.3, -0.2, -1.0),
+            Vec3::new(0.7, -0.2, -1.0),
+            Vec3::new(0.5, 0.2, -1.0),
+        ];
+        let back_faces = [0, 1, 2, 3, 4, 5];
+        let camera = ortho();
+        let (w, h) = (camera.width, camera.height);
+        let alone = [Part::new(&back, &[], &back_faces, palette(3))];
+        assert_eq!(draw_in_strips(&camera, &alone, w, h).1, 2, "both back faces face the camera");
+        let parts = [Part::new(&left, &[], &quad, palette(1)), Part::new(&right, &[], &quad, palette(2)), alone[0]];
+        let (plain, faces) = draw_in_strips(&camera, &parts, w, h);
+        let (culled, stats) = draw_occluded(&camera, &parts, w, h);
+        assert!(culled == plain, "occlusion culling changed pixels");
+        assert_eq!(faces, 6);
+        assert_eq!(stats.faces, 4, "{stats:?}");
+        assert_eq!(stats.faces_hidden, 2, "{stats:?}");
     }
 
     #[test]
