@@ -111,11 +111,11 @@ pub struct SimplifyOptions {
     /// position (the chunk file's writer does, by grid point) sees the two caps as one doubled
     /// face and the cut's edges as edges of four faces. Without it a mesh of many handles and
     /// components (a noisy scan) stops at a few faces per handle and component. With groups, only
-    /// where every group is made of whole components (no vertex has faces of two groups), so a
-    /// cap joins no groups; there no group loses its last faces (a tetrahedron is dropped only
-    /// from a group that keeps others), but a cut through a neck leaves its group in two pieces,
-    /// and the cap's move and a dropped tetrahedron (its spread and its vertices' errors) count in
-    /// the group's error. Default false.
+    /// where every face around the vertices changed is of one group, so a cap joins no groups and
+    /// no group border moves; no group loses its last faces (a tetrahedron is dropped only from a
+    /// group that keeps others), but a cut through a neck leaves its group in two pieces, and the
+    /// cap's move and a dropped tetrahedron (its spread and its vertices' errors) count in the
+    /// group's error. Default false.
     pub topology: bool,
 }
 
@@ -189,7 +189,7 @@ pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opt
         s.init(opts, false);
         s.run(opts);
         let face_target = opts.target_faces > 0 || opts.max_error.is_none();
-        if opts.topology && face_target && s.faces_left > opts.target_faces && (groups.is_none() || s.groups_are_components()) {
+        if opts.topology && face_target && s.faces_left > opts.target_faces {
             s = State::new(mesh, groups);
             s.pinned = pinned.to_vec();
             s.init(opts, true);

@@ -79,8 +79,8 @@ pub(super) struct State {
     pub(super) scratch_edges: Vec<u64>,
     pub(super) scratch_r: Vec<u32>,
     pub(super) scratch_k: Vec<u32>,
-    /// Topology changes are made (see [`SimplifyOptions::topology`]); with groups only where
-    /// each group is made of whole components.
+    /// Topology changes are made (see [`SimplifyOptions::topology`]); with groups only where all
+    /// faces around are of one group.
     pub(super) topology: bool,
     /// Vertices that never move or go, and that no collapse joins by a new edge (empty: none;
     /// see [`super::simplify_pinned`]).
@@ -186,7 +186,7 @@ impl State {
     /// in the same order as a sequential scatter would.
     pub(super) fn init(&mut self, opts: &SimplifyOptions, topology: bool) {
         self.cos_turn = f64::from(opts.max_normal_turn).cos();
-        self.topology = topology && (!self.grouped || self.groups_are_components());
+        self.topology = topology;
         if self.topology && self.grouped {
             let n = self.faces.iter().map(|f| f.group as usize + 1).max().unwrap_or(0);
             self.group_faces = vec![0; n];
@@ -476,16 +476,6 @@ impl State {
             }
         }
         (e.n > 0).then_some(e)
-    }
-
-    /// Whether no vertex has faces of two groups: every group is then made of whole components,
-    /// and cutting or capping inside one cannot touch another.
-    pub(super) fn groups_are_components(&self) -> bool {
-        self.verts.iter().all(|x| {
-            let faces = &self.face_lists[x.start as usize..(x.start + x.len) as usize];
-            let group = |f: &u32| self.faces[*f as usize].group;
-            faces.first().is_none_or(|first| faces.iter().all(|f| group(f) == group(first)))
-        })
     }
 
     /// A vertex's squared error estimate: its own mean squared distance to its planes, or the

@@ -362,6 +362,21 @@ fn tori(n: u32, ring: u32) -> Mesh {
     m
 }
 
+/// The pairs of groups (lower label first) that share an edge.
+fn group_pairs(mesh: &Mesh, groups: &[u32]) -> std::collections::BTreeSet<(u32, u32)> {
+    let adj = Adjacency::build(mesh);
+    let mut pairs = std::collections::BTreeSet::new();
+    for (f, around) in adj.face_neighbors.iter().enumerate() {
+        for &nb in around.iter().filter(|&&nb| nb != NO_FACE) {
+            let (a, b) = (groups[f], groups[nb as usize]);
+            if a != b {
+                pairs.insert((a.min(b), a.max(b)));
+            }
+        }
+    }
+    pairs
+}
+
 #[test]
 fn topology_changes_reach_targets_that_handles_block() {
     let m = tori(3, 40);
@@ -385,11 +400,24 @@ fn topology_changes_reach_targets_that_handles_block() {
     let limited = simplify(&m, None, &SimplifyOptions { topology: true, max_error: Some(0.01), ..opts(12) });
     check(&m, &limited);
     assert!(limited.error <= 0.01, "{}", limited.error);
-    // Groups that meet forbid it.
+    // Groups that meet (two per torus): cuts only where every face around is of one group, so
+    // groups still meet where they met and nowhere else, keep faces, and caps take their labels.
     let groups = patches(&m, 6);
     assert!((0..6).all(|g| groups.contains(&g)));
-    let grouped = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
+    let grouped = simplify(&m, Some(&groups), &opts(12));
     check(&m, &grouped);
+    let meeting = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(12) });
+    check_manifold(&m, &meeting);
+    assert!(
+        meeting.mesh.face_count() < grouped.mesh.face_count(),
+        "{} faces, {} without cuts",
+        meeting.mesh.face_count(),
+        grouped.mesh.face_count()
+    );
+    assert_eq!(group_pairs(&meeting.mesh, &meeting.face_groups), group_pairs(&m, &groups));
+    for (f, &g) in meeting.face_groups.iter().enumerate() {
+        assert_eq!(groups[meeting.source_faces[f] as usize], g, "face {f} has its source's group");
+    }
     // Groups that are whole components (one torus each) allow it: cuts, but no group loses its
     // last faces (a tetrahedron goes only from a group with more), and caps take their group's label.
     let groups = patches(&m, 3);

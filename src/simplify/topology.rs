@@ -13,7 +13,7 @@ impl State {
     /// shape checks. `out` gets the vertices whose edges must be ranked again.
     pub(super) fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64, out: &mut Vec<u32>) -> bool {
         out.clear();
-        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 {
+        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 || !self.one_group(&[u, v]) {
             return false;
         }
         if self.drop_tetrahedron(u, v, e, limit) {
@@ -33,8 +33,8 @@ impl State {
     /// Remove a closed tetrahedron, a component that no collapse can shrink, if (u, v) is on one.
     fn drop_tetrahedron(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64) -> bool {
         let corners = [u, v, e.x[0], e.x[1]];
-        // With groups, not a group's last faces (groups are whole components here, so all four
-        // faces are of one group).
+        // With groups, not a group's last faces (all four faces are of one group: `unblock` checked
+        // u's and v's, which are all four).
         let group = self.faces[e.f[0] as usize].group as usize;
         if (self.grouped && self.group_faces.get(group).is_none_or(|&n| n <= 4))
             || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked)
@@ -69,6 +69,18 @@ impl State {
         true
     }
 
+    /// Whether all faces around the vertices `vs` are of one group (always, without groups): a
+    /// change of topology there neither joins groups by a cap nor moves a group border.
+    fn one_group(&self, vs: &[u32]) -> bool {
+        if !self.grouped {
+            return true;
+        }
+        let mut faces = vs.iter().flat_map(|&w| self.faces_of(w).iter());
+        let Some(&first) = faces.next() else { return true };
+        let group = self.faces[first as usize].group;
+        faces.all(|&f| self.faces[f as usize].group == group)
+    }
+
     /// The largest squared distance of the vertices `vs` from their centroid: how far a cap over
     /// them, or their removal, moves the surface.
     fn spread_sq(&self, vs: &[u32]) -> f64 {
@@ -81,7 +93,7 @@ impl State {
     /// right. Only where every fan around the cycle is closed and manifold. A handle through the
     /// cycle is removed, or the component split in two at a neck; the mesh stays manifold.
     fn cut(&mut self, cycle: [u32; 3], out: &mut Vec<u32>) -> bool {
-        if cycle.iter().any(|&w| self.verts[w as usize].locked) {
+        if cycle.iter().any(|&w| self.verts[w as usize].locked) || !self.one_group(&cycle) {
             return false;
         }
         let mut sides = Vec::with_capacity(3);
