@@ -672,24 +672,32 @@ export class Streamer {
 
   async runSlices() {
     let slice = performance.now();
-    while (this.sliced.length > 0) {
-      if (this.closed) {
-        for (const job of this.sliced.splice(0)) job.resolve(null);
-        break;
+    try {
+      while (this.sliced.length > 0) {
+        if (this.closed) {
+          for (const job of this.sliced.splice(0)) job.resolve(null);
+          break;
+        }
+        const job = this.sliced.shift();
+        try {
+          job.resolve(this.decodeHere(job.i, job.bytes));
+        } catch (e) {
+          job.reject(e);
+        }
+        // At least one node a run, however short sliceMs is. Nodes kept so far may be evicted
+        // before the next run, as the ranges they came in may finish much later.
+        if (this.sliced.length > 0 && performance.now() - slice > this.sliceMs) {
+          this.evict();
+          // A yield that fails still yields: the queue must not stop with nodes in it.
+          await Promise.resolve()
+            .then(() => this.yieldTask())
+            .catch(() => new Promise((r) => setTimeout(r, 0)));
+          slice = performance.now();
+        }
       }
-      const job = this.sliced.shift();
-      try {
-        job.resolve(this.decodeHere(job.i, job.bytes));
-      } catch (e) {
-        job.reject(e);
-      }
-      // At least one node a run, however short sliceMs is.
-      if (this.sliced.length > 0 && performance.now() - slice > this.sliceMs) {
-        await this.yieldTask();
-        slice = performance.now();
-      }
+    } finally {
+      this.slicing = false;
     }
-    this.slicing = false;
   }
 
   /**

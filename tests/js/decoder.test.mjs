@@ -190,3 +190,20 @@ for (const [what, pool] of [['without workers', () => null], ['after the pool fa
     assert.ok(Math.max(...runs) === 1, `runs of up to ${Math.max(...runs)} nodes`);
   });
 }
+
+// A yieldTask that throws or rejects (a caller's) must not stop the queue with nodes in it.
+for (const [what, yieldTask] of [
+  ['throws', () => { throw new Error('no tasks'); }],
+  ['rejects', () => Promise.reject(new Error('no tasks'))],
+]) {
+  test(`the page's decoding queue goes on when yieldTask ${what}`, async () => {
+    const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3'])));
+    const here = await stream(bytes, null);
+    const there = await stream(bytes, null, 16384, { sliceMs: 0, yieldTask });
+    assert.equal(there.st.error, null);
+    assert.deepEqual(there.st.drawn, here.st.drawn);
+    for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
+    assert.equal(there.st.slicing, false);
+    assert.equal(there.st.sliced.length, 0);
+  });
+}
