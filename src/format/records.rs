@@ -227,7 +227,7 @@ impl Default for HierarchyParams {
             leaf_faces: 512,
             leaf_angle: 120f32.to_radians(),
             angle_step: 30f32.to_radians(),
-            growth: 4,
+            growth: 2,
             kc: 1.0,
             ks: 0.1,
             kn: 0.05,
