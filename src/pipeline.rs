@@ -33,15 +33,15 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a PLY or OBJ file the partitioned build takes (format 2, no
-    /// textures) and either an in-core build would not fit in `memory`
+    /// Partitioned when the input is a PLY or OBJ file the partitioned build takes (a PLY without
+    /// texture coordinates or files; any OBJ) and either an in-core build would not fit in `memory`
     /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]) or, on a machine of several cores, it has at
     /// least [`crate::partition::PARALLEL_FACES`] faces and memory for two cells at once (there
     /// the partitioned build is faster); else in memory.
     Auto,
     /// Always in memory.
     InCore,
-    /// Always partitioned (PLY or OBJ input, format 2).
+    /// Always partitioned (PLY or OBJ input).
     Partitioned,
 }
 
@@ -191,7 +191,8 @@ pub fn convert(
 
     let mut choice_warnings = Vec::new();
     if let Some((budget, reader, declared)) = partitioned(input, import, opts, &mut choice_warnings)? {
-        return crate::partition::convert(input, reader, declared, output, opts, &budget, progress);
+        let input = crate::partition::Input { path: input, import, reader, declared };
+        return crate::partition::convert(input, output, opts, &budget, progress);
     }
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;

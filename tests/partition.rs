@@ -228,7 +228,9 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "line 4: face vertex index 4 out of range: the file has 3 vertices"),
         ("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n", "line 3: relative vertex index -3 reaches before the first of 2 so far"),
         ("v 0 0 0\nv 1 zero 0\n", "line 2: v: 'zero' is not a number"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1 2 3\n", "texture coordinates"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 zero\nf 1/1 2 3\n", "line 4: vt: 'zero' is not a number"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2 3\n", "line 5: face texture coordinate index 2 out of range"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl\nf 1 2 3\n", "line 4: usemtl without a material name"),
         ("v 0 0 0\nv 1000000010 0 0\nv 0 1 0\nf 1 2 3\n", "line 2: coordinate 1.00000001e9 exceeds"),
         ("v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r", "line 1: v has 15 numbers"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf //1 2 3\n", "line 4: face vertex '//1' has no position index"),
@@ -241,6 +243,82 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
     assert!(!part.exists(), "a bad input left an output");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
     clean_up([obj, part, core], &work);
+}
+
+/// A textured globe of 65k faces whose southern half has a second, untextured material, written
+/// as OBJ with its MTL and image (in `dir`).
+fn textured_obj(dir: &Path) -> PathBuf {
+    let mut mesh = strata::fixtures::textured_globe(256, 256);
+    let red = strata::mesh::Material { name: "red".into(), base_color: [0.8, 0.1, 0.1, 1.0], ..Default::default() };
+    mesh.materials.push(red);
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        if t.iter().map(|&v| mesh.positions[v as usize].y).sum::<f32>() < 0.0 {
+            mesh.face_materials[f] = 1;
+        }
+    }
+    let obj = dir.join("globe.obj");
+    strata::export::obj::write(&obj, &mesh).expect("write OBJ");
+    obj
+}
+
+/// Per material, how many faces a level has, and every corner's UV (as bits, sorted).
+fn level_looks(rd: &Reader<std::fs::File>, level: u32) -> (Vec<u64>, Vec<[u32; 2]>) {
+    let mut faces = vec![0u64; rd.materials().len()];
+    let mut uvs = Vec::new();
+    for n in rd.level_nodes(level) {
+        let g = rd.read_node(n).expect("node");
+        for r in &g.material_ranges {
+            faces[r.material as usize] += r.index_count as u64 / 3;
+        }
+        uvs.extend(g.indices.iter().map(|&i| g.uvs[i as usize].to_array().map(f32::to_bits)));
+    }
+    uvs.sort_unstable();
+    (faces, uvs)
+}
+
+#[test]
+fn a_textured_obj_of_two_materials_builds_partitioned_with_its_uvs_materials_and_image() {
+    let work = work_dir("textured-work");
+    let dir = work_dir("textured-input");
+    let obj = textured_obj(&dir);
+    let (part, core) = (temp("textured-part.strata"), temp("textured-core.strata"));
+    let c = convert(&obj, &Default::default(), &part, &partitioned(&work), &mut Silent).expect("partitioned OBJ");
+    assert!(c.cells.is_some_and(|n| n > 1), "{:?} cells", c.cells);
+    convert(&obj, &Default::default(), &core, &ConvertOptions { build: Build::InCore, ..ConvertOptions::default() }, &mut Silent)
+        .expect("in-core OBJ");
+    assert!(strata::format::verify_path(&part).is_sound(), "the partitioned file does not verify");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+    let (rp, rc) = (Reader::open_path(&part).unwrap(), Reader::open_path(&core).unwrap());
+    assert!(rp.header().attributes.uvs, "UVs carried");
+    assert_eq!(rp.materials(), rc.materials());
+    assert_eq!(rp.materials().len(), 2);
+    // The same image, with the same levels.
+    let (tp, tc) = (rp.textures(), rc.textures());
+    assert_eq!(tp.images.len(), 1);
+    assert_eq!(tp.images, tc.images);
+    assert_eq!(tp.levels.len(), tc.levels.len());
+    for level in 0..tp.levels.len() as u32 {
+        assert!(rp.read_image_level(0, level).unwrap() == rc.read_image_level(0, level).unwrap(), "image level {level}");
+    }
+    // Level 0: each material's faces, and every corner's UV, as in the in-core build; every level
+    // keeps both materials, and every node that has textured faces a UV density.
+    let (faces, uvs) = level_looks(&rp, 0);
+    assert_eq!((&faces, &uvs), (&level_looks(&rc, 0).0, &level_looks(&rc, 0).1));
+    assert!(faces.iter().all(|&n| n > 20_000), "{faces:?}");
+    for level in 1..rp.levels().len() as u32 {
+        let (faces, _) = level_looks(&rp, level);
+        assert!(faces.iter().all(|&n| n > 0), "level {level}: {faces:?}");
+    }
+    for n in 0..rp.nodes().len() {
+        let g = rp.read_node(n as u32).unwrap();
+        let textured = g.material_ranges.iter().any(|r| r.material == 0 && r.index_count > 0);
+        assert_eq!(textured, tp.uv_density[n] > 0.0, "node {n}");
+    }
+    for f in std::fs::read_dir(&dir).unwrap().flatten() {
+        let _ = std::fs::remove_file(f.path());
+    }
+    clean_up([part, core], &dir);
+    let _ = std::fs::remove_dir(&work);
 }
 
 #[test]

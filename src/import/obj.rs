@@ -62,12 +62,10 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
             return Ok((materials, map));
         }
         let full = dir.join(lib);
-        // Only a regular file: tobj reads a device such as /dev/zero without end.
-        let result =
-            if std::fs::metadata(&full).is_ok_and(|m| !m.is_file()) { Err(tobj::LoadError::OpenFileFailed) } else { tobj::load_mtl(&full) };
+        let result = load_library(&full);
         match &result {
             Err(e) => {
-                let w = format!("material library {} not loaded ({e}); its materials get default colors", full.display());
+                let w = library_warning(&full, e);
                 let mut ws = mtl_warnings.borrow_mut();
                 if !ws.contains(&w) {
                     ws.push(w);
@@ -95,21 +93,49 @@ fn read_mesh(path: &Path, import: &ImportOptions, warnings: &mut Vec<String>) ->
     for (out, source) in sources.iter().enumerate() {
         let (Some(id), Some(m)) = (*source, source.and_then(|i| materials.get(i))) else { continue };
         let folder = folder_of(id).map_or(Path::new(""), |(f, _)| f.as_path());
-        let maps = [
-            (MapKind::BaseColor, m.diffuse_texture.as_deref()),
-            (MapKind::Normal, m.unknown_param.get("norm").map(String::as_str)),
-            (MapKind::Emissive, m.unknown_param.get("map_Ke").map(String::as_str)),
-        ];
-        for (kind, statement) in maps {
-            let Some(statement) = statement else { continue };
-            let (file, clamp) = texture_file(statement);
-            if let Some(image) = images.load(dir, &folder.join(&file), import.allow_outside_files, &mut mesh, warnings) {
-                let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
-                mesh.materials[out].maps[kind as usize] = Some(TextureSlot { image, wrap: [wrap; 2] });
-            }
-        }
+        attach_maps(m, (dir, folder), import.allow_outside_files, &mut images, &mut mesh, out, warnings);
     }
     Ok(mesh)
+}
+
+/// A material library, only if a regular file: tobj reads a device such as /dev/zero without end.
+pub(super) fn load_library(full: &Path) -> tobj::MTLLoadResult {
+    if std::fs::metadata(full).is_ok_and(|m| !m.is_file()) {
+        Err(tobj::LoadError::OpenFileFailed)
+    } else {
+        tobj::load_mtl(full)
+    }
+}
+
+pub(super) fn library_warning(full: &Path, e: &tobj::LoadError) -> String {
+    format!("material library {} not loaded ({e}); its materials get default colors", full.display())
+}
+
+/// The maps of library material `m` on `mesh.materials[out]`: base color, normal and emissive
+/// images, named relative to the library's folder (`at.1`, itself relative to the model's folder
+/// `at.0`), each file read once into `mesh.images`.
+pub(super) fn attach_maps(
+    m: &tobj::Material,
+    at: (&Path, &Path),
+    allow_outside: bool,
+    images: &mut super::ImageFiles,
+    mesh: &mut Mesh,
+    out: usize,
+    warnings: &mut Vec<String>,
+) {
+    let maps = [
+        (MapKind::BaseColor, m.diffuse_texture.as_deref()),
+        (MapKind::Normal, m.unknown_param.get("norm").map(String::as_str)),
+        (MapKind::Emissive, m.unknown_param.get("map_Ke").map(String::as_str)),
+    ];
+    for (kind, statement) in maps {
+        let Some(statement) = statement else { continue };
+        let (file, clamp) = texture_file(statement);
+        if let Some(image) = images.load(at.0, &at.1.join(&file), allow_outside, mesh, warnings) {
+            let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
+            mesh.materials[out].maps[kind as usize] = Some(TextureSlot { image, wrap: [wrap; 2] });
+        }
+    }
 }
 
 /// The file name of a map statement's value (`-s 1 1 1 -clamp on dir/file name.png`) and whether
@@ -449,7 +475,7 @@ fn build_mesh(
     Ok((mesh, sources))
 }
 
-fn material_from(t: &tobj::Material) -> Material {
+pub(super) fn material_from(t: &tobj::Material) -> Material {
     let default = Material::default();
     let [r, g, b] = t.diffuse.unwrap_or([default.base_color[0], default.base_color[1], default.base_color[2]]);
     Material {

@@ -1,16 +1,21 @@
 //! Wavefront OBJ as a stream, for the partitioned build: two passes over the file, line by line.
-//! The first holds the vertex positions (and their colors) and the normals; the second hands the
-//! faces on in batches, fan-triangulated as the whole-file reader does (`obj.rs`), their indices
-//! resolved (positive ones may point further down the file, negative ones count back from their
-//! line) and checked, each corner's normal with it. Errors name the line. Texture coordinates and
-//! materials (`usemtl`) are refused: the partitioned build does not carry them. Vertices keep the
-//! file's order; the whole-file reader's tobj numbers them per object (`o`, `g`), so for a file of
-//! several objects the two builds number the same surface's vertices differently.
+//! The first holds the vertex positions (and their colors), the normals and the texture
+//! coordinates, and notes the material libraries (`mtllib`) and material names (`usemtl`); the
+//! second hands the faces on in batches, fan-triangulated as the whole-file reader does (`obj.rs`),
+//! their indices resolved (positive ones may point further down the file, negative ones count back
+//! from their line) and checked, each corner's normal and texture coordinates and each face's
+//! material with it. Errors name the line. Materials are numbered in the order faces first use
+//! them, with their maps' images read as the whole-file reader reads them; a name several
+//! libraries define takes the last one's definition. Vertices keep the file's order; the
+//! whole-file reader's tobj numbers them per object (`o`, `g`), so for a file of several objects
+//! the two builds number the same surface's vertices differently.
 
-use super::stream::{refused, Declared, FaceSink, Faces, Vertices, BATCH};
+use super::stream::{Declared, FaceSink, Faces, Looks, Vertices, BATCH};
+use super::ImportOptions;
 use crate::error::{Error, Result};
-use crate::mesh::coordinate_problem;
-use glam::Vec3;
+use crate::mesh::{coordinate_problem, Material, Mesh};
+use glam::{Vec2, Vec3};
+use std::collections::HashMap;
 use std::io::BufRead;
 use std::path::Path;
 
@@ -66,18 +71,22 @@ fn number<T: std::str::FromStr>(word: Option<&[u8]>, element: &str, expected: &s
 
 /// Faces of `f` lines with three or more corners make `corners − 2` triangles each.
 pub fn declared(path: &Path) -> Result<Declared> {
-    let (mut triangles, mut refused_why) = (0u64, None);
+    let mut triangles = 0u64;
     lines(path, |_, line| {
         let mut w = words(line);
-        match w.next() {
-            Some(b"f") => triangles += (w.count() as u64).saturating_sub(2),
-            Some(b"vt") if refused_why.is_none() => refused_why = Some(refused("the file has texture coordinates")),
-            Some(b"usemtl") if refused_why.is_none() => refused_why = Some(refused("the file assigns materials (usemtl)")),
-            _ => {}
+        if w.next() == Some(b"f") {
+            triangles += (w.count() as u64).saturating_sub(2);
         }
         Ok(())
     })?;
-    Ok(Declared { triangles, refused: refused_why })
+    Ok(Declared { triangles, refused: None })
+}
+
+/// What follows a statement's keyword as tobj reads it: everything after the line's first space,
+/// trimmed (file and material names may hold spaces).
+fn rest(line: &[u8]) -> String {
+    let text = String::from_utf8_lossy(line);
+    text.trim_start().split_once(|c: char| c.is_ascii_whitespace()).map_or("", |(_, r)| r).trim().to_string()
 }
 
 /// What the first pass holds.
@@ -90,6 +99,12 @@ struct Held {
     /// Whether a vertex without a color came (then `colors` stops growing).
     uncolored: bool,
     normals: Vec<Vec3>,
+    /// Texture coordinates, v flipped to glTF's convention as the whole-file reader does.
+    uvs: Vec<Vec2>,
+    /// `mtllib` names in file order.
+    libraries: Vec<String>,
+    /// Whether any `usemtl` line assigns a material.
+    assigns: bool,
 }
 
 fn first_pass(path: &Path, warnings: &mut Vec<String>) -> Result<Held> {
@@ -145,8 +160,21 @@ fn first_pass(path: &Path, warnings: &mut Vec<String>) -> Result<Held> {
                 }
                 h.normals.push(Vec3::from_array(v));
             }
-            Some(b"vt") => return Err(Error::invalid(path, None, refused("the file has texture coordinates"))),
-            Some(b"usemtl") => return Err(Error::invalid(path, None, refused("the file assigns materials (usemtl)"))),
+            Some(b"vt") => {
+                let u = number::<f32>(w.next(), "vt", "a u coordinate").map_err(bad)?;
+                let v = match w.next() {
+                    Some(word) => number::<f32>(Some(word), "vt", "a v coordinate").map_err(bad)?,
+                    None => 0.0,
+                };
+                h.uvs.push(Vec2::new(u, 1.0 - v));
+            }
+            Some(b"usemtl") => h.assigns = true,
+            Some(b"mtllib") => {
+                let name = rest(line);
+                if !name.is_empty() && !h.libraries.contains(&name) {
+                    h.libraries.push(name);
+                }
+            }
             _ => {}
         }
         Ok(())
@@ -162,30 +190,49 @@ fn first_pass(path: &Path, warnings: &mut Vec<String>) -> Result<Held> {
 
 /// Read an OBJ file as a stream into `sink` (the module's doc says how), with the checks and
 /// warnings of the whole-file reader.
-pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> Result<()> {
+pub fn stream(path: &Path, import: &ImportOptions, sink: &mut FaceSink, warnings: &mut Vec<String>) -> Result<Looks> {
     let held = first_pass(path, warnings)?;
     let vertices = Vertices { positions: &held.positions, normals: &[], colors: &held.colors };
     let with_normals = !held.normals.is_empty();
+    let with_uvs = !held.uvs.is_empty();
     let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(BATCH);
     let mut corner_normals: Vec<[Vec3; 3]> = Vec::with_capacity(if with_normals { BATCH } else { 0 });
-    // Vertices and normals defined above the current line, for relative indices.
-    let (mut seen_v, mut seen_vn) = (0usize, 0usize);
-    let (mut faces, mut short, mut segments, mut without_normal) = (0u64, 0usize, 0usize, 0usize);
+    let mut corner_uvs: Vec<[Vec2; 3]> = Vec::with_capacity(if with_uvs { BATCH } else { 0 });
+    let mut face_materials: Vec<u32> = Vec::with_capacity(BATCH);
+    // Vertices, texture coordinates and normals defined above the current line, for relative indices.
+    let (mut seen_v, mut seen_vt, mut seen_vn) = (0usize, 0usize, 0usize);
+    let (mut faces, mut short, mut segments, mut without_normal, mut without_uv) = (0u64, 0usize, 0usize, 0usize, 0usize);
     let mut last_normal = held.normals.first().copied().unwrap_or(Vec3::Z);
-    let totals = [held.positions.len(), 0, held.normals.len()];
-    let mut corners: Vec<(u32, Vec3)> = Vec::new();
+    let totals = [held.positions.len(), held.uvs.len(), held.normals.len()];
+    let mut corners: Vec<(u32, Vec3, Vec2)> = Vec::new();
     let mut any_text = false;
+    // Materials by first use: the name of each (None: faces before any `usemtl`), and the current one.
+    let mut used: Vec<Option<String>> = Vec::new();
+    let mut by_name: HashMap<Option<String>, u32> = HashMap::new();
+    let mut current: Option<String> = None;
+    let mut material = None::<u32>;
     lines(path, |n, line| {
         let mut w = words(line);
         let first = w.next();
         any_text |= !String::from_utf8_lossy(line).trim().is_empty();
         match first {
             Some(b"v") => seen_v += 1,
+            Some(b"vt") => seen_vt += 1,
             Some(b"vn") => seen_vn += 1,
             Some(b"l") => segments += 1,
+            Some(b"usemtl") => {
+                let name = rest(line);
+                if name.is_empty() {
+                    return Err(Error::at_line(path, n, "usemtl without a material name"));
+                }
+                if current.as_ref() != Some(&name) {
+                    current = Some(name);
+                    material = None;
+                }
+            }
             Some(b"f") => {
                 corners.clear();
-                let seen = [seen_v, 0, seen_vn];
+                let seen = [seen_v, seen_vt, seen_vn];
                 for token in w {
                     let mut parts = token.split(|&b| b == b'/');
                     let p = [parts.next(), parts.next(), parts.next()];
@@ -213,24 +260,48 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
                         }
                     };
                     last_normal = normal;
-                    corners.push((v as u32, normal));
+                    let uv = match index[1] {
+                        Some(k) => held.uvs[k],
+                        None => {
+                            without_uv += 1;
+                            Vec2::ZERO
+                        }
+                    };
+                    corners.push((v as u32, normal, uv));
                 }
                 match corners.len() {
                     0 => return Err(Error::at_line(path, n, "face with no vertices")),
                     1 | 2 => short += 1,
                     _ => faces += 1,
                 }
+                let id = *material.get_or_insert_with(|| {
+                    *by_name.entry(current.clone()).or_insert_with(|| {
+                        used.push(current.clone());
+                        used.len() as u32 - 1
+                    })
+                });
                 for k in 1..corners.len().saturating_sub(1) {
                     let c = [corners[0], corners[k], corners[k + 1]];
                     triangles.push(c.map(|c| c.0));
                     if with_normals {
                         corner_normals.push(c.map(|c| c.1));
                     }
+                    if with_uvs {
+                        corner_uvs.push(c.map(|c| c.2));
+                    }
+                    if held.assigns {
+                        face_materials.push(id);
+                    }
                 }
                 if triangles.len() >= BATCH {
-                    sink(&vertices, &Faces { triangles: &triangles, normals: &corner_normals })?;
+                    sink(
+                        &vertices,
+                        &Faces { triangles: &triangles, normals: &corner_normals, uvs: &corner_uvs, materials: &face_materials },
+                    )?;
                     triangles.clear();
                     corner_normals.clear();
+                    corner_uvs.clear();
+                    face_materials.clear();
                 }
             }
             _ => {}
@@ -248,7 +319,7 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
         ));
     }
     if !triangles.is_empty() {
-        sink(&vertices, &Faces { triangles: &triangles, normals: &corner_normals })?;
+        sink(&vertices, &Faces { triangles: &triangles, normals: &corner_normals, uvs: &corner_uvs, materials: &face_materials })?;
     }
     if short > 0 {
         warnings.push(format!("{short} faces with fewer than 3 vertices skipped"));
@@ -259,7 +330,51 @@ pub fn stream(path: &Path, sink: &mut FaceSink, warnings: &mut Vec<String>) -> R
     if with_normals && without_normal > 0 {
         warnings.push(format!("{without_normal} face corners have no normal index and reuse the previous corner's normal"));
     }
-    Ok(())
+    if with_uvs && without_uv > 0 {
+        warnings.push(format!("{without_uv} face corners have no texture coordinate index and take (0, 0)"));
+    }
+    Ok(looks(path, import, &held.libraries, &used, warnings))
+}
+
+/// The materials `used` names, in that order (None: the default material), from the libraries
+/// `libraries` (relative to the model's folder), with their maps' images.
+fn looks(path: &Path, import: &ImportOptions, libraries: &[String], used: &[Option<String>], warnings: &mut Vec<String>) -> Looks {
+    let dir = path.parent().unwrap_or(Path::new(""));
+    // Each name's definition and the folder of its library: the last library defining it wins.
+    let mut defined: HashMap<String, (tobj::Material, std::path::PathBuf)> = HashMap::new();
+    for lib in libraries {
+        let full = dir.join(lib);
+        match super::obj::load_library(&full) {
+            Ok((materials, _)) => {
+                let folder = Path::new(lib).parent().unwrap_or(Path::new("")).to_path_buf();
+                for m in materials {
+                    defined.insert(m.name.clone(), (m, folder.clone()));
+                }
+            }
+            Err(e) => warnings.push(super::obj::library_warning(&full, &e)),
+        }
+    }
+    let mut holder = Mesh::default();
+    let mut images = super::ImageFiles::default();
+    let mut undefined = Vec::new();
+    for (out, name) in used.iter().enumerate() {
+        let definition = name.as_ref().and_then(|n| defined.get(n));
+        holder.materials.push(match (name, definition) {
+            (None, _) => Material::default(),
+            (Some(_), Some((m, _))) => super::obj::material_from(m),
+            (Some(n), None) => {
+                undefined.push(n.as_str());
+                Material { name: n.clone(), ..Material::default() }
+            }
+        });
+        if let Some((m, folder)) = definition {
+            super::obj::attach_maps(m, (dir, folder), import.allow_outside_files, &mut images, &mut holder, out, warnings);
+        }
+    }
+    if !undefined.is_empty() {
+        warnings.push(format!("materials without a definition in any loaded .mtl: {}", undefined.join(", ")));
+    }
+    Looks { materials: holder.materials, images: holder.images }
 }
 
 /// A face index of `kind` as a 0-based index into its array of `total`, `seen` of which lie above
@@ -279,35 +394,59 @@ fn resolve(part: &[u8], kind: usize, seen: usize, total: usize) -> std::result::
 mod tests {
     use super::*;
 
-    /// The whole-file reader's triangles, positions and corner normals, and the stream's.
+    /// What the stream hands on of `path`: positions, triangles, corner normals and UVs, each
+    /// face's material name, the materials' maps and the images, as a mesh.
+    fn streamed(path: &Path) -> Mesh {
+        let mut m = Mesh::default();
+        let (mut normals, mut uvs, mut materials) = (Vec::new(), Vec::new(), Vec::new());
+        let looks = stream(
+            path,
+            &Default::default(),
+            &mut |v, f| {
+                m.positions = v.positions.to_vec();
+                m.triangles.extend_from_slice(f.triangles);
+                normals.extend(f.normals.iter().flatten());
+                uvs.extend(f.uvs.iter().flatten());
+                materials.extend_from_slice(f.materials);
+                Ok(())
+            },
+            &mut Vec::new(),
+        )
+        .unwrap();
+        (m.normals, m.uvs, m.face_materials, m.materials, m.images) = (normals, uvs, materials, looks.materials, looks.images);
+        m
+    }
+
+    /// The whole-file reader's positions, triangles, corner normals and UVs, materials and images,
+    /// and the stream's, for the OBJ fixtures and exported textured and two-material meshes.
     #[test]
     fn streams_what_the_whole_file_reader_reads() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
-        for name in ["cad_part.obj", "cube.obj", "icosphere.obj", "nonmanifold.obj"] {
-            let path = dir.join(name);
-            let whole = super::super::obj::read(&path, &Default::default(), &mut Vec::new()).unwrap().mesh;
-            let (mut triangles, mut normals, mut positions) = (Vec::new(), Vec::<Vec3>::new(), Vec::new());
-            let declared = declared(&path).unwrap();
-            stream(
-                &path,
-                &mut |v, f| {
-                    positions = v.positions.to_vec();
-                    triangles.extend_from_slice(f.triangles);
-                    normals.extend(f.normals.iter().flatten());
-                    Ok(())
-                },
-                &mut Vec::new(),
-            )
-            .unwrap();
-            assert_eq!(declared, Declared { triangles: triangles.len() as u64, refused: None }, "{name}");
-            assert_eq!(positions, whole.positions, "{name}");
-            assert_eq!(triangles, whole.triangles, "{name}");
-            assert_eq!(normals, whole.normals, "{name}");
+        let mut paths: Vec<_> =
+            ["cad_part.obj", "cube.obj", "icosphere.obj", "nonmanifold.obj", "open_grid.obj"].map(|n| dir.join(n)).into();
+        let tmp = std::env::temp_dir().join(format!("strata-obj-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&tmp).unwrap();
+        for (name, mesh) in [("globe.obj", crate::fixtures::textured_globe(24, 64)), ("box.obj", crate::fixtures::two_material_box())] {
+            crate::export::obj::write(&tmp.join(name), &mesh).unwrap();
+            paths.push(tmp.join(name));
         }
-        // Texture coordinates are refused, before any face is handed on.
-        let textured = dir.join("open_grid.obj");
-        assert!(declared(&textured).unwrap().refused.is_some());
-        let e = stream(&textured, &mut |_, _| panic!("no faces"), &mut Vec::new()).unwrap_err().to_string();
-        assert!(e.contains("open_grid.obj") && e.contains("texture coordinates"), "{e}");
+        for path in &paths {
+            let name = path.display();
+            let whole = super::super::obj::read(path, &Default::default(), &mut Vec::new()).unwrap().mesh;
+            let m = streamed(path);
+            assert_eq!(declared(path).unwrap(), Declared { triangles: m.triangles.len() as u64, refused: None }, "{name}");
+            // tobj numbers vertices per object and material run: the same corners, by position.
+            let corners = |mesh: &Mesh| mesh.triangles.iter().map(|t| t.map(|v| mesh.positions[v as usize])).collect::<Vec<_>>();
+            assert_eq!(corners(&m), corners(&whole), "{name}");
+            assert_eq!(m.normals, whole.normals, "{name}");
+            assert_eq!(m.uvs, whole.uvs, "{name}");
+            let named = |mesh: &Mesh| mesh.face_materials.iter().map(|&k| mesh.materials[k as usize].clone()).collect::<Vec<_>>();
+            let faces = if m.face_materials.is_empty() { vec![Material::default(); m.triangles.len()] } else { named(&m) };
+            assert_eq!(faces, named(&whole), "{name}");
+            assert_eq!(m.images.len(), whole.images.len(), "{name}");
+            assert!(m.images.iter().zip(&whole.images).all(|(a, b)| a.name == b.name && a.bytes == b.bytes), "{name}");
+        }
+        assert!(streamed(&tmp.join("globe.obj")).images.len() == 1, "the globe's texture streams");
+        std::fs::remove_dir_all(&tmp).ok();
     }
 }

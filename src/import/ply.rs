@@ -154,7 +154,7 @@ fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)>
 /// colors), and its triangles go to `faces` in batches as they are read, indices checked, with
 /// the errors [`read`] gives. For the partitioned build, so it refuses what that build does not
 /// carry (texture files, texture coordinates) and vertices after faces.
-pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<()> {
+pub fn stream(path: &Path, _: &super::ImportOptions, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<super::stream::Looks> {
     let (header, len) = read_header(path, warnings)?;
     check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
     let plan = Plan::new(path, &header)?;
@@ -192,7 +192,7 @@ pub fn stream(path: &Path, faces: &mut FaceSink, warnings: &mut Vec<String>) -> 
     if reader.short_faces > 0 {
         warnings.push(format!("skipped {} faces with fewer than 3 vertices", reader.short_faces));
     }
-    Ok(())
+    Ok(super::stream::Looks::default())
 }
 
 /// A binary body read from a file in pieces.
@@ -1176,7 +1176,7 @@ impl<'p> Reader<'p> {
     fn flush(&mut self) -> Result<()> {
         if let Some(sink) = self.sink.as_mut() {
             let v = Vertices { positions: &self.positions, normals: &self.normals, colors: &self.colors };
-            sink(&v, &Faces { triangles: &self.triangles, normals: &[] })?;
+            sink(&v, &Faces { triangles: &self.triangles, normals: &[], uvs: &[], materials: &[] })?;
             self.triangles.clear();
         }
         Ok(())
@@ -1910,6 +1910,7 @@ mod tests {
         let mut tris = Vec::new();
         let r = stream(
             &path,
+            &Default::default(),
             &mut |_, t| {
                 tris.extend_from_slice(t.triangles);
                 Ok(())

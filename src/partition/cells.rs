@@ -3,12 +3,12 @@
 //! and a cell read back as a mesh.
 //!
 //! A face is stored as its three corners, each the input vertex id, the position and, when the
-//! input has them, the normal and color: a cell file is the whole of its faces, so cells are
-//! built without the input.
+//! input has them, the normal, texture coordinates and color, then its material when the input
+//! has several: a cell file is the whole of its faces, so cells are built without the input.
 
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh};
-use glam::Vec3;
+use crate::mesh::Mesh;
+use glam::{Vec2, Vec3};
 use rustc_hash::FxHashMap;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -101,17 +101,34 @@ impl Cells {
 
 const LEAF: u32 = 1 << 31;
 
-/// Which corner attributes cell files carry.
+/// Which corner attributes cell files carry, and whether faces carry a material.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
     pub normals: bool,
+    pub uvs: bool,
     pub colors: bool,
+    pub materials: bool,
 }
 
 impl Layout {
     fn corner_bytes(self) -> usize {
-        16 + if self.normals { 12 } else { 0 } + if self.colors { 4 } else { 0 }
+        16 + if self.normals { 12 } else { 0 } + if self.uvs { 8 } else { 0 } + if self.colors { 4 } else { 0 }
     }
+
+    fn face_bytes(self) -> usize {
+        3 * self.corner_bytes() + if self.materials { 4 } else { 0 }
+    }
+}
+
+/// One face as a cell file holds it: its corners' vertex ids, positions and attributes (those
+/// the layout leaves out are ignored), and its material.
+pub struct FaceRecord {
+    pub ids: [u32; 3],
+    pub positions: [Vec3; 3],
+    pub normals: [Vec3; 3],
+    pub uvs: [Vec2; 3],
+    pub colors: [[u8; 4]; 3],
+    pub material: u32,
 }
 
 /// One temporary file per cell, faces appended.
@@ -132,22 +149,30 @@ impl Spool {
         Ok(Spool { files, layout, buf: Vec::with_capacity(128) })
     }
 
-    /// Append a face to cell `cell`: its corners' vertex ids, positions, normals and colors.
-    pub fn push(&mut self, cell: usize, ids: [u32; 3], pos: [Vec3; 3], normals: [Vec3; 3], colors: [[u8; 4]; 3]) -> Result<()> {
+    /// Append a face to cell `cell`.
+    pub fn push(&mut self, cell: usize, face: &FaceRecord) -> Result<()> {
         self.buf.clear();
         for k in 0..3 {
-            self.buf.extend_from_slice(&ids[k].to_le_bytes());
-            for x in pos[k].to_array() {
+            self.buf.extend_from_slice(&face.ids[k].to_le_bytes());
+            for x in face.positions[k].to_array() {
                 self.buf.extend_from_slice(&x.to_le_bytes());
             }
             if self.layout.normals {
-                for x in normals[k].to_array() {
+                for x in face.normals[k].to_array() {
+                    self.buf.extend_from_slice(&x.to_le_bytes());
+                }
+            }
+            if self.layout.uvs {
+                for x in face.uvs[k].to_array() {
                     self.buf.extend_from_slice(&x.to_le_bytes());
                 }
             }
             if self.layout.colors {
-                self.buf.extend_from_slice(&colors[k]);
+                self.buf.extend_from_slice(&face.colors[k]);
             }
+        }
+        if self.layout.materials {
+            self.buf.extend_from_slice(&face.material.to_le_bytes());
         }
         let (path, w, n) = &mut self.files[cell];
         w.write_all(&self.buf).map_err(|e| Error::io(path, e))?;
@@ -168,22 +193,19 @@ impl Spool {
 
 /// A cell's faces as an uncleaned mesh, one vertex per welded input vertex it uses (the first
 /// corner's position: corners of a vertex differ at most in the sign of a zero; [`Mesh::clean`]
-/// welds by position), with the input vertex id of each vertex.
-pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u32>)> {
+/// welds by position), with the input vertex id of each vertex. Its materials are left empty:
+/// they are the input's, which the caller holds; a face's material is checked below `materials`.
+pub fn read_cell(path: &Path, faces: u64, layout: Layout, materials: usize) -> Result<(Mesh, Vec<u32>)> {
     let corner = layout.corner_bytes();
-    let expect = faces * 3 * corner as u64;
+    let expect = faces * layout.face_bytes() as u64;
     let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     if len != expect {
         return Err(Error::invalid(path, None, format!("cell file of {len} bytes, {expect} expected for {faces} faces")));
     }
     let mut r = BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
     let n = faces as usize * 3;
-    let mut mesh = Mesh {
-        triangles: Vec::with_capacity(faces as usize),
-        face_materials: vec![0; faces as usize],
-        materials: vec![Material::default()],
-        ..Mesh::default()
-    };
+    let mut mesh =
+        Mesh { triangles: Vec::with_capacity(faces as usize), face_materials: Vec::with_capacity(faces as usize), ..Mesh::default() };
     // About half a vertex per face on a closed surface.
     let mut ids = Vec::with_capacity(faces as usize / 2);
     mesh.positions.reserve(faces as usize / 2);
@@ -199,16 +221,31 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout) -> Result<(Mesh, Vec<u
             mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
             ids.len() as u32 - 1
         });
-        if c % 3 == 2 {
-            mesh.triangles.push(t);
-        }
         let mut at = 16;
         if layout.normals {
             mesh.normals.push(Vec3::new(f32_at(&rec, at), f32_at(&rec, at + 4), f32_at(&rec, at + 8)));
             at += 12;
         }
+        if layout.uvs {
+            mesh.uvs.push(Vec2::new(f32_at(&rec, at), f32_at(&rec, at + 4)));
+            at += 8;
+        }
         if layout.colors {
             mesh.colors.push(rec[at..at + 4].try_into().unwrap());
+        }
+        if c % 3 == 2 {
+            mesh.triangles.push(t);
+            let mut material = 0;
+            if layout.materials {
+                let mut b = [0u8; 4];
+                r.read_exact(&mut b).map_err(|e| Error::io(path, e))?;
+                material = u32::from_le_bytes(b);
+                if material as usize >= materials {
+                    let face = mesh.triangles.len() - 1;
+                    return Err(Error::invalid(path, None, format!("face {face} has material {material} of {materials}")));
+                }
+            }
+            mesh.face_materials.push(material);
         }
     }
     Ok((mesh, ids))

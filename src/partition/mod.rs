@@ -6,8 +6,9 @@
 //! differs (notes/partition.md says what that costs).
 //!
 //! Memory: the cells in flight (each an in-core build of [`cell_faces`] faces), the vertex arrays
-//! while streaming (positions, and colors and normals when the input has them), and what is held
-//! for later (the tops, the writer's node records, computed normals). It stays within the budget
+//! while streaming (positions, and colors, normals and texture coordinates when the input has
+//! them), the images' levels, and what is held for later (the tops, the writer's node records,
+//! computed normals). It stays within the budget
 //! as long as the mesh simplifies where its cells meet; one that does not (a soup of separate
 //! triangles) leaves large tops, and the final merge, which holds them all, is said to exceed it.
 //! Cells meet exactly: the vertices faces of two cells use are pinned at every level a cell
@@ -20,7 +21,8 @@ mod work;
 use crate::error::{Error, Result};
 use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
 use crate::import::stream::{Declared, Faces, Streaming, Vertices};
-use crate::import::Format;
+use crate::import::{Format, ImportOptions};
+use crate::mesh::{Material, Mesh};
 use crate::pipeline::{ConvertOptions, Converted, Normals, Progress, StageTimes};
 use crate::write::Encoding;
 use cells::{Cells, Layout, Spool};
@@ -125,12 +127,18 @@ pub fn cell_levels(faces: u64) -> usize {
     (((faces as f64).sqrt() / 24.0).log2().floor() as i64).clamp(1, 12) as usize
 }
 
-/// Convert `input` into `output` by the partitioned build, reading it with `reader` (its format's
-/// streaming reader, [`streaming`]); `declared` is what `reader.declared` said of it.
+/// What a partitioned build reads: the input file, the options it is read with, its format's
+/// streaming reader ([`streaming`]) and what `reader.declared` said of it.
+pub struct Input<'a> {
+    pub path: &'a Path,
+    pub import: &'a ImportOptions,
+    pub reader: &'a Streaming,
+    pub declared: Declared,
+}
+
+/// Convert `input` into `output` by the partitioned build.
 pub fn convert(
-    input: &Path,
-    reader: &Streaming,
-    declared: Declared,
+    Input { path: input, import, reader, declared }: Input,
     output: &Path,
     opts: &ConvertOptions,
     budget: &Budget,
@@ -172,8 +180,9 @@ pub fn convert(
     // their sums are kept per input vertex and each cell looks its vertices up later.
     progress.stage("distribute", 0);
     let mut state: Option<Distribute> = None;
-    (reader.stream)(
+    let looks = (reader.stream)(
         input,
+        import,
         &mut |v, faces| {
             let d = match &mut state {
                 Some(d) => d,
@@ -193,7 +202,23 @@ pub fn convert(
     let Distributed { grid, layout, normals: vertex_normals, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
     lap(&mut times.import_ms);
 
-    let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: false, colors: layout.colors };
+    // The images' levels, made while no cell is in memory; maps without UVs are dropped.
+    let mut looks = Mesh {
+        materials: if looks.materials.is_empty() { vec![Material::default()] } else { looks.materials },
+        images: looks.images,
+        ..Mesh::default()
+    };
+    if layout.uvs {
+        looks.uvs.push(glam::Vec2::ZERO);
+    }
+    if !looks.images.is_empty() {
+        progress.stage("textures", looks.images.len() as u64);
+    }
+    let images = crate::texture::pyramid::prepare(&mut looks, &mut warnings, &mut || progress.step());
+    let textured = !images.is_empty();
+    lap(&mut times.texture_ms);
+    let materials = looks.materials;
+    let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: layout.uvs, colors: layout.colors };
     let crease = match opts.normals {
         Normals::Auto { crease_angle } => crease_angle,
         _ => 0.0,
@@ -206,12 +231,12 @@ pub fn convert(
         tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
         grid,
         attributes,
-        materials: vec![crate::mesh::Material::default()],
+        materials: materials.clone(),
         input_vertices: 0,
         levels: k as u32 + 1,
         georef: None,
         major: if precision.is_some() { 3 } else { 2 },
-        images: Default::default(),
+        images: images.into(),
     };
     let mut file = crate::atomic::AtomicFile::create(output)?;
     let dir = output.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
@@ -229,6 +254,8 @@ pub fn convert(
         shared: &shared,
         crease,
         precision,
+        materials: &materials,
+        textured,
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
     warnings.extend(cell_warnings);
@@ -278,7 +305,12 @@ impl Distribute {
     fn new(v: &Vertices, first: &Faces, faces: u64, cell_faces: u64, normals: Normals, temp: &Path) -> Result<Distribute> {
         let cells = Cells::split(v.positions, faces, cell_faces);
         let given = !v.normals.is_empty() || !first.normals.is_empty();
-        let layout = Layout { normals: given && normals != Normals::None, colors: !v.colors.is_empty() };
+        let layout = Layout {
+            normals: given && normals != Normals::None,
+            uvs: !first.uvs.is_empty(),
+            colors: !v.colors.is_empty(),
+            materials: !first.materials.is_empty(),
+        };
         let compute = !given && matches!(normals, Normals::Auto { .. });
         let spool = Spool::create(temp, cells.count, layout)?;
         let n = v.positions.len();
@@ -317,6 +349,8 @@ impl Distribute {
                 None => t.map(|i| v.normals[i as usize]),
             };
             let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
+            let uvs = faces.uvs.get(f).copied().unwrap_or([glam::Vec2::ZERO; 3]);
+            let material = faces.materials.get(f).copied().unwrap_or(0);
             let welded = t.map(|i| self.weld[i as usize]);
             if let Some(sums) = &mut self.sums {
                 let cross = crate::mesh::triangle_cross(v.positions, t).as_vec3();
@@ -334,7 +368,7 @@ impl Distribute {
                     _ => SHARED,
                 };
             }
-            self.spool.push(cell, welded, p, n, c)?;
+            self.spool.push(cell, &cells::FaceRecord { ids: welded, positions: p, normals: n, uvs, colors: c, material })?;
         }
         Ok(())
     }

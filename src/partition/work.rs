@@ -61,6 +61,10 @@ pub struct Job<'a> {
     pub crease: f32,
     /// Format 3's quantization, `None` for format 2.
     pub precision: Option<Precision>,
+    /// The input's materials, which faces index.
+    pub materials: &'a [crate::mesh::Material],
+    /// Whether the file has images (then nodes get their UV density).
+    pub textured: bool,
 }
 
 /// A piece's top level, for the next round.
@@ -273,7 +277,8 @@ fn cell<W: Write>(
     if faces == 0 {
         return Ok(None);
     }
-    let (mut mesh, ids) = read_cell(path, faces, job.layout)?;
+    let (mut mesh, ids) = read_cell(path, faces, job.layout, job.materials.len())?;
+    mesh.materials = job.materials.to_vec();
     let _ = std::fs::remove_file(path);
     if let Some(vn) = job.vertex_normals {
         mesh.compute_face_geometry();
@@ -334,7 +339,7 @@ fn merge<W: Write>(
     writer: &Mutex<Writer<W>>,
     gathered: &Mutex<Gathered>,
 ) -> Result<Option<Top>> {
-    let mut mesh = Mesh { materials: vec![crate::mesh::Material::default()], ..Mesh::default() };
+    let mut mesh = Mesh { materials: job.materials.to_vec(), ..Mesh::default() };
     let (mut face_group, mut group_error, mut groups, mut bounds, mut keys) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut at: FxHashMap<[u32; 3], u32> = FxHashMap::default();
     let (mut max_angle, mut max_faces, mut before) = (0f32, 0u32, 0usize);
@@ -354,8 +359,9 @@ fn merge<W: Write>(
             .collect();
         mesh.triangles.extend(m.triangles.iter().map(|t| t.map(|v| remap[v as usize])));
         mesh.normals.extend_from_slice(&m.normals);
+        mesh.uvs.extend_from_slice(&m.uvs);
         mesh.colors.extend_from_slice(&m.colors);
-        mesh.face_materials.extend(std::iter::repeat_n(0, m.face_count()));
+        mesh.face_materials.extend_from_slice(&m.face_materials);
         face_group.extend(t.level.face_group.iter().map(|&g| base + g));
         group_error.extend_from_slice(&t.level.group_error);
         keys.extend_from_slice(&t.keys);
@@ -399,7 +405,7 @@ fn merge<W: Write>(
             w.set_levels(file_levels as u32)?;
             let place =
                 Place { offset: first, levels: 0..h.levels.len(), file_levels, key: &|l, g| if l == 0 { keys[g as usize] } else { g } };
-            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, job.precision, false, &place)?;
+            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, job.precision, job.textured, &place)?;
             Ok(None)
         }
     }
@@ -438,7 +444,7 @@ fn finish_piece<W: Write>(
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
     let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
     let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
-    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, job.precision, false, &place)?;
+    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, job.precision, job.textured, &place)?;
     gathered.lock().map_err(|_| poisoned())?.borders.push(border);
     let mut levels = lv.levels;
     let level = levels.swap_remove(n);
