@@ -6,7 +6,11 @@
 //! from their line) and checked, each corner's normal and texture coordinates and each face's
 //! material with it. Errors name the line. Materials are numbered in the order faces first use
 //! them, with their maps' images read as the whole-file reader reads them; a name several
-//! libraries define takes the last one's definition. Vertices keep the file's order; the
+//! libraries define takes the last one's definition. Where the whole-file reader (tobj) differs:
+//! it resolves a `usemtl` against the libraries loaded above it (a name used before its
+//! `mtllib` line is undefined there, and a second material after it), and it starts the
+//! fallbacks of corners without a normal or texture index again at each object and material run,
+//! where the stream reuses the previous corner's across them. Vertices keep the file's order; the
 //! whole-file reader's tobj numbers them per object (`o`, `g`), so for a file of several objects
 //! the two builds number the same surface's vertices differently.
 
@@ -82,11 +86,10 @@ pub fn declared(path: &Path) -> Result<Declared> {
     Ok(Declared { triangles, refused: None })
 }
 
-/// What follows a statement's keyword as tobj reads it: everything after the line's first space,
-/// trimmed (file and material names may hold spaces).
+/// What follows a statement's keyword as tobj reads it: everything after the line's first space
+/// (not tab), trimmed (file and material names may hold spaces).
 fn rest(line: &[u8]) -> String {
-    let text = String::from_utf8_lossy(line);
-    text.trim_start().split_once(|c: char| c.is_ascii_whitespace()).map_or("", |(_, r)| r).trim().to_string()
+    String::from_utf8_lossy(line).split_once(' ').map_or("", |(_, r)| r).trim().to_string()
 }
 
 /// What the first pass holds.
@@ -161,17 +164,15 @@ fn first_pass(path: &Path, warnings: &mut Vec<String>) -> Result<Held> {
                 h.normals.push(Vec3::from_array(v));
             }
             Some(b"vt") => {
-                let u = number::<f32>(w.next(), "vt", "a u coordinate").map_err(bad)?;
-                let v = match w.next() {
-                    Some(word) => number::<f32>(Some(word), "vt", "a v coordinate").map_err(bad)?,
-                    None => 0.0,
-                };
+                let u = number::<f32>(w.next(), "vt", "2 coordinates").map_err(bad)?;
+                let v = number::<f32>(w.next(), "vt", "2 coordinates").map_err(bad)?;
                 h.uvs.push(Vec2::new(u, 1.0 - v));
             }
             Some(b"usemtl") => h.assigns = true,
             Some(b"mtllib") => {
                 let name = rest(line);
-                if !name.is_empty() && !h.libraries.contains(&name) {
+                // Every occurrence, as tobj loads each: a name's last definition wins.
+                if !name.is_empty() {
                     h.libraries.push(name);
                 }
             }
@@ -203,6 +204,7 @@ pub fn stream(path: &Path, import: &ImportOptions, sink: &mut FaceSink, warnings
     let (mut seen_v, mut seen_vt, mut seen_vn) = (0usize, 0usize, 0usize);
     let (mut faces, mut short, mut segments, mut without_normal, mut without_uv) = (0u64, 0usize, 0usize, 0usize, 0usize);
     let mut last_normal = held.normals.first().copied().unwrap_or(Vec3::Z);
+    let mut last_uv = held.uvs.first().copied().unwrap_or(Vec2::ZERO);
     let totals = [held.positions.len(), held.uvs.len(), held.normals.len()];
     let mut corners: Vec<(u32, Vec3, Vec2)> = Vec::new();
     let mut any_text = false;
@@ -264,9 +266,10 @@ pub fn stream(path: &Path, import: &ImportOptions, sink: &mut FaceSink, warnings
                         Some(k) => held.uvs[k],
                         None => {
                             without_uv += 1;
-                            Vec2::ZERO
+                            last_uv
                         }
                     };
+                    last_uv = uv;
                     corners.push((v as u32, normal, uv));
                 }
                 match corners.len() {
@@ -331,7 +334,7 @@ pub fn stream(path: &Path, import: &ImportOptions, sink: &mut FaceSink, warnings
         warnings.push(format!("{without_normal} face corners have no normal index and reuse the previous corner's normal"));
     }
     if with_uvs && without_uv > 0 {
-        warnings.push(format!("{without_uv} face corners have no texture coordinate index and take (0, 0)"));
+        warnings.push(format!("{without_uv} face corners have no texture index and reuse the previous corner's UV"));
     }
     Ok(looks(path, import, &held.libraries, &used, warnings))
 }
@@ -351,7 +354,12 @@ fn looks(path: &Path, import: &ImportOptions, libraries: &[String], used: &[Opti
                     defined.insert(m.name.clone(), (m, folder.clone()));
                 }
             }
-            Err(e) => warnings.push(super::obj::library_warning(&full, &e)),
+            Err(e) => {
+                let w = super::obj::library_warning(&full, &e);
+                if !warnings.contains(&w) {
+                    warnings.push(w);
+                }
+            }
         }
     }
     let mut holder = Mesh::default();
@@ -430,6 +438,15 @@ mod tests {
             crate::export::obj::write(&tmp.join(name), &mesh).unwrap();
             paths.push(tmp.join(name));
         }
+        // A library loaded again after another takes precedence again; corners without a texture
+        // index reuse the previous corner's UV; names hold spaces.
+        std::fs::write(tmp.join("a.mtl"), "newmtl m\nKd 1 0 0\nnewmtl other one\nKd 0 1 0\n").unwrap();
+        std::fs::write(tmp.join("b.mtl"), "newmtl m\nKd 0 0 1\n").unwrap();
+        let square = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n";
+        let text =
+            format!("mtllib a.mtl\nmtllib b.mtl\nmtllib a.mtl\n{square}f 1 2 3\nusemtl m\nf 1/1 2/2 3\nusemtl other one\nf 1/1 3/3 4\n");
+        std::fs::write(tmp.join("libraries.obj"), text).unwrap();
+        paths.push(tmp.join("libraries.obj"));
         for path in &paths {
             let name = path.display();
             let whole = super::super::obj::read(path, &Default::default(), &mut Vec::new()).unwrap().mesh;
@@ -447,6 +464,10 @@ mod tests {
             assert!(m.images.iter().zip(&whole.images).all(|(a, b)| a.name == b.name && a.bytes == b.bytes), "{name}");
         }
         assert!(streamed(&tmp.join("globe.obj")).images.len() == 1, "the globe's texture streams");
+        let m = streamed(&tmp.join("libraries.obj"));
+        let names: Vec<(&str, [f32; 4])> = m.materials.iter().map(|m| (m.name.as_str(), m.base_color)).collect();
+        assert_eq!(names[1..], [("m", [1.0, 0.0, 0.0, 1.0]), ("other one", [0.0, 1.0, 0.0, 1.0])]);
+        assert_eq!(m.uvs[5], m.uvs[4], "a corner without a texture index reuses the previous one's");
         std::fs::remove_dir_all(&tmp).ok();
     }
 }
