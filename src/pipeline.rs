@@ -126,13 +126,8 @@ fn partitioned(input: &Path, import: &ImportOptions, opts: &ConvertOptions, warn
         Build::InCore => Ok(None),
         Build::Auto => {
             let Some(reader) = reader else { return Ok(None) };
-            // No format makes more than one triangle per byte: a file of fewer bytes than
-            // PARALLEL_FACES has fewer faces too, and when it fits is built in memory without a look.
-            let size = std::fs::metadata(input).map_or(u64::MAX, |m| m.len());
+            // Asked of every file, small ones too: a .gltf's buffers may lie in other files.
             let fits = |faces: u64| faces.saturating_mul(IN_CORE_BYTES_PER_FACE) <= memory;
-            if size < PARALLEL_FACES && fits(size) {
-                return Ok(None);
-            }
             Ok(match (reader.declared)(input) {
                 Ok(d) if fits(d.triangles) => {
                     // Cells built for speed must run at least two at once to beat the in-core build.

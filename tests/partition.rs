@@ -125,9 +125,18 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
     let work = work_dir("bad-work");
     let out = temp("bad.strata");
 
-    // A format without a streaming reader.
-    let e = convert(&fixture("two_materials.glb"), &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
-    assert!(e.contains("reads OBJ and PLY"), "{e}");
+    // A format without a streaming reader: an elevation grid.
+    let grid = temp("grid.asc");
+    std::fs::write(&grid, "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 4\n").unwrap();
+    let e = convert(&grid, &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("reads OBJ, GLTF and PLY"), "{e}");
+
+    // A GLB cut inside its binary chunk.
+    let glb = std::fs::read(fixture("two_materials.glb")).unwrap();
+    let cut_glb = temp("cut.glb");
+    std::fs::write(&cut_glb, &glb[..glb.len() - 100]).unwrap();
+    let e = convert(&cut_glb, &Default::default(), &out, &partitioned(&work), &mut Silent).unwrap_err().to_string();
+    assert!(e.contains("cut.glb") && e.contains("truncated GLB"), "{e}");
 
     // A binary PLY cut inside its faces.
     let bytes = std::fs::read(fixture("noisy_sphere.ply")).unwrap();
@@ -147,7 +156,7 @@ fn bad_input_ends_in_a_clear_error_without_output_or_work_files() {
 
     assert!(!out.exists(), "an output was left");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
-    clean_up([cut, wild], &work);
+    clean_up([grid, cut_glb, cut, wild], &work);
 }
 
 /// The noisy sphere written as OBJ (positions, per-corner normals).
@@ -246,8 +255,8 @@ fn obj_streams_resolve_relative_and_forward_indices_and_polygons() {
 }
 
 /// A textured globe of 65k faces whose southern half has a second, untextured material, written
-/// as OBJ with its MTL and image (in `dir`).
-fn textured_obj(dir: &Path) -> PathBuf {
+/// in `dir` as `name` (OBJ with its MTL and image, or GLB).
+fn textured_globe(dir: &Path, name: &str) -> PathBuf {
     let mut mesh = strata::fixtures::textured_globe(256, 256);
     let red = strata::mesh::Material { name: "red".into(), base_color: [0.8, 0.1, 0.1, 1.0], ..Default::default() };
     mesh.materials.push(red);
@@ -256,9 +265,9 @@ fn textured_obj(dir: &Path) -> PathBuf {
             mesh.face_materials[f] = 1;
         }
     }
-    let obj = dir.join("globe.obj");
-    strata::export::obj::write(&obj, &mesh).expect("write OBJ");
-    obj
+    let path = dir.join(name);
+    strata::export::write(&path, &mesh).expect("write the globe");
+    path
 }
 
 /// Per material, how many faces a level has, and every corner's UV (as bits, sorted).
@@ -277,11 +286,17 @@ fn level_looks(rd: &Reader<std::fs::File>, level: u32) -> (Vec<u64>, Vec<[u32; 2
 }
 
 #[test]
-fn a_textured_obj_of_two_materials_builds_partitioned_with_its_uvs_materials_and_image() {
-    let work = work_dir("textured-work");
-    let dir = work_dir("textured-input");
-    let obj = textured_obj(&dir);
-    let (part, core) = (temp("textured-part.strata"), temp("textured-core.strata"));
+fn a_textured_obj_or_glb_of_two_materials_builds_partitioned_with_its_uvs_materials_and_image() {
+    for name in ["globe.obj", "globe.glb"] {
+        textured_builds_partitioned_as_in_core(name);
+    }
+}
+
+fn textured_builds_partitioned_as_in_core(name: &str) {
+    let work = work_dir(&format!("textured-work-{name}"));
+    let dir = work_dir(&format!("textured-input-{name}"));
+    let obj = textured_globe(&dir, name);
+    let (part, core) = (temp(&format!("textured-part-{name}.strata")), temp(&format!("textured-core-{name}.strata")));
     let c = convert(&obj, &Default::default(), &part, &partitioned(&work), &mut Silent).expect("partitioned OBJ");
     assert!(c.cells.is_some_and(|n| n > 1), "{:?} cells", c.cells);
     convert(&obj, &Default::default(), &core, &ConvertOptions { build: Build::InCore, ..ConvertOptions::default() }, &mut Silent)

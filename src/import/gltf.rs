@@ -17,6 +17,9 @@
 //! checks strides and offsets against element sizes, so that no element is read from bytes that
 //! belong to another.
 //!
+//! The partitioned build streams a file ([`stream`]): its buffers read whole, as here, the vertex
+//! attributes of all primitives held, and each primitive's triangles handed on in batches.
+//!
 //! External buffers are read only from the glTF file's folder, unless
 //! [`ImportOptions::allow_outside_files`]; so are images (files, `data:` URIs or buffer views, PNG
 //! or JPEG), which become the materials' maps (base color, normal, metallic-roughness, occlusion,
@@ -51,25 +54,41 @@ pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) ->
 }
 
 fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Mesh> {
+    with_scene(path, options, warnings, |scene, warnings| {
+        let mut builder = Builder::new(scene.doc);
+        for (mesh_index, prim, world) in scene.primitives {
+            builder.add(scene.buffers, *mesh_index, prim, *world)?;
+        }
+        if builder.mesh.triangles.is_empty() {
+            return Err(Error::invalid(path, None, "no triangles in the imported scene"));
+        }
+        let mut mesh = builder.finish(warnings);
+        load_images(path, scene.doc, scene.buffers, &scene.maps, options.allow_outside_files, &mut mesh, warnings);
+        Ok(mesh)
+    })
+}
+
+/// A file's scene as the readers take it: the document, the triangle primitives of its scene
+/// with their meshes and world transforms, the materials' maps and the buffers those use.
+struct Scene<'a> {
+    doc: &'a gltf::Document,
+    primitives: &'a [(usize, gltf::Primitive<'a>, Mat4)],
+    maps: Vec<GltfMaps>,
+    buffers: &'a Buffers<'a>,
+}
+
+/// Read, check and open `path`'s scene, and hand it to `f`.
+fn with_scene<R>(
+    path: &Path,
+    options: &ImportOptions,
+    warnings: &mut Vec<String>,
+    f: impl FnOnce(&Scene, &mut Vec<String>) -> Result<R>,
+) -> Result<R> {
     let bytes = super::read_file(path)?;
     let glb = bytes.starts_with(b"glTF");
     let (json_bytes, bin) = if glb { split_glb(path, &bytes)? } else { (&bytes[..], None) };
-    let root = parse_json(path, json_bytes, glb)?;
-    check_extensions(path, &root, warnings)?;
-    validate(path, &root)?;
-    let doc = gltf::Document::from_json_without_validation(root);
-
-    let mut skipped = 0;
-    let mut primitives = Vec::new();
-    for (mesh, world) in scene_meshes(path, &doc, warnings)? {
-        for prim in mesh.primitives() {
-            if matches!(prim.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
-                primitives.push((mesh.index(), prim, world));
-            } else {
-                skipped += 1;
-            }
-        }
-    }
+    let doc = document(path, json_bytes, glb, warnings)?;
+    let (primitives, skipped) = triangle_primitives(path, &doc, warnings)?;
     if skipped > 0 {
         warnings.push(format!("{skipped} point or line primitives skipped"));
     }
@@ -83,17 +102,163 @@ fn read_mesh(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -
         .filter_map(|view| Some(doc.views().nth(view.value())?.buffer().index()))
         .collect();
     let buffers = Buffers::load(path, &doc, bin, bytes.len(), used, &image_buffers, options.allow_outside_files)?;
+    f(&Scene { doc: &doc, primitives: &primitives, maps, buffers: &buffers }, warnings)
+}
 
-    let mut builder = Builder::new(&doc);
-    for (mesh_index, prim, world) in &primitives {
-        builder.add(&buffers, *mesh_index, prim, *world)?;
+/// The document of a glTF JSON text, its extensions and indices checked.
+fn document(path: &Path, json_bytes: &[u8], glb: bool, warnings: &mut Vec<String>) -> Result<gltf::Document> {
+    let root = parse_json(path, json_bytes, glb)?;
+    check_extensions(path, &root, warnings)?;
+    validate(path, &root)?;
+    Ok(gltf::Document::from_json_without_validation(root))
+}
+
+/// The scene's triangle primitives (mesh index, primitive, world transform), and how many point
+/// or line primitives were left out.
+type Primitives<'a> = Vec<(usize, gltf::Primitive<'a>, Mat4)>;
+fn triangle_primitives<'a>(path: &Path, doc: &'a gltf::Document, warnings: &mut Vec<String>) -> Result<(Primitives<'a>, usize)> {
+    let mut skipped = 0;
+    let mut primitives = Vec::new();
+    for (mesh, world) in scene_meshes(path, doc, warnings)? {
+        for prim in mesh.primitives() {
+            if matches!(prim.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+                primitives.push((mesh.index(), prim, world));
+            } else {
+                skipped += 1;
+            }
+        }
     }
-    if builder.mesh.triangles.is_empty() {
-        return Err(Error::invalid(path, None, "no triangles in the imported scene"));
-    }
-    let mut mesh = builder.finish(warnings);
-    load_images(path, &doc, &buffers, &maps, options.allow_outside_files, &mut mesh, warnings);
-    Ok(mesh)
+    Ok((primitives, skipped))
+}
+
+/// The triangles the primitives of `path` make, from its JSON alone (a GLB's binary chunk is
+/// not read): what the partitioned build plans its cells by.
+pub fn streaming_declared(path: &Path) -> Result<super::stream::Declared> {
+    use std::io::Read as _;
+    let (file, len) = super::open_regular(path)?;
+    let mut file = std::io::BufReader::new(file);
+    let mut head = [0u8; 20];
+    let n = (&mut file).take(20).read(&mut head).map_err(|e| Error::io(path, e))?;
+    let glb = head[..n].starts_with(b"glTF");
+    let json = if glb {
+        let chunk = u32_at(&head, 12)
+            .filter(|_| n == 20 && &head[16..20] == b"JSON")
+            .ok_or_else(|| Error::at_byte(path, 12, "a GLB whose first chunk is not a JSON chunk"))? as u64;
+        if chunk > len.saturating_sub(20) {
+            return Err(Error::at_byte(path, 12, format!("GLB JSON chunk of {chunk} bytes runs past the end of the file ({len} bytes)")));
+        }
+        let mut json = Vec::with_capacity(chunk as usize);
+        (&mut file).take(chunk).read_to_end(&mut json).map_err(|e| Error::io(path, e))?;
+        json
+    } else {
+        let mut json = head[..n].to_vec();
+        file.read_to_end(&mut json).map_err(|e| Error::io(path, e))?;
+        json
+    };
+    let doc = document(path, &json, glb, &mut Vec::new())?;
+    let (primitives, _) = triangle_primitives(path, &doc, &mut Vec::new())?;
+    let triangles = primitives
+        .iter()
+        .map(|(_, p, _)| {
+            let count = p.indices().or_else(|| p.get(&Semantic::Positions)).map_or(0, |a| a.count() as u64);
+            match p.mode() {
+                Mode::Triangles => count / 3,
+                _ => count.saturating_sub(2),
+            }
+        })
+        .sum();
+    Ok(super::stream::Declared { triangles, refused: None })
+}
+
+/// glTF as a stream, for the partitioned build: the buffers are read as the whole-file reader
+/// reads them, every primitive's vertex attributes are held (transformed, in one array each),
+/// and each primitive's triangles are handed on in batches, their corners' normals and UVs and
+/// their materials with them, filled where a primitive lacks what others have, as [`read`] fills
+/// them. Its materials and images come after.
+pub fn stream(
+    path: &Path,
+    options: &ImportOptions,
+    sink: &mut super::stream::FaceSink,
+    warnings: &mut Vec<String>,
+) -> Result<super::stream::Looks> {
+    use super::stream::{Faces, Looks, Vertices, BATCH};
+    with_scene(path, options, warnings, |scene, warnings| {
+        let mut builder = Builder::new(scene.doc);
+        let (mut positions, mut normals, mut uvs, mut colors) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        // Per primitive: its first vertex, vertex count, what it has, its material, whether it mirrors.
+        let mut held = Vec::with_capacity(scene.primitives.len());
+        for (mesh_index, prim, world) in scene.primitives {
+            let v = builder.vertices(scene.buffers, *mesh_index, prim, *world)?;
+            let (base, n) = (positions.len(), v.positions.len());
+            if base + n > u32::MAX as usize {
+                return Err(Error::at_element(
+                    path,
+                    format!("mesh {mesh_index} primitive {}", prim.index()),
+                    "more than 2^32 vertices in total",
+                ));
+            }
+            let has = [v.normals.is_some(), v.uvs.is_some(), v.colors.is_some()];
+            positions.extend(v.positions);
+            normals.extend(v.normals.unwrap_or_else(|| vec![Vec3::ZERO; n]));
+            uvs.extend(v.uvs.unwrap_or_else(|| vec![Vec2::ZERO; n]));
+            colors.extend(v.colors.unwrap_or_else(|| vec![[255; 4]; n]));
+            for (present, has) in builder.present.iter_mut().zip(has) {
+                *present |= has;
+            }
+            held.push((base as u32, n, has, v.material, v.flip));
+        }
+        let [with_normals, with_uvs, with_colors] = builder.present;
+        if !with_normals {
+            normals = Vec::new();
+        }
+        if !with_uvs {
+            uvs = Vec::new();
+        }
+        if !with_colors {
+            colors = Vec::new();
+        }
+        let vertices = Vertices { positions: &positions, normals: &[], colors: &colors };
+        let (mut tris, mut corner_normals, mut corner_uvs, mut materials) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut faces = 0usize;
+        for ((mesh_index, prim, _), &(base, n, has, material, flip)) in scene.primitives.iter().zip(&held) {
+            let triangles = builder.triangles(scene.buffers, *mesh_index, prim, n, flip)?;
+            builder.note(faces..faces + triangles.len(), has);
+            faces += triangles.len();
+            for t in triangles {
+                let t = t.map(|v| base + v);
+                tris.push(t);
+                if with_normals {
+                    corner_normals.push(if has[0] {
+                        t.map(|v| normals[v as usize])
+                    } else {
+                        let [a, b, c] = t.map(|v| positions[v as usize]);
+                        [(b - a).cross(c - a).normalize_or_zero(); 3]
+                    });
+                }
+                if with_uvs {
+                    corner_uvs.push(t.map(|v| uvs[v as usize]));
+                }
+                materials.push(material);
+                if tris.len() >= BATCH {
+                    sink(&vertices, &Faces { triangles: &tris, normals: &corner_normals, uvs: &corner_uvs, materials: &materials })?;
+                    tris.clear();
+                    corner_normals.clear();
+                    corner_uvs.clear();
+                    materials.clear();
+                }
+            }
+        }
+        if faces == 0 {
+            return Err(Error::invalid(path, None, "no triangles in the imported scene"));
+        }
+        if !tris.is_empty() {
+            sink(&vertices, &Faces { triangles: &tris, normals: &corner_normals, uvs: &corner_uvs, materials: &materials })?;
+        }
+        builder.warn(warnings);
+        let mut looks = Mesh { materials: std::mem::take(&mut builder.mesh.materials), ..Mesh::default() };
+        load_images(path, scene.doc, scene.buffers, &scene.maps, options.allow_outside_files, &mut looks, warnings);
+        Ok(Looks { materials: looks.materials, images: looks.images })
+    })
 }
 
 /// A material's maps as glTF names them: per [`MapKind`] slot, the glTF image and the wrap modes.
@@ -686,6 +851,16 @@ fn assemble(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
 const ATTRIBUTES: [(&str, &str); 3] = [("NORMAL", "face normals"), ("TEXCOORD_0", "UV (0, 0)"), ("COLOR_0", "white")];
 
 /// Accumulates primitives into one raw mesh.
+/// One primitive's vertex attributes, transformed, and what its faces take.
+struct PrimitiveVertices {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    uvs: Option<Vec<Vec2>>,
+    colors: Option<Vec<[u8; 4]>>,
+    material: u32,
+    flip: bool,
+}
+
 struct Builder {
     mesh: Mesh,
     /// Per material: the UV transform of its base color texture (KHR_texture_transform).
@@ -734,6 +909,38 @@ impl Builder {
     }
 
     fn add(&mut self, buffers: &Buffers, mesh_index: usize, prim: &gltf::Primitive, world: Mat4) -> Result<()> {
+        let v = self.vertices(buffers, mesh_index, prim, world)?;
+        let n = v.positions.len();
+        let base = self.mesh.positions.len();
+        if base + n > u32::MAX as usize {
+            return Err(Error::at_element(
+                buffers.path,
+                format!("mesh {mesh_index} primitive {}", prim.index()),
+                "more than 2^32 vertices in total",
+            ));
+        }
+        let triangles = self.triangles(buffers, mesh_index, prim, n, v.flip)?;
+        let has = [v.normals.is_some(), v.uvs.is_some(), v.colors.is_some()];
+        let m = &mut self.mesh;
+        m.positions.extend(v.positions);
+        let first_face = m.triangles.len();
+        for t in triangles {
+            m.triangles.push(t.map(|v| base as u32 + v));
+            m.face_materials.push(v.material);
+            for v2 in t.map(|v| v as usize) {
+                m.normals.push(v.normals.as_ref().map_or(Vec3::ZERO, |a| a[v2]));
+                m.uvs.push(v.uvs.as_ref().map_or(Vec2::ZERO, |a| a[v2]));
+                m.colors.push(v.colors.as_ref().map_or([255; 4], |a| a[v2]));
+            }
+        }
+        let faces = first_face..m.triangles.len();
+        self.note(faces, has);
+        Ok(())
+    }
+
+    /// A primitive's vertex attributes under `world`, its material (the default one for none)
+    /// and whether `world` mirrors.
+    fn vertices(&mut self, buffers: &Buffers, mesh_index: usize, prim: &gltf::Primitive, world: Mat4) -> Result<PrimitiveVertices> {
         let path = buffers.path;
         let element = format!("mesh {mesh_index} primitive {}", prim.index());
         let err = |message: String| Error::at_element(path, &element, message);
@@ -749,22 +956,6 @@ impl Builder {
             }
         }
         let n = positions.len();
-        let base = self.mesh.positions.len();
-        if base + n > u32::MAX as usize {
-            return Err(err("more than 2^32 vertices in total".into()));
-        }
-        let indices = match prim.indices() {
-            Some(a) => buffers.indices(&a)?,
-            None => (0..n as u32).collect(),
-        };
-        if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
-            return Err(err(format!("index {bad} out of range for {n} vertices")));
-        }
-        if prim.mode() == Mode::Triangles {
-            self.trailing_indices += indices.len() % 3;
-        }
-        let triangles = assemble(prim.mode(), &indices);
-
         let attribute = |semantic: Semantic, name: &str| -> Result<Option<gltf::Accessor>> {
             match prim.get(&semantic) {
                 Some(a) if a.count() != n => Err(err(format!("{name} has {} elements but POSITION has {n}", a.count()))),
@@ -804,29 +995,53 @@ impl Builder {
             Some(a) => Some(buffers.colors(&a)?),
             None => None,
         };
+        Ok(PrimitiveVertices { positions, normals, uvs, colors, material, flip: linear.determinant() < 0.0 })
+    }
 
-        let m = &mut self.mesh;
-        m.positions.extend(positions);
-        let flip = linear.determinant() < 0.0;
-        let first_face = m.triangles.len();
-        for t in triangles {
-            let t = if flip { [t[0], t[2], t[1]] } else { t };
-            m.triangles.push(t.map(|v| base as u32 + v));
-            m.face_materials.push(material);
-            for v in t.map(|v| v as usize) {
-                m.normals.push(normals.as_ref().map_or(Vec3::ZERO, |a| a[v]));
-                m.uvs.push(uvs.as_ref().map_or(Vec2::ZERO, |a| a[v]));
-                m.colors.push(colors.as_ref().map_or([255; 4], |a| a[v]));
+    /// A primitive's triangles over its `n` vertices (strips and fans expanded, wound the other
+    /// way when its transform mirrors), indices checked.
+    fn triangles(&mut self, buffers: &Buffers, mesh_index: usize, prim: &gltf::Primitive, n: usize, flip: bool) -> Result<Vec<[u32; 3]>> {
+        let indices = match prim.indices() {
+            Some(a) => buffers.indices(&a)?,
+            None => (0..n as u32).collect(),
+        };
+        if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+            let element = format!("mesh {mesh_index} primitive {}", prim.index());
+            return Err(Error::at_element(buffers.path, element, format!("index {bad} out of range for {n} vertices")));
+        }
+        if prim.mode() == Mode::Triangles {
+            self.trailing_indices += indices.len() % 3;
+        }
+        let mut triangles = assemble(prim.mode(), &indices);
+        if flip {
+            for t in &mut triangles {
+                t.swap(1, 2);
             }
         }
-        let faces = first_face..m.triangles.len();
-        for (k, has) in [normals.is_some(), uvs.is_some(), colors.is_some()].into_iter().enumerate() {
+        Ok(triangles)
+    }
+
+    /// Faces `faces` came from a primitive that has (normals, UVs, colors) as `has` says.
+    fn note(&mut self, faces: Range<usize>, has: [bool; 3]) {
+        for (k, has) in has.into_iter().enumerate() {
             self.present[k] |= has;
             if !has {
                 self.missing[k].push(faces.clone());
             }
         }
-        Ok(())
+    }
+
+    /// The warnings of the attributes some primitives lacked, and of trailing indices.
+    fn warn(&self, warnings: &mut Vec<String>) {
+        for (k, (name, fill)) in ATTRIBUTES.iter().enumerate() {
+            if self.present[k] && !self.missing[k].is_empty() {
+                let faces: usize = self.missing[k].iter().map(|r| r.len()).sum();
+                warnings.push(format!("{faces} faces from primitives without {name} got {fill}"));
+            }
+        }
+        if self.trailing_indices > 0 {
+            warnings.push(format!("{} triangle-list indices past the last full triangle ignored", self.trailing_indices));
+        }
     }
 
     /// Drop attributes no primitive had, fill the gaps of the others, and hand over the mesh.
@@ -842,12 +1057,6 @@ impl Builder {
         if !colors {
             m.colors.clear();
         }
-        for (k, (name, fill)) in ATTRIBUTES.iter().enumerate() {
-            if self.present[k] && !self.missing[k].is_empty() {
-                let faces: usize = self.missing[k].iter().map(|r| r.len()).sum();
-                warnings.push(format!("{faces} faces from primitives without {name} got {fill}"));
-            }
-        }
         if normals {
             for f in self.missing[0].iter().flat_map(|r| r.clone()) {
                 let [a, b, c] = m.triangles[f].map(|v| m.positions[v as usize]);
@@ -855,9 +1064,7 @@ impl Builder {
                 m.normals[3 * f..3 * f + 3].fill(normal);
             }
         }
-        if self.trailing_indices > 0 {
-            warnings.push(format!("{} triangle-list indices past the last full triangle ignored", self.trailing_indices));
-        }
+        self.warn(warnings);
         self.mesh
     }
 }
@@ -1369,5 +1576,75 @@ mod tests {
                 proptest::prop_assert!(mesh.validate().is_ok());
             }
         }
+    }
+
+    /// What [`stream`] hands on of `path`, as a mesh: positions, triangles, corner normals, UVs
+    /// and colors, each face's material, the materials and images.
+    fn streamed(path: &Path) -> Mesh {
+        let mut m = Mesh::default();
+        let looks = stream(
+            path,
+            &ImportOptions::default(),
+            &mut |v, f| {
+                m.positions = v.positions.to_vec();
+                m.triangles.extend_from_slice(f.triangles);
+                m.normals.extend(f.normals.iter().flatten());
+                m.uvs.extend(f.uvs.iter().flatten());
+                if !v.colors.is_empty() {
+                    m.colors.extend(f.triangles.iter().flatten().map(|&i| v.colors[i as usize]));
+                }
+                m.face_materials.extend_from_slice(f.materials);
+                Ok(())
+            },
+            &mut Vec::new(),
+        )
+        .unwrap();
+        (m.materials, m.images) = (looks.materials, looks.images);
+        m
+    }
+
+    /// The stream gives what the whole-file reader reads: the fixtures, and the shared glTF
+    /// models when present (node transforms, mirrored nodes, primitives without some attributes,
+    /// external buffers and images).
+    #[test]
+    fn streams_what_the_whole_file_reader_reads() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut paths = vec![root.join("fixtures/textured_globe.glb"), root.join("fixtures/two_materials.glb")];
+        let shared = root.join("../shared/meshes/gltf");
+        let mut stack = vec![shared];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else if p.extension().is_some_and(|x| x == "gltf" || x == "glb") {
+                    paths.push(p);
+                }
+            }
+        }
+        let mut compared = 0;
+        for path in &paths {
+            let name = path.display();
+            let Ok(whole) = read(path, &ImportOptions::default(), &mut Vec::new()).map(|r| r.mesh) else {
+                let e = stream(path, &ImportOptions::default(), &mut |_, _| Ok(()), &mut Vec::new());
+                assert!(e.is_err(), "{name}: the whole-file reader refuses it, the stream does not");
+                continue;
+            };
+            let m = streamed(path);
+            let declared = streaming_declared(path).unwrap();
+            assert!(declared.triangles >= m.triangles.len() as u64, "{name}: declared {} < {}", declared.triangles, m.triangles.len());
+            assert_eq!(m.positions, whole.positions, "{name}");
+            assert_eq!(m.triangles, whole.triangles, "{name}");
+            assert_eq!(m.normals, whole.normals, "{name}");
+            assert_eq!(m.uvs, whole.uvs, "{name}");
+            assert_eq!(m.colors, whole.colors, "{name}");
+            assert_eq!(m.face_materials, whole.face_materials, "{name}");
+            assert_eq!(m.materials, whole.materials, "{name}");
+            assert_eq!(m.images.len(), whole.images.len(), "{name}");
+            assert!(m.images.iter().zip(&whole.images).all(|(a, b)| a.name == b.name && a.bytes == b.bytes), "{name}");
+            compared += 1;
+        }
+        println!("{compared} of {} files compared", paths.len());
+        assert!(compared >= 2, "{compared} files compared");
     }
 }

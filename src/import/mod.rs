@@ -48,7 +48,12 @@ pub static IMPORTERS: &[Importer] = &[
         read: obj::read,
         stream: Some(stream::Streaming { declared: obj_stream::declared, stream: obj_stream::stream }),
     },
-    Importer { name: "gltf", extensions: &["gltf", "glb"], read: gltf::read, stream: None },
+    Importer {
+        name: "gltf",
+        extensions: &["gltf", "glb"],
+        read: gltf::read,
+        stream: Some(stream::Streaming { declared: gltf::streaming_declared, stream: gltf::stream }),
+    },
     Importer {
         name: "ply",
         extensions: &["ply"],
