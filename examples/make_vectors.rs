@@ -76,7 +76,7 @@ fn sphere(major: u16) -> Vec<u8> {
 fn textured(major: u16) -> Vec<u8> {
     let mut mesh = strata::fixtures::textured_globe(8, 128);
     let mut warnings = Vec::new();
-    let images = strata::texture::pyramid::prepare(&mut mesh, &mut warnings, &mut || {});
+    let images = strata::texture::pyramid::prepare(&mut mesh.materials, &mesh.images, !mesh.uvs.is_empty(), &mut warnings, &mut || {});
     assert!(warnings.is_empty(), "{warnings:?}");
     let params = HierarchyParams { cluster_faces: 8, leaf_faces: 24, growth: 2, top_groups: 2, ..HierarchyParams::default() };
     let adjacency = Adjacency::build(&mesh);

@@ -204,7 +204,9 @@ pub fn convert(
 
     let textured = imported.mesh.images.len() as u64;
     progress.stage("textures", textured);
-    let images = crate::texture::pyramid::prepare(&mut imported.mesh, &mut imported.warnings, &mut || progress.step());
+    let m = &mut imported.mesh;
+    let images =
+        crate::texture::pyramid::prepare(&mut m.materials, &m.images, !m.uvs.is_empty(), &mut imported.warnings, &mut || progress.step());
     // The levels hold the images from here on.
     imported.mesh.images.clear();
     lap(&mut times.texture_ms);

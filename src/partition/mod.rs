@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
 use crate::import::stream::{Declared, Faces, Streaming, Vertices};
 use crate::import::{Format, ImportOptions};
-use crate::mesh::{Material, Mesh};
+use crate::mesh::Material;
 use crate::pipeline::{ConvertOptions, Converted, Normals, Progress, StageTimes};
 use crate::write::Encoding;
 use cells::{Cells, Layout, Spool};
@@ -203,21 +203,14 @@ pub fn convert(
     lap(&mut times.import_ms);
 
     // The images' levels, made while no cell is in memory; maps without UVs are dropped.
-    let mut looks = Mesh {
-        materials: if looks.materials.is_empty() { vec![Material::default()] } else { looks.materials },
-        images: looks.images,
-        ..Mesh::default()
-    };
-    if layout.uvs {
-        looks.uvs.push(glam::Vec2::ZERO);
-    }
+    let mut materials = if looks.materials.is_empty() { vec![Material::default()] } else { looks.materials };
     if !looks.images.is_empty() {
         progress.stage("textures", looks.images.len() as u64);
     }
-    let images = crate::texture::pyramid::prepare(&mut looks, &mut warnings, &mut || progress.step());
+    let images = crate::texture::pyramid::prepare(&mut materials, &looks.images, layout.uvs, &mut warnings, &mut || progress.step());
+    drop(looks.images);
     let textured = !images.is_empty();
     lap(&mut times.texture_ms);
-    let materials = looks.materials;
     let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: layout.uvs, colors: layout.colors };
     let crease = match opts.normals {
         Normals::Auto { crease_angle } => crease_angle,

@@ -138,21 +138,27 @@ pub fn downsample(image: &Rgba8, filter: Filter) -> Rgba8 {
     out
 }
 
-/// The images `mesh`'s materials use, each with its levels for the file, in a new order that the
+/// The `images` that `materials` use, each with its levels for the file, in a new order that the
 /// materials' maps are renumbered to. An image no map uses is dropped; one that cannot be decoded
-/// is a warning naming it, and the maps using it are cleared; without UVs every map is.
-/// `progress` is called once per image.
-pub fn prepare(mesh: &mut crate::mesh::Mesh, warnings: &mut Vec<String>, progress: &mut dyn FnMut()) -> Vec<ImageIn> {
-    let used = mesh.materials.iter().any(|m| m.maps.iter().any(Option::is_some));
-    if used && mesh.uvs.is_empty() {
+/// is a warning naming it, and the maps using it are cleared; without UVs (`has_uvs` false) every
+/// map is. `progress` is called once per image.
+pub fn prepare(
+    materials: &mut [crate::mesh::Material],
+    images: &[SourceImage],
+    has_uvs: bool,
+    warnings: &mut Vec<String>,
+    progress: &mut dyn FnMut(),
+) -> Vec<ImageIn> {
+    let used = materials.iter().any(|m| m.maps.iter().any(Option::is_some));
+    if used && !has_uvs {
         warnings.push("textures left out: the mesh has no UVs to map them".into());
     }
     let mut out = Vec::new();
-    let mut renumber: Vec<Option<u32>> = vec![None; mesh.images.len()];
-    for (i, image) in mesh.images.iter().enumerate() {
+    let mut renumber: Vec<Option<u32>> = vec![None; images.len()];
+    for (i, image) in images.iter().enumerate() {
         let first_use =
-            mesh.materials.iter().flat_map(|m| MapKind::ALL.into_iter().filter(|&k| m.map(k).is_some_and(|s| s.image == i as u32))).next();
-        let Some(kind) = first_use.filter(|_| !mesh.uvs.is_empty()) else { continue };
+            materials.iter().flat_map(|m| MapKind::ALL.into_iter().filter(|&k| m.map(k).is_some_and(|s| s.image == i as u32))).next();
+        let Some(kind) = first_use.filter(|_| has_uvs) else { continue };
         progress();
         // What the file's image table holds must pass the writer's checks: the header's size is
         // the decoded one (a JPEG the decoder forgives but whose markers do not state it is left
@@ -181,7 +187,7 @@ pub fn prepare(mesh: &mut crate::mesh::Mesh, warnings: &mut Vec<String>, progres
             Err(e) => warnings.push(format!("texture left out: {}: {e}", image.name)),
         }
     }
-    for m in &mut mesh.materials {
+    for m in materials.iter_mut() {
         for slot in &mut m.maps {
             *slot = slot.and_then(|s| Some(crate::format::TextureSlot { image: (*renumber.get(s.image as usize)?)?, ..s }));
         }
