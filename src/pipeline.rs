@@ -33,15 +33,15 @@ pub struct ConvertOptions {
 /// Which build makes the levels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Build {
-    /// Partitioned when the input is a PLY or OBJ file the partitioned build takes (a PLY without
-    /// texture coordinates or files; any OBJ) and either an in-core build would not fit in `memory`
+    /// Partitioned when the input is a file the partitioned build streams (PLY, OBJ, glTF, GLB)
+    /// and either an in-core build would not fit in `memory`
     /// ([`crate::partition::IN_CORE_BYTES_PER_FACE`]) or, on a machine of several cores, it has at
     /// least [`crate::partition::PARALLEL_FACES`] faces and memory for two cells at once (there
     /// the partitioned build is faster); else in memory.
     Auto,
     /// Always in memory.
     InCore,
-    /// Always partitioned (PLY or OBJ input).
+    /// Always partitioned (a file the partitioned build streams).
     Partitioned,
 }
 

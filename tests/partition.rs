@@ -266,8 +266,50 @@ fn textured_globe(dir: &Path, name: &str) -> PathBuf {
         }
     }
     let path = dir.join(name);
-    strata::export::write(&path, &mesh).expect("write the globe");
+    if name.ends_with(".ply") {
+        write_meshlab_ply(&path, &mesh);
+    } else {
+        strata::export::write(&path, &mesh).expect("write the globe");
+    }
     path
+}
+
+/// `mesh` as a binary PLY in MeshLab's convention for textures, as photogrammetry tools write it:
+/// a `TextureFile` comment per material (the image of the first, written beside the file, stands
+/// for every one), each face's corners' UVs in a `texcoord` list and its material as `texnumber`.
+fn write_meshlab_ply(path: &Path, mesh: &strata::mesh::Mesh) {
+    let image = &mesh.images[0];
+    let names: Vec<String> = (0..mesh.materials.len()).map(|k| format!("texture{k}.png")).collect();
+    for n in &names {
+        std::fs::write(path.with_file_name(n), &image.bytes[..]).unwrap();
+    }
+    let mut out: Vec<u8> = b"ply\nformat binary_little_endian 1.0\n".to_vec();
+    for n in &names {
+        out.extend(format!("comment TextureFile {n}\n").bytes());
+    }
+    out.extend(
+        format!(
+            "element vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\n\
+             property list uchar int vertex_indices\nproperty list uchar float texcoord\nproperty int texnumber\nend_header\n",
+            mesh.positions.len(),
+            mesh.triangles.len()
+        )
+        .bytes(),
+    );
+    for p in &mesh.positions {
+        out.extend(p.to_array().iter().flat_map(|x| x.to_le_bytes()));
+    }
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        out.push(3);
+        out.extend(t.iter().flat_map(|&v| (v as i32).to_le_bytes()));
+        out.push(6);
+        for c in 0..3 {
+            let uv = mesh.uvs[3 * f + c];
+            out.extend([uv.x, 1.0 - uv.y].iter().flat_map(|x| x.to_le_bytes()));
+        }
+        out.extend((mesh.face_materials[f] as i32).to_le_bytes());
+    }
+    std::fs::write(path, out).unwrap();
 }
 
 /// Per material, how many faces a level has, and every corner's UV (as bits, sorted).
@@ -286,8 +328,8 @@ fn level_looks(rd: &Reader<std::fs::File>, level: u32) -> (Vec<u64>, Vec<[u32; 2
 }
 
 #[test]
-fn a_textured_obj_or_glb_of_two_materials_builds_partitioned_with_its_uvs_materials_and_image() {
-    for name in ["globe.obj", "globe.glb"] {
+fn a_textured_obj_glb_or_ply_of_two_materials_builds_partitioned_with_its_uvs_materials_and_images() {
+    for name in ["globe.obj", "globe.glb", "globe.ply"] {
         textured_builds_partitioned_as_in_core(name);
     }
 }
@@ -308,12 +350,19 @@ fn textured_builds_partitioned_as_in_core(name: &str) {
     assert_eq!(rp.materials(), rc.materials());
     assert_eq!(rp.materials().len(), 2);
     // The same image, with the same levels.
+    // The same images (a PLY names one per material), with the same levels.
     let (tp, tc) = (rp.textures(), rc.textures());
-    assert_eq!(tp.images.len(), 1);
+    let ply = name.ends_with(".ply");
+    assert_eq!(tp.images.len(), if ply { 2 } else { 1 });
     assert_eq!(tp.images, tc.images);
     assert_eq!(tp.levels.len(), tc.levels.len());
-    for level in 0..tp.levels.len() as u32 {
-        assert!(rp.read_image_level(0, level).unwrap() == rc.read_image_level(0, level).unwrap(), "image level {level}");
+    for image in 0..tp.images.len() as u32 {
+        for level in 0..tp.level_count(image) {
+            assert!(
+                rp.read_image_level(image, level).unwrap() == rc.read_image_level(image, level).unwrap(),
+                "image {image} level {level}"
+            );
+        }
     }
     // Level 0: each material's faces, and every corner's UV, as in the in-core build; every level
     // keeps both materials, and every node that has textured faces a UV density.
@@ -326,7 +375,7 @@ fn textured_builds_partitioned_as_in_core(name: &str) {
     }
     for n in 0..rp.nodes().len() {
         let g = rp.read_node(n as u32).unwrap();
-        let textured = g.material_ranges.iter().any(|r| r.material == 0 && r.index_count > 0);
+        let textured = g.material_ranges.iter().any(|r| (r.material == 0 || ply) && r.index_count > 0);
         assert_eq!(textured, tp.uv_density[n] > 0.0, "node {n}");
     }
     for f in std::fs::read_dir(&dir).unwrap().flatten() {

@@ -26,16 +26,35 @@ use std::path::Path;
 /// Fails on a file without faces (a point cloud) and on any malformed or inconsistent data.
 pub fn read(path: &Path, options: &ImportOptions, warnings: &mut Vec<String>) -> Result<Raw> {
     let mut mesh = read_mesh(path, warnings)?;
-    // MeshLab's `TextureFile` comments name images beside the file: each material's base color.
+    load_textures(path, options, &mut mesh, warnings);
+    Ok(Raw { mesh, metres_per_unit: None, georef: None, grid: None })
+}
+
+/// MeshLab's `TextureFile` comments name images beside the file: each material's base color,
+/// read into `mesh.images` (a warning for each that cannot be read).
+fn load_textures(path: &Path, options: &ImportOptions, mesh: &mut Mesh, warnings: &mut Vec<String>) {
     let dir = path.parent().unwrap_or(Path::new(""));
     let mut files = super::ImageFiles::default();
     for m in 0..mesh.materials.len() {
         let Some(name) = mesh.materials[m].texture.clone() else { continue };
-        if let Some(image) = files.load(dir, Path::new(&name), options.allow_outside_files, &mut mesh, warnings) {
+        if let Some(image) = files.load(dir, Path::new(&name), options.allow_outside_files, mesh, warnings) {
             mesh.materials[m].maps[MapKind::BaseColor as usize] = Some(TextureSlot { image, wrap: [Wrap::Repeat; 2] });
         }
     }
-    Ok(Raw { mesh, metres_per_unit: None, georef: None, grid: None })
+}
+
+/// One material per `TextureFile`, named after it, its image to be loaded ([`load_textures`]).
+fn texture_materials(texture_files: &[String]) -> Vec<Material> {
+    texture_files
+        .iter()
+        .map(|t| Material { name: t.clone(), base_color: [1.0; 4], texture: Some(t.clone()), ..Material::default() })
+        .collect()
+}
+
+/// The material of a face of `texnumber` (`None`: the face has none) among `count` texture files:
+/// the first when it has none or one out of range.
+fn texture_material(texnumber: Option<i64>, count: usize) -> u32 {
+    texnumber.filter(|&t| (0..count as i64).contains(&t)).map_or(0, |t| t as u32)
 }
 
 fn read_mesh(path: &Path, warnings: &mut Vec<String>) -> Result<Mesh> {
@@ -55,7 +74,7 @@ fn parse(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Mesh> 
         Encoding::Little => reader.run(&header, &plan, &mut Binary::<LittleEndian>::new(body, header.body_start))?,
         Encoding::Big => reader.run(&header, &plan, &mut Binary::<BigEndian>::new(body, header.body_start))?,
     }
-    Ok(reader.finish(&plan, &header.texture_files, warnings))
+    Ok(reader.finish(&header.texture_files, warnings))
 }
 
 /// What a PLY header declares.
@@ -65,7 +84,7 @@ pub struct Declared {
     /// Face-like records (polygons or strips), not triangles.
     pub faces: u64,
     pub binary: bool,
-    /// Whether it names texture images or has texture coordinates, which [`stream`] refuses.
+    /// Whether it names texture images or has texture coordinates.
     pub textured: bool,
     /// About how many triangles the faces make: in a binary file, from the bytes the face lists
     /// take (polygons and strips make more triangles than records); else the face records, or
@@ -120,19 +139,13 @@ fn declared_by(path: &Path, header: &Header, len: u64) -> Declared {
 /// would refuse the file, if it would.
 pub fn streaming_declared(path: &Path) -> Result<super::stream::Declared> {
     let (header, len) = read_header(path, &mut Vec::new())?;
-    let refused = Plan::new(path, &header).ok().and_then(|plan| unstreamable(&header, &plan));
+    let refused = Plan::new(path, &header).ok().and_then(|plan| unstreamable(&plan));
     Ok(super::stream::Declared { triangles: declared_by(path, &header, len).triangles, refused })
 }
 
-/// Why [`stream`] cannot read a file of this header, if it cannot: what the partitioned build
-/// does not carry, or faces before the vertices they index.
-fn unstreamable(header: &Header, plan: &Plan) -> Option<String> {
-    if !header.texture_files.is_empty() {
-        return Some(super::stream::refused("the file names texture images"));
-    }
-    if plan.has_texcoords() {
-        return Some(super::stream::refused("the file has texture coordinates"));
-    }
+/// Why [`stream`] cannot read a file of this header, if it cannot: faces before the vertices they
+/// index.
+fn unstreamable(plan: &Plan) -> Option<String> {
     let faces_first = plan.faces.iter().position(Option::is_some).is_some_and(|f| f < plan.vertex);
     faces_first.then(|| "faces come before vertices: a stream cannot index vertices it has not read".into())
 }
@@ -151,17 +164,19 @@ fn read_header(path: &Path, warnings: &mut Vec<String>) -> Result<(Header, u64)>
 }
 
 /// Read a PLY file (ascii or binary) as a stream: its vertex arrays are held (positions, normals,
-/// colors), and its triangles go to `faces` in batches as they are read, indices checked, with
-/// the errors [`read`] gives. For the partitioned build, so it refuses what that build does not
-/// carry (texture files, texture coordinates) and vertices after faces.
-pub fn stream(path: &Path, _: &super::ImportOptions, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<super::stream::Looks> {
+/// colors, texture coordinates), and its triangles go to `faces` in batches as they are read with
+/// their corners' UVs and their materials, indices checked, with the errors [`read`] gives; the
+/// `TextureFile` materials and their images come back at the end. For the partitioned build, so
+/// it refuses vertices after faces.
+pub fn stream(path: &Path, options: &ImportOptions, faces: &mut FaceSink, warnings: &mut Vec<String>) -> Result<super::stream::Looks> {
     let (header, len) = read_header(path, warnings)?;
     check_sizes(path, &header, (len - header.body_start as u64) as usize)?;
     let plan = Plan::new(path, &header)?;
-    if let Some(why) = unstreamable(&header, &plan) {
+    if let Some(why) = unstreamable(&plan) {
         return Err(Error::invalid(path, None, why));
     }
     let mut reader = Reader::new(path, &plan);
+    reader.texture_files = header.texture_files.len();
     reader.sink = Some(faces);
     let (file, _) = super::open_regular(path)?;
     let mut file = std::io::BufReader::with_capacity(1 << 20, file);
@@ -189,10 +204,13 @@ pub fn stream(path: &Path, _: &super::ImportOptions, faces: &mut FaceSink, warni
         (Some(e), _) => return Err(Error::io(path, e)),
         (None, r) => r?,
     }
-    if reader.short_faces > 0 {
-        warnings.push(format!("skipped {} faces with fewer than 3 vertices", reader.short_faces));
+    reader.warn(warnings);
+    if header.texture_files.is_empty() {
+        return Ok(super::stream::Looks::default());
     }
-    Ok(super::stream::Looks::default())
+    let mut holder = Mesh { materials: texture_materials(&header.texture_files), ..Mesh::default() };
+    load_textures(path, options, &mut holder, warnings);
+    Ok(super::stream::Looks { materials: holder.materials, images: holder.images })
 }
 
 /// A binary body read from a file in pieces.
@@ -1137,6 +1155,9 @@ impl Source for Ascii<'_> {
     }
 }
 
+/// The UV of a corner whose face has no texcoord pair for it: (0, 0) as the file counts, v flipped.
+const NO_UV: Vec2 = Vec2::new(0.0, 1.0);
+
 /// Accumulates what the body holds.
 struct Reader<'p> {
     path: &'p Path,
@@ -1145,14 +1166,23 @@ struct Reader<'p> {
     normals: Vec<Vec3>,
     colors: Vec<[u8; 4]>,
     uvs: Vec<Vec2>,
+    /// Whether vertices have UVs; else whether faces have `texcoord` lists.
+    vertex_uvs: bool,
+    face_uvs: bool,
     triangles: Vec<[u32; 3]>,
-    /// Per-corner UVs from face `texcoord` lists, for the triangles that had them.
-    corner_uvs: Vec<Vec2>,
+    /// With `face_uvs`, per triangle its corners' UVs from its face's `texcoord` list ([`NO_UV`]
+    /// when the list does not hold a pair per corner: `lacking_uvs` counts those faces).
+    corner_uvs: Vec<[Vec2; 3]>,
+    lacking_uvs: usize,
     /// Per triangle, its face's `texnumber`, when faces have one.
     texnumbers: Vec<i64>,
     short_faces: usize,
-    /// Streaming ([`stream`]): triangles go here in batches instead of accumulating.
+    /// Streaming ([`stream`]): triangles go here in batches instead of accumulating, with their
+    /// corners' UVs and, when the file names `texture_files`, their materials.
     sink: Option<&'p mut FaceSink<'p>>,
+    texture_files: usize,
+    batch_uvs: Vec<[Vec2; 3]>,
+    batch_materials: Vec<u32>,
 }
 
 impl<'p> Reader<'p> {
@@ -1164,22 +1194,55 @@ impl<'p> Reader<'p> {
             normals: Vec::new(),
             colors: Vec::new(),
             uvs: Vec::new(),
+            vertex_uvs: plan.has(U, 2),
+            face_uvs: !plan.has(U, 2) && plan.has_texcoords(),
             triangles: Vec::new(),
             corner_uvs: Vec::new(),
+            lacking_uvs: 0,
             texnumbers: Vec::new(),
             short_faces: 0,
             sink: None,
+            texture_files: 0,
+            batch_uvs: Vec::new(),
+            batch_materials: Vec::new(),
         }
     }
 
     /// Hand the triangles read so far to the sink, if streaming.
     fn flush(&mut self) -> Result<()> {
-        if let Some(sink) = self.sink.as_mut() {
-            let v = Vertices { positions: &self.positions, normals: &self.normals, colors: &self.colors };
-            sink(&v, &Faces { triangles: &self.triangles, normals: &[], uvs: &[], materials: &[] })?;
-            self.triangles.clear();
+        let Some(sink) = self.sink.as_mut() else { return Ok(()) };
+        if self.triangles.is_empty() {
+            return Ok(());
         }
+        self.batch_uvs.clear();
+        if self.vertex_uvs {
+            self.batch_uvs.extend(self.triangles.iter().map(|t| t.map(|v| self.uvs[v as usize])));
+        }
+        self.batch_materials.clear();
+        if self.texture_files > 0 {
+            let (n, texnumbers) = (self.texture_files, &self.texnumbers);
+            self.batch_materials.extend((0..self.triangles.len()).map(|f| texture_material(texnumbers.get(f).copied(), n)));
+        }
+        let v = Vertices { positions: &self.positions, normals: &self.normals, colors: &self.colors };
+        let uvs = if self.face_uvs { &self.corner_uvs } else { &self.batch_uvs };
+        sink(&v, &Faces { triangles: &self.triangles, normals: &[], uvs, materials: &self.batch_materials })?;
+        self.triangles.clear();
+        self.corner_uvs.clear();
+        self.texnumbers.clear();
         Ok(())
+    }
+
+    /// The warnings of what was skipped or filled in.
+    fn warn(&self, warnings: &mut Vec<String>) {
+        if self.short_faces > 0 {
+            warnings.push(format!("skipped {} faces with fewer than 3 vertices", self.short_faces));
+        }
+        if self.lacking_uvs > 0 {
+            warnings.push(format!(
+                "{} faces have no texcoord list of one (u, v) pair per corner: their corners get UV (0, 0)",
+                self.lacking_uvs
+            ));
+        }
     }
 
     fn run<S: Source>(&mut self, header: &Header, plan: &Plan, src: &mut S) -> Result<()> {
@@ -1257,7 +1320,7 @@ impl<'p> Reader<'p> {
             if fast {
                 if let Some(t) = src.triangle(face.count_type, face.index_type) {
                     src.end_record().map_err(|f| fault_error(self.path, f, e, r, None))?;
-                    self.polygon(&t, &[], e, r)?;
+                    self.polygon(&t, None, e, r)?;
                     if self.sink.is_some() && self.triangles.len() >= BATCH {
                         self.flush()?;
                     }
@@ -1280,7 +1343,7 @@ impl<'p> Reader<'p> {
             if face.strips {
                 self.strip(&indices, e, r)?;
             } else {
-                self.polygon(&indices, &texcoords, e, r)?;
+                self.polygon(&indices, face.texcoord.map(|_| texcoords.as_slice()), e, r)?;
             }
             if face.texnumber.is_some() {
                 self.texnumbers.resize(before, 0);
@@ -1305,8 +1368,9 @@ impl<'p> Reader<'p> {
         }
     }
 
-    /// Fan-triangulate one polygon; `texcoords` holds a (u, v) pair per corner or is ignored.
-    fn polygon(&mut self, indices: &[i64], texcoords: &[f64], e: &Element, record: u64) -> Result<()> {
+    /// Fan-triangulate one polygon; `texcoords`, its face's `texcoord` list if its element has
+    /// one, should hold a (u, v) pair per corner.
+    fn polygon(&mut self, indices: &[i64], texcoords: Option<&[f64]>, e: &Element, record: u64) -> Result<()> {
         if indices.len() < 3 {
             self.short_faces += 1;
             return Ok(());
@@ -1314,13 +1378,15 @@ impl<'p> Reader<'p> {
         for &v in indices {
             self.check_index(v, e, record)?;
         }
-        let with_uvs = texcoords.len() == 2 * indices.len();
+        let pairs = texcoords.filter(|t| t.len() == 2 * indices.len());
+        if self.face_uvs && pairs.is_none() {
+            self.lacking_uvs += 1;
+        }
         for k in 1..indices.len() - 1 {
             self.triangles.push([indices[0], indices[k], indices[k + 1]].map(|v| v as u32));
-            if with_uvs {
-                for c in [0, k, k + 1] {
-                    self.corner_uvs.push(Vec2::new(texcoords[2 * c] as f32, 1.0 - texcoords[2 * c + 1] as f32));
-                }
+            if self.face_uvs {
+                let uv = |c: usize| pairs.map_or(NO_UV, |t| Vec2::new(t[2 * c] as f32, 1.0 - t[2 * c + 1] as f32));
+                self.corner_uvs.push([uv(0), uv(k), uv(k + 1)]);
             }
         }
         Ok(())
@@ -1331,43 +1397,30 @@ impl<'p> Reader<'p> {
         for &v in indices.iter().filter(|&&v| v != -1) {
             self.check_index(v, e, record)?;
         }
+        let before = self.triangles.len();
         for strip in indices.split(|&v| v == -1) {
             for k in 2..strip.len() {
                 let [a, b, c] = [strip[k - 2], strip[k - 1], strip[k]].map(|v| v as u32);
                 self.triangles.push(if k % 2 == 0 { [a, b, c] } else { [b, a, c] });
             }
         }
+        if self.face_uvs && self.triangles.len() > before {
+            self.lacking_uvs += 1;
+            self.corner_uvs.resize(self.corner_uvs.len() + self.triangles.len() - before, [NO_UV; 3]);
+        }
         Ok(())
     }
 
-    fn finish(self, plan: &Plan, texture_files: &[String], warnings: &mut Vec<String>) -> Mesh {
-        if self.short_faces > 0 {
-            warnings.push(format!("skipped {} faces with fewer than 3 vertices", self.short_faces));
-        }
-        let uvs = if plan.has(U, 2) {
-            per_corner(&self.triangles, &self.uvs)
-        } else if self.corner_uvs.len() == 3 * self.triangles.len() {
-            self.corner_uvs
-        } else {
-            if !self.corner_uvs.is_empty() {
-                warnings.push("ignored face texcoord lists: not every face has one per corner".into());
-            }
-            Vec::new()
-        };
-        // One material per texture file, named after it; faces pick theirs by `texnumber` (the
-        // first without one, or with one out of range).
+    fn finish(self, texture_files: &[String], warnings: &mut Vec<String>) -> Mesh {
+        self.warn(warnings);
+        let uvs = if self.vertex_uvs { per_corner(&self.triangles, &self.uvs) } else { self.corner_uvs.into_iter().flatten().collect() };
+        // One material per texture file; faces pick theirs by `texnumber`.
         let (materials, face_materials) = if texture_files.is_empty() {
             (vec![Material::default()], vec![0; self.triangles.len()])
         } else {
-            let n = texture_files.len() as i64;
-            let faces: Vec<u32> = (0..self.triangles.len())
-                .map(|f| self.texnumbers.get(f).filter(|&&t| (0..n).contains(&t)).map_or(0, |&t| t as u32))
-                .collect();
-            let materials = texture_files
-                .iter()
-                .map(|t| Material { name: t.clone(), base_color: [1.0; 4], texture: Some(t.clone()), ..Material::default() })
-                .collect();
-            (materials, faces)
+            let n = texture_files.len();
+            let faces = (0..self.triangles.len()).map(|f| texture_material(self.texnumbers.get(f).copied(), n)).collect();
+            (texture_materials(texture_files), faces)
         };
         Mesh {
             normals: per_corner(&self.triangles, &self.normals),
@@ -1950,6 +2003,109 @@ mod tests {
                 (a, b) => panic!("whole read {:?}, stream {:?}", a.map(|m| m.face_count()), b.map(|t| t.len())),
             }
         }
+    }
+
+    /// What [`stream`] gives for the file `path`, as the whole-file reader's mesh: triangles,
+    /// corner UVs, face materials, materials and images; and its warnings.
+    fn streamed_mesh(path: &Path) -> (Mesh, Vec<String>) {
+        let (mut m, mut warnings) = (Mesh::default(), Vec::new());
+        let looks = stream(
+            path,
+            &Default::default(),
+            &mut |_, f| {
+                assert!(f.normals.is_empty());
+                m.triangles.extend_from_slice(f.triangles);
+                m.uvs.extend(f.uvs.iter().flatten());
+                m.face_materials.extend_from_slice(f.materials);
+                Ok(())
+            },
+            &mut warnings,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        (m.materials, m.images) = (looks.materials, looks.images);
+        (m, warnings)
+    }
+
+    #[test]
+    fn textured_files_stream_as_they_read_whole() {
+        let dir = std::env::temp_dir().join(format!("strata-ply-tex-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
+        std::fs::write(dir.join("a.png"), &png).unwrap();
+        let vertices = |uvs: bool| -> Vec<Vec<V>> {
+            [(0., 0.), (1., 0.), (1., 1.), (0., 1.), (2., 0.)]
+                .iter()
+                .map(|&(x, y)| {
+                    let mut r = vec![V::F(x), V::F(y), V::F(0.)];
+                    if uvs {
+                        r.extend([V::F(x / 2.), V::F(y)]);
+                    }
+                    r
+                })
+                .collect()
+        };
+        let xyz = ["property float x", "property float y", "property float z"];
+        // Per-vertex UVs.
+        let mut per_vertex: Vec<&str> = vec!["element vertex 5"];
+        per_vertex.extend(xyz);
+        per_vertex.extend(["property float s", "property float t", "element face 2", "property list uchar int vertex_indices"]);
+        let mut records = vertices(true);
+        records.extend([vec![V::Uc(4), V::I(0), V::I(1), V::I(2), V::I(3)], vec![V::Uc(3), V::I(1), V::I(4), V::I(2)]]);
+        let mut files =
+            vec![("vertex", file(Encoding::Little, &per_vertex, &records)), ("vertex-ascii", file(Encoding::Ascii, &per_vertex, &records))];
+        // MeshLab's convention: texture files, texcoord lists and texnumbers; the second face's
+        // list is short, the third names a file that is missing, the fourth one out of range.
+        let mut per_face: Vec<&str> = vec!["comment TextureFile a.png", "comment TextureFile missing.png", "element vertex 5"];
+        per_face.extend(xyz);
+        per_face.extend([
+            "element face 4",
+            "property list uchar int vertex_indices",
+            "property list uchar float texcoord",
+            "property int texnumber",
+        ]);
+        let face = |ix: &[i32], t: &[f32], n: i32| -> Vec<V> {
+            let mut r = vec![V::Uc(ix.len() as u8)];
+            r.extend(ix.iter().map(|&i| V::I(i)));
+            r.push(V::Uc(t.len() as u8));
+            r.extend(t.iter().map(|&x| V::F(x)));
+            r.push(V::I(n));
+            r
+        };
+        let mut records = vertices(false);
+        records.extend([
+            face(&[0, 1, 2, 3], &[0., 0., 0.5, 0., 0.5, 1., 0., 1.], 0),
+            face(&[1, 4, 2], &[0.5, 0.], 0),
+            face(&[0, 2, 3], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], 1),
+            face(&[1, 4, 2], &[0.5, 0., 1., 0., 0.5, 1.], 7),
+        ]);
+        for encoding in ALL {
+            files.push(("face", file(encoding, &per_face, &records)));
+        }
+        for (name, bytes) in files {
+            let path = dir.join("m.ply");
+            std::fs::write(&path, &bytes).unwrap();
+            let mut warnings = Vec::new();
+            let whole = read(&path, &ImportOptions::default(), &mut warnings).unwrap().mesh;
+            let (m, stream_warnings) = streamed_mesh(&path);
+            assert_eq!(m.triangles, whole.triangles, "{name}");
+            assert_eq!(m.uvs, whole.uvs, "{name}");
+            assert_eq!(m.uvs.len(), 3 * m.triangles.len(), "{name}");
+            assert_eq!(stream_warnings, warnings, "{name}");
+            if name == "vertex" || name == "vertex-ascii" {
+                assert!(m.materials.is_empty() && m.face_materials.is_empty(), "{name}: one default material");
+                assert_eq!(whole.materials, vec![Material::default()]);
+                continue;
+            }
+            assert_eq!(m.face_materials, whole.face_materials, "{name}");
+            assert_eq!(m.face_materials, vec![0, 0, 0, 1, 0]);
+            assert_eq!(m.materials, whole.materials, "{name}");
+            assert_eq!(m.images.len(), 1);
+            assert!(m.images == whole.images, "{name}");
+            assert_eq!(m.uvs[6..9], [NO_UV; 3], "a short list gives (0, 0) corners");
+            assert!(warnings.iter().any(|w| w.starts_with("1 faces have no texcoord list")), "{warnings:?}");
+            assert!(warnings.iter().any(|w| w.contains("missing.png")), "{warnings:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

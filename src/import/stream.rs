@@ -58,8 +58,3 @@ pub struct Streaming {
     pub declared: fn(&Path) -> Result<Declared>,
     pub stream: fn(&Path, &ImportOptions, &mut FaceSink, &mut Vec<String>) -> Result<Looks>,
 }
-
-/// Why a streaming reader refuses a file: `what` it has that the partitioned build cannot carry.
-pub fn refused(what: &str) -> String {
-    format!("{what}: the partitioned build does not carry them yet")
-}
