@@ -23,6 +23,7 @@ use super::{
 };
 use crate::error::{Error, Result};
 use glam::Vec3;
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use std::fs::File;
 use std::io::Write;
@@ -114,6 +115,9 @@ impl WriteSummary {
 }
 
 /// Where a level's encoded chunks wait for [`Writer::finish`].
+/// Spilled node models read at once to be coded on every core (format 3's last step).
+const CODING_BATCH_BYTES: u64 = 16 << 20;
+
 enum Spill {
     Memory(Vec<u8>),
     /// An unlinked temporary file: nothing is left behind, whatever ends the process.
@@ -309,24 +313,51 @@ impl<W: Write> Writer<W> {
         let io = |e: std::io::Error| Error::io(&path, e);
         let tables = v3::CodeTables::fit(self.normal_bits.unwrap_or(0), self.color_bits.unwrap_or(0), &self.counts);
         let enc: Vec<EncodeTable> = tables.freqs.iter().map(EncodeTable::new).collect();
+        let costs = v3::symbol_costs(&tables.freqs);
         let mut bits = vec![0f64; v3::alphabet::ALPHABETS];
-        let mut buf = Vec::new();
+        // Nodes are coded on every core, a batch of spilled models at a time.
+        let code = |spilled: &[u8]| -> std::result::Result<(Vec<f64>, Vec<u8>), String> {
+            let (model, _) = v3::Model::from_bytes(spilled).ok_or("a damaged spill")?;
+            Ok((model.bits(&costs), model.payload(&enc)?))
+        };
         for l in 0..self.levels.len() {
             let mut coded = match &self.spill_dir {
                 Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
                 None => Spill::Memory(Vec::new()),
             };
-            for p in &mut self.levels[l] {
-                buf.resize(p.padded as usize, 0);
-                self.spills[l].read(p.spill_at, &mut buf).map_err(io)?;
-                let (model, _) = v3::Model::from_bytes(&buf).ok_or_else(|| bad(format!("level {l} node {}: a damaged spill", p.key)))?;
-                for (b, x) in bits.iter_mut().zip(model.bits(&tables.freqs)) {
-                    *b += x;
+            let mut pending = &mut self.levels[l][..];
+            while !pending.is_empty() {
+                let mut batch_bytes = 0u64;
+                let n = pending
+                    .iter()
+                    .take_while(|p| {
+                        batch_bytes += p.padded as u64;
+                        batch_bytes <= CODING_BATCH_BYTES
+                    })
+                    .count()
+                    .max(1);
+                let (batch, rest) = std::mem::take(&mut pending).split_at_mut(n);
+                pending = rest;
+                let spilled = batch
+                    .iter()
+                    .map(|p| {
+                        let mut buf = vec![0; p.padded as usize];
+                        self.spills[l].read(p.spill_at, &mut buf).map(|_| buf)
+                    })
+                    .collect::<std::io::Result<Vec<_>>>()
+                    .map_err(io)?;
+                let results: Vec<_> = spilled.par_iter().map(|b| code(b)).collect();
+                drop(spilled);
+                for (p, result) in batch.iter_mut().zip(results) {
+                    let (node_bits, payload) = result.map_err(|m| bad(format!("level {l} node {}: {m}", p.key)))?;
+                    for (b, x) in bits.iter_mut().zip(node_bits) {
+                        *b += x;
+                    }
+                    let size =
+                        u32::try_from(payload.len()).map_err(|_| bad(format!("level {l} node {}: {} bytes", p.key, payload.len())))?;
+                    p.spill_at = coded.append(&payload).map_err(io)?;
+                    (p.padded, p.span, p.crc) = (size, size, chunk::crc32(&payload));
                 }
-                let payload = model.payload(&enc).map_err(|m| bad(format!("level {l} node {}: {m}", p.key)))?;
-                let size = u32::try_from(payload.len()).map_err(|_| bad(format!("level {l} node {}: {} bytes", p.key, payload.len())))?;
-                p.spill_at = coded.append(&payload).map_err(io)?;
-                (p.padded, p.span, p.crc) = (size, size, chunk::crc32(&payload));
             }
             self.spills[l] = coded;
         }

@@ -263,6 +263,12 @@ impl CodeTables {
     }
 }
 
+/// Per alphabet and symbol, the bits a symbol of frequency `f` costs under `freqs`:
+/// `log2(PROB_SCALE / f)` (a symbol of frequency 0 as if it were 1).
+pub fn symbol_costs(freqs: &[Freqs]) -> Vec<Vec<f64>> {
+    freqs.iter().map(|f| f.0.iter().map(|&x| (rans::PROB_SCALE as f64 / x.max(1) as f64).log2()).collect()).collect()
+}
+
 /// A node as symbols and raw bits, before the file's tables code it.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Model {
@@ -305,13 +311,13 @@ impl Model {
         Ok(out)
     }
 
-    /// Bits by alphabet under `freqs`: each symbol costs `log2(4096 / f)`, plus its raw bits.
-    pub fn bits(&self, freqs: &[Freqs]) -> Vec<f64> {
+    /// Bits by alphabet under `costs` ([`symbol_costs`]), plus its raw bits.
+    pub fn bits(&self, costs: &[Vec<f64>]) -> Vec<f64> {
         let mut out: Vec<f64> = self.raw_by_alphabet.iter().map(|&b| b as f64).collect();
         out.resize(a::ALPHABETS, 0.0);
+        let rarest = (rans::PROB_SCALE as f64).log2();
         for &(al, s) in &self.symbols {
-            let f = freqs[al as usize].0.get(s as usize).copied().unwrap_or(1).max(1);
-            out[al as usize] += (rans::PROB_SCALE as f64 / f as f64).log2();
+            out[al as usize] += costs[al as usize].get(s as usize).copied().unwrap_or(rarest);
         }
         out
     }
