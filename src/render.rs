@@ -302,6 +302,8 @@ fn encode(width: u32, height: u32, rgba: &[u8]) -> std::result::Result<Vec<u8>, 
 pub const STRIP_ROWS: u32 = 32;
 /// Faces per block of a part: the unit of the per-strip tests.
 pub const BLOCK_FACES: usize = 16;
+// A block's faces found hidden are bits of a u32.
+const _: () = assert!(BLOCK_FACES <= 32);
 /// Rows a face's pixels may reach beyond the rows of its corners' projections (rounding and
 /// clipping error), for the strip test.
 const ROW_MARGIN: i32 = 2;
@@ -326,6 +328,8 @@ struct Block {
 
 /// A block no test can rule out.
 const ANYWHERE: Block = Block { rows: ALL_ROWS, cols: ALL_ROWS, z: f32::NEG_INFINITY };
+/// Bounds that hold nothing yet (rows empty).
+const NOWHERE: Block = Block { rows: (i32::MAX, i32::MIN), cols: (i32::MAX, i32::MIN), z: f32::INFINITY };
 
 /// What occlusion culling found of a block or part this frame: not tested, hidden in some strip
 /// and drawn in none, or drawn.
@@ -340,6 +344,11 @@ fn behind(rows: (i32, i32), cols: (i32, i32), z: f32, first: u32, last: u32, wid
     let (x0, x1) = (cols.0.max(0), cols.1.min(width as i32 - 1));
     if a > b || x0 > x1 {
         return None;
+    }
+    // The middle pixel first: where something shows, it most often shows there.
+    let middle = ((a + b) / 2 - first as i32) as usize * width as usize + ((x0 + x1) / 2) as usize;
+    if depth[middle] >= z {
+        return Some(false);
     }
     Some((a..=b).all(|row| {
         let line = (row as u32 - first) as usize * width as usize;
@@ -359,6 +368,10 @@ struct StripFrame<'a> {
     /// Per part, then per block (parts one after the other): [`UNTESTED`], [`HIDDEN`] or [`DRAWN`].
     drawn: &'a [AtomicU8],
     block_state: &'a [AtomicU8],
+    /// Per block, [`BLOCK_FACES`] entries: each face's bounds, and its state where its block was
+    /// drawn.
+    face_bounds: &'a [Block],
+    face_state: &'a [AtomicU8],
 }
 
 /// A part's box on screen, for the occlusion test: pixels `x0..=x1` × `y0..=y1` (a pixel wider
@@ -472,18 +485,22 @@ impl StripFrame<'_> {
 
     /// Where the faces of each block of `part` may reach ([`Block`]; rows empty when
     /// first > last), into `out` (one per [`BLOCK_FACES`] faces).
-    fn block_bounds(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [Block]) {
+    /// With `faces` (occlusion culling), also each face's own ([`NOWHERE`] for a face not drawn),
+    /// [`BLOCK_FACES`] entries per block.
+    fn block_bounds(&self, part: &Part<'_>, cache: &mut VertexCache, out: &mut [Block], mut faces: Option<&mut [Block]>) {
         cache.next_generation();
         let n = part.positions.len();
-        for (block, bounds) in part.indices.chunks(3 * BLOCK_FACES).zip(out) {
-            let mut b = Block { rows: (i32::MAX, i32::MIN), cols: (i32::MAX, i32::MIN), z: f32::INFINITY };
-            for tri in block.chunks_exact(3) {
-                match self.face_bounds(part, [tri[0], tri[1], tri[2]], n, false, cache) {
+        for (k, (block, bounds)) in part.indices.chunks(3 * BLOCK_FACES).zip(out).enumerate() {
+            let mut b = NOWHERE;
+            for (j, tri) in block.chunks_exact(3).enumerate() {
+                let f = self.face_bounds(part, [tri[0], tri[1], tri[2]], n, false, cache);
+                if let Some(faces) = faces.as_deref_mut() {
+                    faces[k * BLOCK_FACES + j] = f.unwrap_or(NOWHERE);
+                }
+                match f {
                     None => continue,
-                    Some(f) if f.rows == ALL_ROWS => {
-                        b = ANYWHERE;
-                        break;
-                    }
+                    Some(_) if b.rows == ALL_ROWS => {}
+                    Some(f) if f.rows == ALL_ROWS => b = ANYWHERE,
                     Some(f) => {
                         b.rows = (b.rows.0.min(f.rows.0), b.rows.1.max(f.rows.1));
                         b.cols = (b.cols.0.min(f.cols.0), b.cols.1.max(f.cols.1));
@@ -529,19 +546,28 @@ impl StripFrame<'_> {
         Some(b)
     }
 
-    /// Whether every face of block `b` of `part` lies behind the depths of the strip of `rows` by its
-    /// own rectangle and least corner depth, or has no pixel there: the block test made tight
-    /// where one rectangle for the block reaches pixels none of its faces covers.
-    fn faces_behind(&self, part: &Part<'_>, b: usize, rows: (u32, u32), depth: &[f32], smooth: bool, cache: &mut VertexCache) -> bool {
-        let n = part.positions.len();
-        let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
-        part.indices[3 * b * BLOCK_FACES..end].chunks_exact(3).all(|tri| {
-            match self.face_bounds(part, [tri[0], tri[1], tri[2]], n, smooth, cache) {
-                None => true,
-                Some(f) if f.rows == ALL_ROWS || !f.z.is_finite() => false,
-                Some(f) => behind(f.rows, f.cols, f.z - HULL_DEPTH_MARGIN, rows.0, rows.1, self.width, depth) != Some(false),
+    /// Which faces of a block (bit j: face j; `faces`, their bounds from [`Strips::face_bounds`])
+    /// lie behind the depths of the strip of `rows` by their own rectangle and least corner depth,
+    /// or have no pixel there: the block test made tight where one rectangle for the block reaches
+    /// pixels none of its faces covers, and face by face where some of its faces show. Faces in
+    /// curve order are hidden in runs: where the first and the last face both show, the others are
+    /// taken to show too, untested (testing every face of every block that shows cost more than
+    /// drawing what it finds).
+    fn faces_behind(&self, faces: &[Block], rows: (u32, u32), depth: &[f32]) -> u32 {
+        let test = |f: &Block| {
+            if f.rows.0 > f.rows.1 {
+                true
+            } else if f.rows == ALL_ROWS || !f.z.is_finite() {
+                false
+            } else {
+                behind(f.rows, f.cols, f.z - HULL_DEPTH_MARGIN, rows.0, rows.1, self.width, depth) != Some(false)
             }
-        })
+        };
+        let last = faces.len() - 1;
+        if !test(&faces[0]) && !test(&faces[last]) {
+            return 0;
+        }
+        faces.iter().enumerate().fold(0, |hidden, (j, f)| hidden | (test(f) as u32) << j)
     }
 
     /// Draw every face reaching strip `strip` (rows `strip · STRIP_ROWS ..`) into its buffers, in
@@ -581,30 +607,41 @@ impl StripFrame<'_> {
                 if bounds.rows.1 < lo || bounds.rows.0 > hi {
                     continue;
                 }
+                let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
+                let faces = &part.indices[3 * b * BLOCK_FACES..end];
+                // Faces of the block found hidden here, one bit each.
+                let mut hidden = 0u32;
                 if occlusion {
                     let state = &self.block_state[first_block + b];
                     if bounds.z > f32::NEG_INFINITY {
+                        let all = u32::MAX >> (32 - faces.len() / 3);
                         match behind(bounds.rows, bounds.cols, bounds.z - HULL_DEPTH_MARGIN, first, last, width, depth) {
                             // Outside the image: its faces have no pixel here.
                             None => continue,
-                            Some(true) => {
-                                state.fetch_max(HIDDEN, Ordering::Relaxed);
-                                self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
-                                continue;
+                            Some(true) => hidden = all,
+                            Some(false) => {
+                                let at = (first_block + b) * BLOCK_FACES;
+                                hidden = self.faces_behind(&self.face_bounds[at..at + faces.len() / 3], (first, last), depth);
                             }
-                            Some(false) if self.faces_behind(part, b, (first, last), depth, smooth, &mut s.cache) => {
-                                state.fetch_max(HIDDEN, Ordering::Relaxed);
-                                self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
-                                continue;
-                            }
-                            Some(false) => {}
+                        }
+                        if hidden == all {
+                            state.fetch_max(HIDDEN, Ordering::Relaxed);
+                            self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
+                            continue;
                         }
                     }
                     state.store(DRAWN, Ordering::Relaxed);
                     self.drawn[part_index].store(DRAWN, Ordering::Relaxed);
                 }
-                let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
-                for tri in part.indices[3 * b * BLOCK_FACES..end].chunks_exact(3) {
+                for (j, tri) in faces.chunks_exact(3).enumerate() {
+                    if occlusion {
+                        let face = &self.face_state[(first_block + b) * BLOCK_FACES + j];
+                        if hidden >> j & 1 == 1 {
+                            face.fetch_max(HIDDEN, Ordering::Relaxed);
+                            continue;
+                        }
+                        face.store(DRAWN, Ordering::Relaxed);
+                    }
                     let tri = [tri[0], tri[1], tri[2]];
                     if tri.iter().any(|&i| i as usize >= n) {
                         continue;
@@ -718,6 +755,9 @@ pub struct Strips {
     hulls: Vec<Hull>,
     drawn: Vec<AtomicU8>,
     block_state: Vec<AtomicU8>,
+    /// With occlusion culling, [`BLOCK_FACES`] per block: each face's bounds (this frame).
+    face_bounds: Vec<Block>,
+    face_state: Vec<AtomicU8>,
     stats: DrawStats,
 }
 
@@ -781,14 +821,16 @@ impl Strips {
             hulls: Vec::new(),
             drawn: Vec::new(),
             block_state: Vec::new(),
+            face_bounds: Vec::new(),
+            face_state: Vec::new(),
             stats: DrawStats::default(),
         }
     }
 
     /// Occlusion culling: parts with [`Part::bounds`] are skipped in a strip where their box lies
     /// behind what the parts before them drew there, and so are blocks of [`BLOCK_FACES`] faces
-    /// whose corners' screen rectangle does (at the corners' least depth), or failing that, each
-    /// of whose faces' rectangles does (at its own corners' least depth). Drawn front to back,
+    /// whose corners' screen rectangle does (at the corners' least depth), and failing that, the
+    /// faces whose own rectangles do (at their own corners' least depth). Drawn front to back,
     /// this skips much of what is hidden; the image is the same pixel for pixel either way (the
     /// tests are conservative).
     pub fn set_occlusion(&mut self, on: bool) {
@@ -806,13 +848,15 @@ impl Strips {
         self.drawn.get(k).is_some_and(|d| d.load(Ordering::Relaxed) == HIDDEN)
     }
 
-    /// Whether the last [`Strips::draw`] skipped face `f` of part `k` by occlusion: the part, or
-    /// the face's block of [`BLOCK_FACES`] in every strip it reaches.
+    /// Whether the last [`Strips::draw`] skipped face `f` of part `k` by occlusion, and drew it
+    /// in no strip: its part, its block of [`BLOCK_FACES`], or the face itself.
     pub fn face_hidden(&self, k: usize, f: usize) -> bool {
+        let hidden = |s: Option<&AtomicU8>| s.is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN);
         self.part_hidden(k)
             || self.block_start.get(k).is_some_and(|&b| {
-                self.block_state.get(b + f / BLOCK_FACES).is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN)
-                    && b + f / BLOCK_FACES < self.block_start[k + 1]
+                let block = b + f / BLOCK_FACES;
+                block < self.block_start[k + 1]
+                    && (hidden(self.block_state.get(block)) || hidden(self.face_state.get(block * BLOCK_FACES + f % BLOCK_FACES)))
             })
     }
 
@@ -832,10 +876,12 @@ impl Strips {
         self.hulls.clear();
         self.drawn.clear();
         self.block_state.clear();
+        self.face_state.clear();
         if self.occlusion {
             self.hulls.extend(parts.iter().map(|p| Hull::of(p, &view_projection, width, height)));
             self.drawn.extend(parts.iter().map(|_| AtomicU8::new(UNTESTED)));
             self.block_state.extend((0..total).map(|_| AtomicU8::new(UNTESTED)));
+            self.face_state.extend((0..total * BLOCK_FACES).map(|_| AtomicU8::new(UNTESTED)));
         }
         let frame = StripFrame {
             parts,
@@ -846,6 +892,8 @@ impl Strips {
             hulls: &self.hulls,
             drawn: &self.drawn,
             block_state: &self.block_state,
+            face_bounds: &[],
+            face_state: &self.face_state,
         };
         // Scratch is sized here, so that the workers do not allocate (their arenas would keep
         // the memory).
@@ -860,25 +908,37 @@ impl Strips {
         }
         self.blocks.clear();
         self.blocks.resize(total, ANYWHERE);
+        self.face_bounds.clear();
+        if self.occlusion {
+            self.face_bounds.resize(total * BLOCK_FACES, NOWHERE);
+        }
         // Each slot finds the block bounds of every slots.len()-th part.
-        let mut per_part: Vec<&mut [Block]> = Vec::with_capacity(parts.len());
-        let mut rest = &mut self.blocks[..];
+        let mut per_part: Vec<(&mut [Block], Option<&mut [Block]>)> = Vec::with_capacity(parts.len());
+        let (mut rest, mut faces_rest) = (&mut self.blocks[..], &mut self.face_bounds[..]);
         for c in counts {
             let (head, tail) = rest.split_at_mut(c);
-            per_part.push(head);
             rest = tail;
+            let faces = if faces_rest.is_empty() {
+                None
+            } else {
+                let (head, tail) = std::mem::take(&mut faces_rest).split_at_mut(c * BLOCK_FACES);
+                faces_rest = tail;
+                Some(head)
+            };
+            per_part.push((head, faces));
         }
         let stride = self.slots.len();
-        type Lane<'p, 'b> = Vec<(&'p Part<'p>, &'b mut [Block])>;
+        type Lane<'p, 'b> = Vec<(&'p Part<'p>, (&'b mut [Block], Option<&'b mut [Block]>))>;
         let mut lanes: Vec<Lane> = (0..stride).map(|_| Vec::new()).collect();
         for (k, (part, out)) in parts.iter().zip(per_part).enumerate() {
             lanes[k % stride].push((part, out));
         }
         self.slots.par_iter_mut().zip(lanes).for_each(|(slot, lane)| {
-            for (part, out) in lane {
-                frame.block_bounds(part, &mut slot.scratch.cache, out);
+            for (part, (out, faces)) in lane {
+                frame.block_bounds(part, &mut slot.scratch.cache, out, faces);
             }
         });
+        let frame = StripFrame { face_bounds: &self.face_bounds, ..frame };
         let strips = height.div_ceil(STRIP_ROWS);
         let blocks = &self.blocks;
         let mut stats = DrawStats::default();
@@ -912,8 +972,13 @@ impl Strips {
                 self.stats.faces_hidden += faces as u64;
             } else if self.occlusion {
                 for (b, state) in self.block_state[self.block_start[k]..self.block_start[k + 1]].iter().enumerate() {
+                    let in_block = (faces - b * BLOCK_FACES).min(BLOCK_FACES);
                     if state.load(Ordering::Relaxed) == HIDDEN {
-                        self.stats.faces_hidden += (faces - b * BLOCK_FACES).min(BLOCK_FACES) as u64;
+                        self.stats.faces_hidden += in_block as u64;
+                    } else {
+                        let first = (self.block_start[k] + b) * BLOCK_FACES;
+                        let states = &self.face_state[first..first + in_block];
+                        self.stats.faces_hidden += states.iter().filter(|s| s.load(Ordering::Relaxed) == HIDDEN).count() as u64;
                     }
                 }
             }
@@ -1405,6 +1470,37 @@ mod tests {
         assert_eq!(faces, 6);
         assert_eq!(stats.faces, 4, "{stats:?}");
         assert_eq!(stats.faces_hidden, 2, "{stats:?}");
+    }
+
+    #[test]
+    fn faces_of_a_block_that_shows_are_skipped_one_by_one_where_hidden() {
+        // A near square over the left half; behind it one block of four faces along x: the first
+        // two behind the square, the last two beside it. The block shows; its first two faces do not.
+        let near = [Vec3::new(-1.0, -0.5, 1.0), Vec3::new(0.0, -0.5, 1.0), Vec3::new(0.0, 0.5, 1.0), Vec3::new(-1.0, 0.5, 1.0)];
+        let mut back = Vec::new();
+        let mut faces = Vec::new();
+        for x in [-0.8f32, -0.5, 0.3, 0.6] {
+            let at = back.len() as u32;
+            back.extend([Vec3::new(x, -0.2, -1.0), Vec3::new(x + 0.15, -0.2, -1.0), Vec3::new(x + 0.07, 0.2, -1.0)]);
+            faces.extend([at, at + 1, at + 2]);
+        }
+        let camera = ortho();
+        let (w, h) = (camera.width, camera.height);
+        let parts = [Part::new(&near, &[], &[0, 1, 2, 0, 2, 3], palette(1)), Part::new(&back, &[], &faces, palette(2))];
+        let (plain, all) = draw_in_strips(&camera, &parts, w, h);
+        assert_eq!(all, 6);
+        let mut strips = Strips::new(w, h);
+        strips.set_occlusion(true);
+        let mut culled = vec![0u8; 4 * (w * h) as usize];
+        strips.draw(&camera, &parts, |row, rgba| {
+            let at = 4 * (row * w) as usize;
+            culled[at..at + rgba.len()].copy_from_slice(rgba);
+        });
+        assert!(culled == plain, "occlusion culling changed pixels");
+        let stats = strips.stats();
+        assert_eq!((stats.faces, stats.faces_hidden), (4, 2), "{stats:?}");
+        assert_eq!((0..4).map(|f| strips.face_hidden(1, f)).collect::<Vec<_>>(), [true, true, false, false]);
+        assert!(!strips.part_hidden(1));
     }
 
     #[test]
