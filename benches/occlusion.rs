@@ -326,7 +326,7 @@ fn main() {
     println!("visible: of those, reaching a pixel of the image (id buffer of the front); ideal: hidden share of front+frus;");
     println!("nodes / clusters of it: share of the ideal in nodes (clusters at level 0) none of whose faces is visible;");
     println!(
-        "culled of it: share of the ideal in the faces the renderer's occlusion test skipped (nodes' boxes, {}-face blocks' rectangles, then each face's, per {}-row strip).",
+        "culled of it: share of the ideal in the faces the renderer's occlusion test skipped (nodes' boxes, {}-face blocks' rectangles, then faces' where a block's first or last is hidden, per {}-row strip).",
         strata::render::BLOCK_FACES,
         strata::render::STRIP_ROWS
     );

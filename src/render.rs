@@ -627,6 +627,10 @@ impl StripFrame<'_> {
                         if hidden == all {
                             state.fetch_max(HIDDEN, Ordering::Relaxed);
                             self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
+                            let at = (first_block + b) * BLOCK_FACES;
+                            for f in &self.face_state[at..at + faces.len() / 3] {
+                                f.fetch_max(HIDDEN, Ordering::Relaxed);
+                            }
                             continue;
                         }
                     }
@@ -634,13 +638,10 @@ impl StripFrame<'_> {
                     self.drawn[part_index].store(DRAWN, Ordering::Relaxed);
                 }
                 for (j, tri) in faces.chunks_exact(3).enumerate() {
-                    if occlusion {
-                        let face = &self.face_state[(first_block + b) * BLOCK_FACES + j];
-                        if hidden >> j & 1 == 1 {
-                            face.fetch_max(HIDDEN, Ordering::Relaxed);
-                            continue;
-                        }
-                        face.store(DRAWN, Ordering::Relaxed);
+                    let face = occlusion.then(|| &self.face_state[(first_block + b) * BLOCK_FACES + j]);
+                    if hidden >> j & 1 == 1 {
+                        face.map(|f| f.fetch_max(HIDDEN, Ordering::Relaxed));
+                        continue;
                     }
                     let tri = [tri[0], tri[1], tri[2]];
                     if tri.iter().any(|&i| i as usize >= n) {
@@ -656,6 +657,10 @@ impl StripFrame<'_> {
                         if b < lo || a > hi {
                             continue;
                         }
+                    }
+                    // Drawn here: a face hidden in another strip is not hidden.
+                    if let Some(f) = face {
+                        f.store(DRAWN, Ordering::Relaxed);
                     }
                     let mut corners = v.map(|v| v.clip);
                     if !smooth {
@@ -771,8 +776,8 @@ pub struct DrawStats {
     pub writes: u64,
     /// Pixels some face covers.
     pub covered: u64,
-    /// Parts with bounds skipped by the occlusion test in every strip their box reaches, and
-    /// their faces.
+    /// Parts with bounds skipped by the occlusion test in every strip their box reaches; faces
+    /// skipped by it (their part, their block or they alone) in every strip and drawn in none.
     pub parts_hidden: usize,
     pub faces_hidden: u64,
 }
@@ -830,7 +835,8 @@ impl Strips {
     /// Occlusion culling: parts with [`Part::bounds`] are skipped in a strip where their box lies
     /// behind what the parts before them drew there, and so are blocks of [`BLOCK_FACES`] faces
     /// whose corners' screen rectangle does (at the corners' least depth), and failing that, the
-    /// faces whose own rectangles do (at their own corners' least depth). Drawn front to back,
+    /// faces whose own rectangles do (at their own corners' least depth; all of a block's faces
+    /// are tested when its first or last is found hidden, see `faces_behind`). Drawn front to back,
     /// this skips much of what is hidden; the image is the same pixel for pixel either way (the
     /// tests are conservative).
     pub fn set_occlusion(&mut self, on: bool) {
@@ -853,10 +859,9 @@ impl Strips {
     pub fn face_hidden(&self, k: usize, f: usize) -> bool {
         let hidden = |s: Option<&AtomicU8>| s.is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN);
         self.part_hidden(k)
-            || self.block_start.get(k).is_some_and(|&b| {
+            || self.block_start.get(k).zip(self.block_start.get(k + 1)).is_some_and(|(&b, &end)| {
                 let block = b + f / BLOCK_FACES;
-                block < self.block_start[k + 1]
-                    && (hidden(self.block_state.get(block)) || hidden(self.face_state.get(block * BLOCK_FACES + f % BLOCK_FACES)))
+                block < end && (hidden(self.block_state.get(block)) || hidden(self.face_state.get(block * BLOCK_FACES + f % BLOCK_FACES)))
             })
     }
 
@@ -1501,6 +1506,33 @@ mod tests {
         assert_eq!((stats.faces, stats.faces_hidden), (4, 2), "{stats:?}");
         assert_eq!((0..4).map(|f| strips.face_hidden(1, f)).collect::<Vec<_>>(), [true, true, false, false]);
         assert!(!strips.part_hidden(1));
+        assert!(!strips.face_hidden(2, 0), "no such part");
+    }
+
+    #[test]
+    fn a_face_hidden_in_its_strip_is_hidden_though_its_block_shows_in_another() {
+        // One block of three faces: the first and last high in the picture (strip 0), shown; the
+        // middle one lower (strip 1), behind a near square.
+        let near = [Vec3::new(-1.0, -0.5, 1.0), Vec3::new(1.0, -0.5, 1.0), Vec3::new(1.0, 0.2, 1.0), Vec3::new(-1.0, 0.2, 1.0)];
+        let tri = |x: f32, y: f32| [Vec3::new(x - 0.1, y, -1.0), Vec3::new(x + 0.1, y, -1.0), Vec3::new(x, y + 0.2, -1.0)];
+        let back: Vec<Vec3> = [tri(-0.5, 0.7), tri(0.0, -0.2), tri(0.5, 0.7)].concat();
+        let camera = ortho();
+        let (w, h) = (camera.width, camera.height);
+        let parts =
+            [Part::new(&near, &[], &[0, 1, 2, 0, 2, 3], palette(1)), Part::new(&back, &[], &[0, 1, 2, 3, 4, 5, 6, 7, 8], palette(2))];
+        let (plain, all) = draw_in_strips(&camera, &parts, w, h);
+        assert_eq!(all, 5);
+        let mut strips = Strips::new(w, h);
+        strips.set_occlusion(true);
+        let mut culled = vec![0u8; 4 * (w * h) as usize];
+        strips.draw(&camera, &parts, |row, rgba| {
+            let at = 4 * (row * w) as usize;
+            culled[at..at + rgba.len()].copy_from_slice(rgba);
+        });
+        assert!(culled == plain, "occlusion culling changed pixels");
+        let stats = strips.stats();
+        assert_eq!((stats.faces, stats.faces_hidden), (4, 1), "{stats:?}");
+        assert_eq!((0..3).map(|f| strips.face_hidden(1, f)).collect::<Vec<_>>(), [false, true, false]);
     }
 
     #[test]

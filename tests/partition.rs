@@ -349,7 +349,6 @@ fn textured_builds_partitioned_as_in_core(name: &str) {
     assert!(rp.header().attributes.uvs, "UVs carried");
     assert_eq!(rp.materials(), rc.materials());
     assert_eq!(rp.materials().len(), 2);
-    // The same image, with the same levels.
     // The same images (a PLY names one per material), with the same levels.
     let (tp, tc) = (rp.textures(), rc.textures());
     let ply = name.ends_with(".ply");

@@ -114,10 +114,10 @@ impl WriteSummary {
     }
 }
 
-/// Where a level's encoded chunks wait for [`Writer::finish`].
 /// Spilled node models read at once to be coded on every core (format 3's last step).
 const CODING_BATCH_BYTES: u64 = 16 << 20;
 
+/// Where a level's encoded chunks wait for [`Writer::finish`].
 enum Spill {
     Memory(Vec<u8>),
     /// An unlinked temporary file: nothing is left behind, whatever ends the process.
