@@ -87,6 +87,15 @@ pub fn check_output(dest: &Path) -> Result<()> {
     if dest.file_name().is_none() {
         return Err(Error::invalid(dest, None, "not a file name"));
     }
+    // The output is renamed into place, which would replace a device, pipe or socket (even
+    // /dev/null) with a regular file.
+    if std::fs::metadata(dest).is_ok_and(|m| !m.is_file()) {
+        return Err(Error::invalid(
+            dest,
+            None,
+            "is not a regular file (a device, pipe or socket): strata writes to a temporary file and renames it into place, which would replace it; give a file name",
+        ));
+    }
     if let Some(id) = Identity::of(dest) {
         let protected = PROTECTED.lock().map(|l| l.iter().any(|p| p.same_file(&id))).unwrap_or(false);
         if protected {
@@ -378,6 +387,18 @@ mod tests {
         }
         assert_eq!(std::fs::read(&input).unwrap(), b"v 0 0 0\n");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_device_is_refused_not_replaced() {
+        let null = Path::new("/dev/null");
+        if !std::fs::metadata(null).is_ok_and(|m| !m.is_file()) {
+            return;
+        }
+        let err = AtomicFile::create(null).err().expect("a device is refused").to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        assert!(!std::fs::metadata(null).unwrap().is_file(), "/dev/null is still a device");
     }
 
     #[test]
