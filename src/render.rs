@@ -365,13 +365,12 @@ struct StripFrame<'a> {
     height: u32,
     /// Per part, with occlusion culling on: where its box projects ([`Hull`]).
     hulls: &'a [Hull],
-    /// Per part, then per block (parts one after the other): [`UNTESTED`], [`HIDDEN`] or [`DRAWN`].
+    /// Per part, and per face ([`BLOCK_FACES`] entries per block, parts one after the other):
+    /// [`UNTESTED`], [`HIDDEN`] or [`DRAWN`].
     drawn: &'a [AtomicU8],
-    block_state: &'a [AtomicU8],
-    /// Per block, [`BLOCK_FACES`] entries: each face's bounds, and its state where its block was
-    /// drawn.
-    face_bounds: &'a [Block],
     face_state: &'a [AtomicU8],
+    /// Per block, [`BLOCK_FACES`] entries: each face's bounds.
+    face_bounds: &'a [Block],
 }
 
 /// A part's box on screen, for the occlusion test: pixels `x0..=x1` × `y0..=y1` (a pixel wider
@@ -609,38 +608,36 @@ impl StripFrame<'_> {
                 }
                 let end = (3 * (b + 1) * BLOCK_FACES).min(part.indices.len() / 3 * 3);
                 let faces = &part.indices[3 * b * BLOCK_FACES..end];
+                // The block's faces' entries in `face_state` and `face_bounds`.
+                let at = (first_block + b) * BLOCK_FACES;
+                let slots = at..at + faces.len() / 3;
                 // Faces of the block found hidden here, one bit each.
                 let mut hidden = 0u32;
                 if occlusion {
-                    let state = &self.block_state[first_block + b];
                     if bounds.z > f32::NEG_INFINITY {
-                        let all = u32::MAX >> (32 - faces.len() / 3);
+                        let all = u32::MAX >> (32 - slots.len());
                         match behind(bounds.rows, bounds.cols, bounds.z - HULL_DEPTH_MARGIN, first, last, width, depth) {
                             // Outside the image: its faces have no pixel here.
                             None => continue,
                             Some(true) => hidden = all,
-                            Some(false) => {
-                                let at = (first_block + b) * BLOCK_FACES;
-                                hidden = self.faces_behind(&self.face_bounds[at..at + faces.len() / 3], (first, last), depth);
-                            }
+                            Some(false) => hidden = self.faces_behind(&self.face_bounds[slots.clone()], (first, last), depth),
                         }
                         if hidden == all {
-                            state.fetch_max(HIDDEN, Ordering::Relaxed);
                             self.drawn[part_index].fetch_max(HIDDEN, Ordering::Relaxed);
-                            let at = (first_block + b) * BLOCK_FACES;
-                            for f in &self.face_state[at..at + faces.len() / 3] {
+                            for f in &self.face_state[slots] {
                                 f.fetch_max(HIDDEN, Ordering::Relaxed);
                             }
                             continue;
                         }
                     }
-                    state.store(DRAWN, Ordering::Relaxed);
                     self.drawn[part_index].store(DRAWN, Ordering::Relaxed);
                 }
                 for (j, tri) in faces.chunks_exact(3).enumerate() {
-                    let face = occlusion.then(|| &self.face_state[(first_block + b) * BLOCK_FACES + j]);
+                    let face = occlusion.then(|| &self.face_state[at + j]);
                     if hidden >> j & 1 == 1 {
-                        face.map(|f| f.fetch_max(HIDDEN, Ordering::Relaxed));
+                        if let Some(f) = face {
+                            f.fetch_max(HIDDEN, Ordering::Relaxed);
+                        }
                         continue;
                     }
                     let tri = [tri[0], tri[1], tri[2]];
@@ -759,8 +756,7 @@ pub struct Strips {
     occlusion: bool,
     hulls: Vec<Hull>,
     drawn: Vec<AtomicU8>,
-    block_state: Vec<AtomicU8>,
-    /// With occlusion culling, [`BLOCK_FACES`] per block: each face's bounds (this frame).
+    /// With occlusion culling, [`BLOCK_FACES`] per block: each face's bounds and state (this frame).
     face_bounds: Vec<Block>,
     face_state: Vec<AtomicU8>,
     stats: DrawStats,
@@ -825,7 +821,6 @@ impl Strips {
             occlusion: false,
             hulls: Vec::new(),
             drawn: Vec::new(),
-            block_state: Vec::new(),
             face_bounds: Vec::new(),
             face_state: Vec::new(),
             stats: DrawStats::default(),
@@ -857,11 +852,11 @@ impl Strips {
     /// Whether the last [`Strips::draw`] skipped face `f` of part `k` by occlusion, and drew it
     /// in no strip: its part, its block of [`BLOCK_FACES`], or the face itself.
     pub fn face_hidden(&self, k: usize, f: usize) -> bool {
-        let hidden = |s: Option<&AtomicU8>| s.is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN);
         self.part_hidden(k)
             || self.block_start.get(k).zip(self.block_start.get(k + 1)).is_some_and(|(&b, &end)| {
                 let block = b + f / BLOCK_FACES;
-                block < end && (hidden(self.block_state.get(block)) || hidden(self.face_state.get(block * BLOCK_FACES + f % BLOCK_FACES)))
+                block < end
+                    && self.face_state.get(block * BLOCK_FACES + f % BLOCK_FACES).is_some_and(|s| s.load(Ordering::Relaxed) == HIDDEN)
             })
     }
 
@@ -880,12 +875,10 @@ impl Strips {
         let total = *self.block_start.last().unwrap_or(&0);
         self.hulls.clear();
         self.drawn.clear();
-        self.block_state.clear();
         self.face_state.clear();
         if self.occlusion {
             self.hulls.extend(parts.iter().map(|p| Hull::of(p, &view_projection, width, height)));
             self.drawn.extend(parts.iter().map(|_| AtomicU8::new(UNTESTED)));
-            self.block_state.extend((0..total).map(|_| AtomicU8::new(UNTESTED)));
             self.face_state.extend((0..total * BLOCK_FACES).map(|_| AtomicU8::new(UNTESTED)));
         }
         let frame = StripFrame {
@@ -896,7 +889,6 @@ impl Strips {
             height,
             hulls: &self.hulls,
             drawn: &self.drawn,
-            block_state: &self.block_state,
             face_bounds: &[],
             face_state: &self.face_state,
         };
@@ -976,16 +968,9 @@ impl Strips {
                 self.stats.parts_hidden += 1;
                 self.stats.faces_hidden += faces as u64;
             } else if self.occlusion {
-                for (b, state) in self.block_state[self.block_start[k]..self.block_start[k + 1]].iter().enumerate() {
-                    let in_block = (faces - b * BLOCK_FACES).min(BLOCK_FACES);
-                    if state.load(Ordering::Relaxed) == HIDDEN {
-                        self.stats.faces_hidden += in_block as u64;
-                    } else {
-                        let first = (self.block_start[k] + b) * BLOCK_FACES;
-                        let states = &self.face_state[first..first + in_block];
-                        self.stats.faces_hidden += states.iter().filter(|s| s.load(Ordering::Relaxed) == HIDDEN).count() as u64;
-                    }
-                }
+                // A block skipped whole marks its faces too; entries past a part's last face stay untested.
+                let states = &self.face_state[self.block_start[k] * BLOCK_FACES..self.block_start[k + 1] * BLOCK_FACES];
+                self.stats.faces_hidden += states.iter().filter(|s| s.load(Ordering::Relaxed) == HIDDEN).count() as u64;
             }
         }
         self.stats.faces
@@ -1389,6 +1374,12 @@ mod tests {
 
     /// The strip renderer's rows with occlusion culling on, and its stats.
     fn draw_occluded(camera: &Camera, parts: &[Part<'_>], width: u32, height: u32) -> (Vec<u8>, DrawStats) {
+        let (rgba, strips) = occluded_strips(camera, parts, width, height);
+        (rgba, strips.stats())
+    }
+
+    /// [`draw_occluded`], with the renderer kept to ask which faces it skipped.
+    fn occluded_strips(camera: &Camera, parts: &[Part<'_>], width: u32, height: u32) -> (Vec<u8>, Strips) {
         let mut rgba = vec![0; 4 * (width * height) as usize];
         let mut strips = Strips::new(width, height);
         strips.set_occlusion(true);
@@ -1396,7 +1387,7 @@ mod tests {
             let at = 4 * (row * width) as usize;
             rgba[at..at + rows.len()].copy_from_slice(rows);
         });
-        (rgba, strips.stats())
+        (rgba, strips)
     }
 
     #[test]
@@ -1494,13 +1485,7 @@ mod tests {
         let parts = [Part::new(&near, &[], &[0, 1, 2, 0, 2, 3], palette(1)), Part::new(&back, &[], &faces, palette(2))];
         let (plain, all) = draw_in_strips(&camera, &parts, w, h);
         assert_eq!(all, 6);
-        let mut strips = Strips::new(w, h);
-        strips.set_occlusion(true);
-        let mut culled = vec![0u8; 4 * (w * h) as usize];
-        strips.draw(&camera, &parts, |row, rgba| {
-            let at = 4 * (row * w) as usize;
-            culled[at..at + rgba.len()].copy_from_slice(rgba);
-        });
+        let (culled, strips) = occluded_strips(&camera, &parts, w, h);
         assert!(culled == plain, "occlusion culling changed pixels");
         let stats = strips.stats();
         assert_eq!((stats.faces, stats.faces_hidden), (4, 2), "{stats:?}");
@@ -1522,13 +1507,7 @@ mod tests {
             [Part::new(&near, &[], &[0, 1, 2, 0, 2, 3], palette(1)), Part::new(&back, &[], &[0, 1, 2, 3, 4, 5, 6, 7, 8], palette(2))];
         let (plain, all) = draw_in_strips(&camera, &parts, w, h);
         assert_eq!(all, 5);
-        let mut strips = Strips::new(w, h);
-        strips.set_occlusion(true);
-        let mut culled = vec![0u8; 4 * (w * h) as usize];
-        strips.draw(&camera, &parts, |row, rgba| {
-            let at = 4 * (row * w) as usize;
-            culled[at..at + rgba.len()].copy_from_slice(rgba);
-        });
+        let (culled, strips) = occluded_strips(&camera, &parts, w, h);
         assert!(culled == plain, "occlusion culling changed pixels");
         let stats = strips.stats();
         assert_eq!((stats.faces, stats.faces_hidden), (4, 1), "{stats:?}");
