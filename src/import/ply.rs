@@ -2026,12 +2026,18 @@ mod tests {
         (m, warnings)
     }
 
-    #[test]
-    fn textured_files_stream_as_they_read_whole() {
-        let dir = std::env::temp_dir().join(format!("strata-ply-tex-stream-{}", std::process::id()));
+    /// A new folder `name` in the temporary folder holding a 2 × 2 PNG, `a.png`.
+    fn folder_with_image(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
         std::fs::write(dir.join("a.png"), &png).unwrap();
+        dir
+    }
+
+    #[test]
+    fn textured_files_stream_as_they_read_whole() {
+        let dir = folder_with_image("strata-ply-tex-stream");
         let vertices = |uvs: bool| -> Vec<Vec<V>> {
             [(0., 0.), (1., 0.), (1., 1.), (0., 1.), (2., 0.)]
                 .iter()
@@ -2268,10 +2274,7 @@ mod tests {
 
     #[test]
     fn texture_file_comments_become_materials_with_their_images() {
-        let dir = std::env::temp_dir().join(format!("strata-ply-tex-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let png = crate::texture::encode(crate::texture::ImageCodec::Png, &crate::texture::Rgba8::new(2, 2), 90).unwrap();
-        std::fs::write(dir.join("a.png"), &png).unwrap();
+        let dir = folder_with_image("strata-ply-tex");
         let text = "ply\nformat ascii 1.0\ncomment TextureFile a.png\ncomment TextureFile missing b.png\nelement vertex 4\n\
                     property float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\n\
                     property list uchar float texcoord\nproperty int texnumber\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n\
