@@ -248,6 +248,25 @@ fn non_finite_normals_and_uvs_are_replaced_with_a_warning() {
 }
 
 #[test]
+fn huge_and_non_finite_uvs_and_normals_are_replaced_by_both_builds() {
+    let dir = TempDir::new("huge-uvs");
+    let ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+               property float nx\nproperty float ny\nproperty float nz\nproperty float s\nproperty float t\n\
+               element face 2\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0 0 0 1 0 0\n1 0 0 0 0 1 1e20 0\n1 1 0 nan 0 1 1 1\n0 1 0 0 0 1 0 -inf\n3 0 1 2\n3 0 2 3\n";
+    let input = dir.write("huge.ply", ply);
+    for build in ["--in-core", "--partitioned"] {
+        let output = dir.0.join(format!("huge{build}.strata"));
+        let (ok, _, stderr) = strata(&["convert", build, input.to_str().unwrap(), output.to_str().unwrap()]);
+        assert!(ok, "{build}: {stderr}");
+        assert!(stderr.contains("2 corner normals were NaN or infinite and got their face's normal"), "{build}: {stderr}");
+        assert!(stderr.contains("2 corner UVs were NaN, infinite or beyond ±2^24 and got UV (0, 0)"), "{build}: {stderr}");
+        let (ok, _, stderr) = strata(&["verify", output.to_str().unwrap()]);
+        assert!(ok, "{build}: {stderr}");
+    }
+}
+
+#[test]
 fn utf16_text_is_recognised() {
     let dir = TempDir::new("utf16");
     let utf16 = |text: &str, bom: bool, big: bool| -> Vec<u8> {

@@ -261,7 +261,7 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
             return Err(Error::at_element(path, format!("vertex {i}"), problem));
         }
     }
-    replace_non_finite_corners(&mut raw, &mut warnings);
+    replace_unusable_corners(&mut raw, &mut warnings);
     let source_faces = raw.face_count();
     let (mesh, cleaned) = raw
         .clean_known(grid.is_some())
@@ -272,11 +272,20 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
     Ok(Imported { mesh, source_faces, cleaned, warnings, metres_per_unit, georef, grid, import_ms: start.elapsed().as_secs_f64() * 1e3 })
 }
 
-/// Replace NaN or infinite corner normals by their face's normal and such UVs by (0, 0), with a
-/// warning per attribute. Unlike a position, neither shapes the mesh: a normal follows from the
-/// positions (writers emit NaN ones for degenerate faces), and a UV only places a texture, so the
-/// file stays usable, and the warning says what changed.
-fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
+/// The largest UV coordinate kept, in magnitude: from 2^24 on an f32 holds even integers alone,
+/// which place nothing within a texture, and the format's UV steps end not far beyond.
+pub(crate) const MAX_UV: f32 = 16_777_216.0;
+
+/// Whether a UV places a texture: finite and within ±[`MAX_UV`].
+pub(crate) fn usable_uv(uv: Vec2) -> bool {
+    uv.is_finite() && uv.abs().max_element() < MAX_UV
+}
+
+/// Replace NaN or infinite corner normals by their face's normal and unusable UVs (see
+/// [`usable_uv`]) by (0, 0), with a warning per attribute. Unlike a position, neither shapes the
+/// mesh: a normal follows from the positions (writers emit NaN ones for degenerate faces), and a UV
+/// only places a texture, so the file stays usable, and the warning says what changed.
+fn replace_unusable_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
     let mut normals = 0;
     for (c, n) in mesh.normals.iter_mut().enumerate() {
         if !n.is_finite() {
@@ -285,10 +294,15 @@ fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
         }
     }
     let mut uvs = 0;
-    for uv in mesh.uvs.iter_mut().filter(|uv| !uv.is_finite()) {
+    for uv in mesh.uvs.iter_mut().filter(|uv| !usable_uv(**uv)) {
         *uv = Vec2::ZERO;
         uvs += 1;
     }
+    replaced_corners_warnings(normals, uvs, warnings);
+}
+
+/// The warnings for `normals` corner normals and `uvs` corner UVs replaced on import.
+pub(crate) fn replaced_corners_warnings(normals: u64, uvs: u64, warnings: &mut Vec<String>) {
     match normals {
         0 => {}
         1 => warnings.push("1 corner normal was NaN or infinite and got its face's normal".into()),
@@ -296,8 +310,8 @@ fn replace_non_finite_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
     }
     match uvs {
         0 => {}
-        1 => warnings.push("1 corner UV was NaN or infinite and got UV (0, 0)".into()),
-        n => warnings.push(format!("{n} corner UVs were NaN or infinite and got UV (0, 0)")),
+        1 => warnings.push("1 corner UV was NaN, infinite or beyond ±2^24 and got UV (0, 0)".into()),
+        n => warnings.push(format!("{n} corner UVs were NaN, infinite or beyond ±2^24 and got UV (0, 0)")),
     }
 }
 
@@ -390,23 +404,26 @@ mod tests {
     }
 
     #[test]
-    fn non_finite_normals_and_uvs_are_replaced_and_reported() {
+    fn unusable_normals_and_uvs_are_replaced_and_reported() {
         let mut mesh = Mesh {
             positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
             triangles: vec![[0, 1, 2], [0, 2, 1]],
             normals: vec![glam::Vec3::NAN, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::Z, glam::Vec3::INFINITY, glam::Vec3::X],
-            uvs: vec![Vec2::ONE, Vec2::new(f32::NAN, 0.0), Vec2::ONE, Vec2::ONE, Vec2::ONE, Vec2::ONE],
+            uvs: vec![Vec2::ONE, Vec2::new(f32::NAN, 0.0), Vec2::ONE, Vec2::new(0.5, -1e20), Vec2::splat(16_777_215.0), Vec2::ONE],
             ..Mesh::default()
         };
         let mut warnings = Vec::new();
-        replace_non_finite_corners(&mut mesh, &mut warnings);
+        replace_unusable_corners(&mut mesh, &mut warnings);
         assert_eq!(mesh.normals[0], glam::Vec3::Z);
         assert_eq!(mesh.normals[4], -glam::Vec3::Z);
         assert_eq!(mesh.normals[5], glam::Vec3::X);
-        assert_eq!(mesh.uvs[1], Vec2::ZERO);
+        assert_eq!(mesh.uvs[1..5], [Vec2::ZERO, Vec2::ONE, Vec2::ZERO, Vec2::splat(16_777_215.0)]);
         assert_eq!(
             warnings,
-            ["2 corner normals were NaN or infinite and got their face's normal", "1 corner UV was NaN or infinite and got UV (0, 0)",]
+            [
+                "2 corner normals were NaN or infinite and got their face's normal",
+                "2 corner UVs were NaN, infinite or beyond ±2^24 and got UV (0, 0)",
+            ]
         );
     }
 }

@@ -195,6 +195,7 @@ pub fn convert(
     let Some(d) = state else {
         return Err(Error::invalid(input, None, "nothing to convert: no faces"));
     };
+    crate::import::replaced_corners_warnings(d.replaced_normals, d.replaced_uvs, &mut warnings);
     let precision = match opts.encoding {
         Encoding::V3(p) => Some(p),
         Encoding::V2 => None,
@@ -291,6 +292,10 @@ struct Distribute {
     edges: Vec<f64>,
     stride: u64,
     seen: u64,
+    /// Corner normals that were NaN or infinite and corner UVs that were unusable, replaced as
+    /// the whole-file import replaces them.
+    replaced_normals: u64,
+    replaced_uvs: u64,
 }
 
 impl Distribute {
@@ -320,6 +325,8 @@ impl Distribute {
             edges: Vec::new(),
             stride: (faces / 65_536).max(1),
             seen: 0,
+            replaced_normals: 0,
+            replaced_uvs: 0,
         })
     }
 
@@ -336,13 +343,24 @@ impl Distribute {
             }
             self.seen += 1;
             let cell = self.cells.of((p[0] + p[1] + p[2]) / 3.0);
-            let n = match faces.normals.get(f) {
+            let mut n = match faces.normals.get(f) {
                 _ if !self.layout.normals => [Vec3::ZERO; 3],
                 Some(&corners) => corners,
                 None => t.map(|i| v.normals[i as usize]),
             };
+            if n.iter().any(|c| !c.is_finite()) {
+                let face = crate::mesh::triangle_cross(v.positions, t).normalize_or_zero().as_vec3();
+                for c in n.iter_mut().filter(|c| !c.is_finite()) {
+                    *c = face;
+                    self.replaced_normals += 1;
+                }
+            }
             let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
-            let uvs = faces.uvs.get(f).copied().unwrap_or([glam::Vec2::ZERO; 3]);
+            let mut uvs = faces.uvs.get(f).copied().unwrap_or([glam::Vec2::ZERO; 3]);
+            for uv in uvs.iter_mut().filter(|uv| !crate::import::usable_uv(**uv)) {
+                *uv = glam::Vec2::ZERO;
+                self.replaced_uvs += 1;
+            }
             let material = faces.materials.get(f).copied().unwrap_or(0);
             let welded = t.map(|i| self.weld[i as usize]);
             if let Some(sums) = &mut self.sums {
