@@ -252,6 +252,23 @@ fn up(x: f64) -> f32 {
 }
 
 impl Support {
+    /// Bytes of [`Support::to_bytes`].
+    pub const BYTES: usize = DIRECTIONS * 8;
+
+    /// The extents as little-endian f32s, min then max per direction.
+    pub fn to_bytes(&self, out: &mut Vec<u8>) {
+        out.extend(self.0.iter().flatten().flat_map(|x| x.to_le_bytes()));
+    }
+
+    /// The support [`Support::to_bytes`] wrote to `bytes` ([`Support::BYTES`] long).
+    pub fn from_bytes(bytes: &[u8]) -> Support {
+        let mut s = Support::default();
+        for (x, b) in s.0.iter_mut().flatten().zip(bytes.chunks_exact(4)) {
+            *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        }
+        s
+    }
+
     /// The support of `points` (grid coordinates).
     pub fn of(points: &[[u32; 3]]) -> Support {
         let mut s = Support::default();
@@ -311,6 +328,23 @@ pub fn grid_eye(grid: &super::Grid, eye: Vec3) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_support_reads_back_from_its_bytes() {
+        let s = Support::of(&[[0, 7, 3], [1000, 20, 65_535], [5, 5, 1 << 20]]);
+        let mut bytes = vec![1, 2];
+        s.to_bytes(&mut bytes);
+        assert_eq!(bytes.len(), 2 + Support::BYTES);
+        assert_eq!(Support::from_bytes(&bytes[2..]), s);
+        assert_eq!(
+            Support::from_bytes(&{
+                let mut b = Vec::new();
+                Support::default().to_bytes(&mut b);
+                b
+            }),
+            Support::default()
+        );
+    }
 
     #[test]
     fn separated_boxes_get_a_plane_with_a_gap_and_the_eye_decides() {

@@ -128,6 +128,14 @@ enum Spill {
 }
 
 impl Spill {
+    /// An unlinked file in `dir`, or memory without one.
+    fn new(dir: Option<&Path>) -> Result<Spill> {
+        Ok(match dir {
+            Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
+            None => Spill::Memory(Vec::new()),
+        })
+    }
+
     fn append(&mut self, bytes: &[u8]) -> std::io::Result<u64> {
         match self {
             Spill::Memory(v) => {
@@ -165,8 +173,9 @@ struct Pending {
     padded: u32,
     span: u32,
     crc: u32,
-    /// Its geometry's extent along the plane directions (`ORDR`).
-    support: Support,
+    /// Where its geometry's extent along the plane directions (`ORDR`) lies in the supports'
+    /// spill.
+    support_at: u64,
 }
 
 /// A file being built node by node.
@@ -175,6 +184,8 @@ pub struct Writer<W> {
     path: PathBuf,
     opts: WriterOptions,
     spills: Vec<Spill>,
+    /// Every node's [`Support`], which only `finish` reads.
+    supports: Spill,
     levels: Vec<Vec<Pending>>,
     clusters: u64,
     buf: Vec<u8>,
@@ -203,19 +214,14 @@ impl<W: Write> Writer<W> {
             return Err(bad(format!("{} levels", opts.levels)));
         }
         check_images(&opts).map_err(bad)?;
-        let mut spills = Vec::with_capacity(opts.levels as usize);
-        for _ in 0..opts.levels {
-            spills.push(match spill_dir {
-                Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
-                None => Spill::Memory(Vec::new()),
-            });
-        }
+        let spills = (0..opts.levels).map(|_| Spill::new(spill_dir)).collect::<Result<_>>()?;
         let levels = (0..opts.levels).map(|_| Vec::new()).collect();
         Ok(Writer {
             out,
             path: path.to_path_buf(),
             opts,
             spills,
+            supports: Spill::new(spill_dir)?,
             levels,
             clusters: 0,
             buf: Vec::new(),
@@ -286,6 +292,10 @@ impl<W: Write> Writer<W> {
         };
         let span = u32::try_from(span).map_err(|_| bad(format!("level {l} node {}: geometry of {span} bytes exceeds 4 GiB", node.key)))?;
         let spill_at = self.spills[l].append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
+        let padded = self.buf.len() as u32;
+        self.buf.clear();
+        Support::of(&g.points).to_bytes(&mut self.buf);
+        let support_at = self.supports.append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
         self.clusters += g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
         self.levels[l].push(Pending {
             key: node.key,
@@ -297,10 +307,10 @@ impl<W: Write> Writer<W> {
             faces: faces as u32,
             vertices: vertices as u32,
             spill_at,
-            padded: self.buf.len() as u32,
+            padded,
             span,
             crc,
-            support: Support::of(&g.points),
+            support_at,
         });
         Ok(())
     }
@@ -321,10 +331,7 @@ impl<W: Write> Writer<W> {
             Ok((model.bits(&costs), model.payload(&enc)?))
         };
         for l in 0..self.levels.len() {
-            let mut coded = match &self.spill_dir {
-                Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
-                None => Spill::Memory(Vec::new()),
-            };
+            let mut coded = Spill::new(self.spill_dir.as_deref())?;
             let mut pending = &mut self.levels[l][..];
             while !pending.is_empty() {
                 let mut batch_bytes = 0u64;
@@ -376,10 +383,7 @@ impl<W: Write> Writer<W> {
             return Err(Error::invalid(&self.path, None, format!("{levels} levels for a file begun with {}", self.levels.len())));
         }
         while self.levels.len() < levels as usize {
-            self.spills.push(match &self.spill_dir {
-                Some(dir) => Spill::File { file: tempfile::tempfile_in(dir).map_err(|e| Error::io(dir, e))?, len: 0 },
-                None => Spill::Memory(Vec::new()),
-            });
+            self.spills.push(Spill::new(self.spill_dir.as_deref())?);
             self.levels.push(Vec::new());
         }
         self.opts.levels = levels;
@@ -540,9 +544,15 @@ impl<W: Write> Writer<W> {
         // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images
         // and UVs in glTF's orientation (so a file with UVs is 2.2 with or without images).
         let images = &self.opts.images;
-        let supports: Vec<&Support> =
-            (0..nl).rev().flat_map(|l| order[l].iter().map(move |&k| (l, k))).map(|(l, k)| &self.levels[l][k].support).collect();
-        let planes = order_planes(&records, &codes, &supports, levels[nl - 1].nodes);
+        let mut bytes = [0u8; Support::BYTES];
+        let supports = (0..nl)
+            .rev()
+            .flat_map(|l| order[l].iter().map(move |&k| (l, k)))
+            .map(|(l, k)| self.supports.read(self.levels[l][k].support_at, &mut bytes).map(|_| Support::from_bytes(&bytes)))
+            .collect::<std::io::Result<Vec<Support>>>()
+            .map_err(|e| Error::io(&self.path, e))?;
+        self.supports = Spill::Memory(Vec::new());
+        let planes = order_planes(&records, &codes, supports, levels[nl - 1].nodes);
         let minor =
             match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some())
             {
@@ -661,8 +671,8 @@ impl<W: Write> Writer<W> {
 /// file order): every pair of up to 16 siblings, else each child with its 8 nearest siblings by box
 /// gap; a pair gets a plane when one of [`planes::directions`] leaves a slab no thicker than a
 /// quarter of the smaller box's diagonal.
-fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: &[&Support], top: u32) -> Planes {
-    let mut subtree: Vec<Support> = supports.iter().map(|s| (*s).clone()).collect();
+fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: Vec<Support>, top: u32) -> Planes {
+    let mut subtree = supports;
     for i in (0..records.len()).rev() {
         let p = records[i].parent;
         if p != NO_PARENT {

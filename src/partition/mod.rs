@@ -16,10 +16,12 @@
 //! that weld the tops by position link such nodes as neighbours.
 
 mod cells;
+mod tops;
+mod vertex_normals;
 mod work;
 
 use crate::error::{Error, Result};
-use crate::format::{octa, Attributes, Grid, Writer, WriterOptions, GRID_BITS};
+use crate::format::{Attributes, Grid, Writer, WriterOptions, GRID_BITS};
 use crate::import::stream::{Declared, Faces, Streaming, Vertices};
 use crate::import::{Format, ImportOptions};
 use crate::mesh::Material;
@@ -93,10 +95,10 @@ pub fn default_memory() -> u64 {
     (total / 2).max(256 << 20)
 }
 
-/// Bytes held per input face while cells are built, besides the cells themselves: the tops
-/// waiting for the merge, the writer's node records and the computed vertex normals (measured:
-/// 80 MB at 5M faces, 200 MB at 20M, after the cells of a 1 GB build; more than their slope of
-/// 8 B per face, for the allocator's share).
+/// Bytes held per input face besides the cells: while the input streams, its vertex arrays
+/// (positions, weld, owner, normal sums: 32 bytes a vertex, about 16 a face); while cells are
+/// built, the writer's node records and the pieces' open edges, a few bytes a face, as tops,
+/// node supports and computed normals wait in temporary files.
 pub const HELD_BYTES_PER_FACE: u64 = 16;
 
 /// Faces per cell for a budget and an input of `faces` faces: the cells in flight at once take
@@ -200,7 +202,8 @@ pub fn convert(
         Encoding::V3(p) => Some(p),
         Encoding::V2 => None,
     };
-    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
+    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } =
+        d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits), temp.path())?;
     lap(&mut times.import_ms);
 
     // The images' levels, made while no cell is in memory; maps without UVs are dropped.
@@ -244,12 +247,13 @@ pub fn convert(
         cell_levels: k,
         cell_faces,
         layout,
-        vertex_normals: vertex_normals.as_deref(),
+        vertex_normals: vertex_normals.as_ref(),
         shared: &shared,
         crease,
         precision,
         materials: &materials,
         textured,
+        temp: temp.path(),
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
     warnings.extend(cell_warnings);
@@ -266,7 +270,7 @@ pub fn convert(
 struct Distributed {
     grid: Grid,
     layout: Layout,
-    normals: Option<Vec<[i16; 2]>>,
+    normals: Option<vertex_normals::VertexNormals>,
     shared: Vec<u64>,
     spooled: Vec<(PathBuf, u64)>,
 }
@@ -389,7 +393,7 @@ impl Distribute {
     /// vertex straying outside the input's bounds (pieces do not know the coarse levels' bounds
     /// beforehand) stays on the grid where it can.
     /// `bits`: the grid's bits, 0 for format 3's automatic choice from the sampled edges.
-    fn finish(mut self, bits: u32) -> Result<Distributed> {
+    fn finish(mut self, bits: u32, temp: &Path) -> Result<Distributed> {
         let extent = (self.hi - self.lo).as_dvec3().max_element();
         let bits = if bits == 0 { crate::quantize::grid_bits_for(extent, &mut self.edges) } else { bits };
         let mut grid = Grid::fit(self.lo, self.hi, bits);
@@ -398,7 +402,7 @@ impl Distribute {
             let extent = (self.hi[k] as f64 - self.lo[k] as f64).max(0.0);
             grid.origin[k] -= ((span - extent) / 2.0 / grid.step).floor() * grid.step;
         }
-        let normals = self.sums.map(|s| s.into_iter().map(|n| octa::encode(n.normalize_or(Vec3::Z))).collect());
+        let normals = self.sums.map(|s| vertex_normals::VertexNormals::write(temp.join("normals"), &s)).transpose()?;
         let mut shared = vec![0u64; self.owner.len().div_ceil(64)];
         for (i, _) in self.owner.iter().enumerate().filter(|(_, &o)| o == SHARED) {
             shared[i / 64] |= 1 << (i % 64);

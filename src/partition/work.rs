@@ -11,10 +11,11 @@
 //! their open edges (locked, so the same at every level a piece builds) and linked at the end.
 
 use super::cells::{read_cell, Layout};
+use super::tops::{Spilled, Top};
 use crate::bounds::NodeBounds;
 use crate::error::{Error, Result};
 use crate::format::{octa, Attributes, Grid, HierarchyParams, NodeIn, WriteSummary, Writer};
-use crate::hierarchy::{self, GroupInfo, Hierarchy, Level};
+use crate::hierarchy::{self, Hierarchy, Level};
 use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
 use crate::mesh::{Adjacency, Mesh};
@@ -53,7 +54,7 @@ pub struct Job<'a> {
     pub cell_faces: u64,
     pub layout: Layout,
     /// Per welded input vertex, its computed normal, when normals are computed.
-    pub vertex_normals: Option<&'a [[i16; 2]]>,
+    pub vertex_normals: Option<&'a super::vertex_normals::VertexNormals>,
     /// Per welded input vertex, a bit: whether faces of more than one cell use it. Cells pin
     /// those vertices.
     pub shared: &'a [u64],
@@ -65,17 +66,15 @@ pub struct Job<'a> {
     pub materials: &'a [crate::mesh::Material],
     /// Whether the file has images (then nodes get their UV density).
     pub textured: bool,
+    /// The folder where tops wait between rounds.
+    pub temp: &'a Path,
 }
 
-/// A piece's top level, for the next round.
-pub struct Top {
-    level: LevelMesh,
-    groups: Vec<GroupInfo>,
-    bounds: Vec<NodeBounds>,
-    /// Node key of each group.
-    keys: Vec<u32>,
-    max_angle: f32,
-    max_faces: u32,
+impl Job<'_> {
+    /// Keep `top`, piece `p`'s of round `round`, in a file until the next round.
+    fn spill(&self, top: Option<Top>, round: usize, p: usize) -> Result<Option<Spilled>> {
+        top.map(|t| t.spill(self.temp.join(format!("top-{round}-{p}")))).transpose()
+    }
 }
 
 /// A piece's open edges, by their ends' positions (lower first), with the node key on their side
@@ -113,17 +112,18 @@ pub fn build<W: Write + Send>(
     let writer = Mutex::new(writer);
     let gathered = Mutex::new(Gathered::default());
     progress.stage("cells", spooled.len() as u64);
-    let mut tops: Vec<Top> = run(spooled.len(), threads, progress, |c| cell(job, c, &spooled[c].0, spooled[c].1, &writer, &gathered))?
-        .into_iter()
-        .flatten()
-        .collect();
+    let mut tops: Vec<Spilled> =
+        run(spooled.len(), threads, progress, |c| job.spill(cell(job, c, &spooled[c].0, spooled[c].1, &writer, &gathered)?, 0, c))?
+            .into_iter()
+            .flatten()
+            .collect();
     if tops.is_empty() {
         return Err(Error::invalid(job.input, None, "no faces left after removing degenerate and duplicate faces"));
     }
     let mut first = job.cell_levels;
     let mut round = 0;
     loop {
-        let faces: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+        let faces: usize = tops.iter().map(|t| t.faces).sum();
         let parts = faces.div_ceil(job.cell_faces.max(1) as usize);
         if parts <= 1 || tops.len() < 2 || round == MAX_ROUNDS {
             break;
@@ -138,7 +138,7 @@ pub fn build<W: Write + Send>(
         let mut part_of: FxHashMap<[u32; 3], u32> = FxHashMap::default();
         for (p, r) in runs.iter().enumerate() {
             for t in &tops[r.clone()] {
-                for &q in &t.level.mesh.positions {
+                for q in t.positions()? {
                     let e = part_of.entry(position_key(q)).or_insert(p as u32);
                     if *e != p as u32 {
                         *e = u32::MAX;
@@ -146,32 +146,28 @@ pub fn build<W: Write + Send>(
                 }
             }
         }
-        let mut groups: Vec<Option<(Vec<Top>, Pins)>> = Vec::with_capacity(runs.len());
+        let pins: Pins = part_of.into_iter().filter(|&(_, p)| p == u32::MAX).map(|(k, _)| k).collect();
+        let mut groups: Vec<Option<Vec<Spilled>>> = Vec::with_capacity(runs.len());
         let mut rest = tops.into_iter();
         for r in &runs {
-            let part: Vec<Top> = rest.by_ref().take(r.len()).collect();
-            let pins = part
-                .iter()
-                .flat_map(|t| t.level.mesh.positions.iter().map(|&q| position_key(q)))
-                .filter(|k| part_of[k] == u32::MAX)
-                .collect();
-            groups.push(Some((part, pins)));
+            groups.push(Some(rest.by_ref().take(r.len()).collect()));
         }
-        drop(part_of);
         let groups = Mutex::new(groups);
         let next = run(runs.len(), threads, progress, |p| {
-            let (part, pins) = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
-            merge(job, part, first, Some((p, levels, &pins)), &writer, &gathered)
+            let spilled = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
+            let part = spilled.into_iter().map(Spilled::load).collect::<Result<Vec<Top>>>()?;
+            job.spill(merge(job, part, first, Some((p, levels, &pins)), &writer, &gathered)?, round + 1, p)
         })?;
+        drop(pins);
         tops = next.into_iter().flatten().collect();
-        let after: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+        let after: usize = tops.iter().map(|t| t.faces).sum();
         first += levels;
         round += 1;
         if after * 4 > faces * 3 {
             break;
         }
     }
-    let faces: u64 = tops.iter().map(|t| t.level.mesh.face_count() as u64).sum();
+    let faces: u64 = tops.iter().map(|t| t.faces as u64).sum();
     if faces > 2 * job.cell_faces {
         let w = format!(
             "the final merge holds {faces} faces, more than twice a cell's {}: the mesh simplifies little at its cells' borders \
@@ -181,6 +177,7 @@ pub fn build<W: Write + Send>(
         gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
     }
     progress.stage("merge", 0);
+    let tops = tops.into_iter().map(Spilled::load).collect::<Result<Vec<Top>>>()?;
     merge(job, tops, first, None, &writer, &gathered)?;
     let mut writer = writer.into_inner().map_err(|_| poisoned())?;
     let mut g = gathered.into_inner().map_err(|_| poisoned())?;
@@ -242,12 +239,12 @@ fn run<T: Send>(n: usize, threads: usize, progress: &mut dyn Progress, work: imp
 }
 
 /// Split `tops` into `parts` runs of consecutive tops with about equal faces.
-fn runs(tops: &[Top], parts: usize) -> Vec<std::ops::Range<usize>> {
-    let total: usize = tops.iter().map(|t| t.level.mesh.face_count()).sum();
+fn runs(tops: &[Spilled], parts: usize) -> Vec<std::ops::Range<usize>> {
+    let total: usize = tops.iter().map(|t| t.faces).sum();
     let mut out = Vec::with_capacity(parts);
     let (mut start, mut sum) = (0, 0);
     for (i, t) in tops.iter().enumerate() {
-        sum += t.level.mesh.face_count();
+        sum += t.faces;
         if sum * parts >= total * (out.len() + 1) && i + 1 > start {
             out.push(start..i + 1);
             start = i + 1;
@@ -283,7 +280,7 @@ fn cell<W: Write>(
     if let Some(vn) = job.vertex_normals {
         mesh.compute_face_geometry();
         let cos = job.crease.cos();
-        let smooth: Vec<Vec3> = ids.iter().map(|&id| octa::decode(vn[id as usize])).collect();
+        let smooth: Vec<Vec3> = vn.read(&ids)?.into_iter().map(octa::decode).collect();
         mesh.normals = (0..3 * mesh.triangles.len())
             .map(|i| {
                 let n = smooth[mesh.triangles[i / 3][i % 3] as usize];
