@@ -60,13 +60,16 @@ pub struct Budget {
     pub threads: usize,
     /// Faces per cell; 0 derives it from `memory` and `threads` ([`cell_faces`]).
     pub cell_faces: u64,
+    /// Whether memory matters more than time: then big allocations go to and from the system
+    /// directly ([`frugal_allocation`]).
+    pub frugal: bool,
 }
 
 impl Budget {
     /// A budget of `memory` bytes on every core.
     pub fn new(memory: u64) -> Budget {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Budget { memory, temp: None, threads, cell_faces: 0 }
+        Budget { memory, temp: None, threads, cell_faces: 0, frugal: true }
     }
 
     /// A budget for an input of `faces` faces that the in-core build would fit in `memory`,
@@ -82,7 +85,7 @@ impl Budget {
         let room = memory.saturating_sub(faces.saturating_mul(HELD_BYTES_PER_FACE));
         let b = Budget::new(memory);
         let threads = b.threads.min((room / per_cell.max(1)) as usize).max(1);
-        Budget { threads, cell_faces, ..b }
+        Budget { threads, cell_faces, frugal: false, ..b }
     }
 }
 
@@ -154,6 +157,9 @@ pub fn convert(
     };
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
+    if budget.frugal {
+        frugal_allocation();
+    }
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
     if let Some(why) = declared.refused {
@@ -436,13 +442,26 @@ pub(crate) fn release_memory() {
     }
 }
 
+/// Have glibc serve allocations of 256 KiB or more by mappings of their own, which go back to the
+/// system when freed. By default it raises that threshold whenever such a block is freed, after
+/// which the pieces' big arrays come from the heap, which `malloc_trim` returns only in part
+/// where allocations that outlive a piece (node records, open edges) lie among them: the peak
+/// then grows with the number of pieces (notes/partition.md). This lasts for the whole process.
+fn frugal_allocation() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes a tunable of the allocator.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 10);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn cells_are_capped_for_speed_unless_there_would_be_too_many() {
-        let b = Budget { memory: 64 << 30, temp: None, threads: 2, cell_faces: 0 };
+        let b = Budget { memory: 64 << 30, temp: None, threads: 2, cell_faces: 0, frugal: true };
         assert_eq!(cell_faces(&b, 5_000_000), FAST_CELL_FACES);
         assert_eq!(cell_faces(&b, 1_000_000_000), 1_000_000_000u64.div_ceil(MAX_CELLS));
         let tight = Budget { memory: 256 << 20, ..b.clone() };
