@@ -262,6 +262,7 @@ impl Support {
 
     /// The support [`Support::to_bytes`] wrote to `bytes` ([`Support::BYTES`] long).
     pub fn from_bytes(bytes: &[u8]) -> Support {
+        debug_assert_eq!(bytes.len(), Support::BYTES);
         let mut s = Support::default();
         for (x, b) in s.0.iter_mut().flatten().zip(bytes.chunks_exact(4)) {
             *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);

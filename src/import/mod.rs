@@ -276,7 +276,7 @@ pub fn import_with(path: &Path, options: &ImportOptions) -> Result<Imported> {
 /// which place nothing within a texture, and the format's UV steps end not far beyond.
 pub(crate) const MAX_UV: f32 = 16_777_216.0;
 
-/// Whether a UV places a texture: finite and within ±[`MAX_UV`].
+/// Whether a UV places a texture: finite and below [`MAX_UV`] in magnitude.
 pub(crate) fn usable_uv(uv: Vec2) -> bool {
     uv.is_finite() && uv.abs().max_element() < MAX_UV
 }
@@ -310,8 +310,8 @@ pub(crate) fn replaced_corners_warnings(normals: u64, uvs: u64, warnings: &mut V
     }
     match uvs {
         0 => {}
-        1 => warnings.push("1 corner UV was NaN, infinite or beyond ±2^24 and got UV (0, 0)".into()),
-        n => warnings.push(format!("{n} corner UVs were NaN, infinite or beyond ±2^24 and got UV (0, 0)")),
+        1 => warnings.push("1 corner UV was NaN, infinite or at least 2^24 in magnitude and got UV (0, 0)".into()),
+        n => warnings.push(format!("{n} corner UVs were NaN, infinite or at least 2^24 in magnitude and got UV (0, 0)")),
     }
 }
 
@@ -422,7 +422,7 @@ mod tests {
             warnings,
             [
                 "2 corner normals were NaN or infinite and got their face's normal",
-                "2 corner UVs were NaN, infinite or beyond ±2^24 and got UV (0, 0)",
+                "2 corner UVs were NaN, infinite or at least 2^24 in magnitude and got UV (0, 0)",
             ]
         );
     }

@@ -7,8 +7,9 @@
 //!
 //! Memory: the cells in flight (each an in-core build of [`cell_faces`] faces), the vertex arrays
 //! while streaming (positions, and colors, normals and texture coordinates when the input has
-//! them), the images' levels, and what is held for later (the tops, the writer's node records,
-//! computed normals). It stays within the budget
+//! them), the images' levels, and what is held for later (the writer's node records, the pieces'
+//! open edges); the tops waiting for the next round and computed normals wait in temporary files.
+//! It stays within the budget
 //! as long as the mesh simplifies where its cells meet; one that does not (a soup of separate
 //! triangles) leaves large tops, and the final merge, which holds them all, is said to exceed it.
 //! Cells meet exactly: the vertices faces of two cells use are pinned at every level a cell
@@ -61,12 +62,13 @@ pub struct Budget {
     /// Faces per cell; 0 derives it from `memory` and `threads` ([`cell_faces`]).
     pub cell_faces: u64,
     /// Whether memory matters more than time: then big allocations go to and from the system
-    /// directly ([`frugal_allocation`]).
+    /// directly for the rest of the process ([`frugal_allocation`]), at the price of page faults
+    /// (10–20 % more time, notes/partition.md).
     pub frugal: bool,
 }
 
 impl Budget {
-    /// A budget of `memory` bytes on every core.
+    /// A budget of `memory` bytes on every core, frugal: memory matters more than time.
     pub fn new(memory: u64) -> Budget {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         Budget { memory, temp: None, threads, cell_faces: 0, frugal: true }
@@ -157,9 +159,6 @@ pub fn convert(
     };
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
-    if budget.frugal {
-        frugal_allocation();
-    }
     let temp = crate::atomic::TempDir::create(budget.temp.as_deref())?;
     let mut warnings = Vec::new();
     if let Some(why) = declared.refused {
@@ -184,6 +183,9 @@ pub fn convert(
         ));
     }
 
+    if budget.frugal {
+        frugal_allocation();
+    }
     // Distribute: faces to cells by centroid; computed normals need every face of a vertex, so
     // their sums are kept per input vertex and each cell looks its vertices up later.
     progress.stage("distribute", 0);
@@ -263,6 +265,7 @@ pub fn convert(
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
     warnings.extend(cell_warnings);
+    drop(vertex_normals);
     drop(temp);
     lap(&mut times.simplify_ms);
     file.commit()?;
@@ -449,7 +452,8 @@ pub(crate) fn release_memory() {
 /// then grows with the number of pieces (notes/partition.md). This lasts for the whole process.
 fn frugal_allocation() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only changes a tunable of the allocator.
+    // SAFETY: mallopt only changes a tunable of the allocator, under the allocator's own lock.
+    // Should it refuse (it returns 0), the build goes on with the default.
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 10);
     }

@@ -43,7 +43,7 @@ impl Top {
     /// Write the top to a new file at `path`.
     pub fn spill(self, path: PathBuf) -> Result<Spilled> {
         let io = |e| Error::io(&path, e);
-        let mut w = BufWriter::with_capacity(1 << 20, File::create(&path).map_err(io)?);
+        let mut w = BufWriter::with_capacity(1 << 20, File::options().write(true).create_new(true).open(&path).map_err(io)?);
         let m = &self.level.mesh;
         let faces = m.face_count();
         put(&mut w, &m.positions, |w, p| vec3(w, *p)).map_err(io)?;
@@ -87,7 +87,7 @@ impl Top {
 
 /// Bytes of one element of each array, as [`Top::spill`] writes them.
 const GROUP_BYTES: u64 = 19 * 4;
-const BOUNDS_BYTES: u64 = 9 * 4 + 2 * 2 + 2 + 2 + 7 * 4;
+const BOUNDS_BYTES: u64 = 9 * 4 + 2 * 2 + 2 * 2 + 9 * 4;
 
 impl Spilled {
     /// The top's vertex positions.
@@ -96,7 +96,7 @@ impl Spilled {
         r.array(12, |r| r.vec3())
     }
 
-    /// Read the top back and remove its file.
+    /// Read the top back and remove its file (left for the temporary folder's removal on error).
     pub fn load(self) -> Result<Top> {
         let mut r = self.open()?;
         let positions = r.array(12, |r| r.vec3())?;
@@ -140,6 +140,9 @@ impl Spilled {
         })?;
         let keys = r.array(4, |r| r.u32())?;
         let (max_angle, max_faces) = (r.f32().map_err(|e| r.fail(e))?, r.u32().map_err(|e| r.fail(e))?);
+        if r.left != 8 {
+            return Err(Error::invalid(&self.path, None, format!("{} bytes after a top", r.left.saturating_sub(8))));
+        }
         let _ = std::fs::remove_file(&self.path);
         let n = triangles.len();
         let m = Mesh { positions, triangles, normals, uvs, colors, face_materials, ..Mesh::default() };
@@ -286,6 +289,9 @@ mod tests {
             let e = Spilled { path: path.clone(), faces: 2 }.load().err().expect("a cut file fails");
             assert!(e.to_string().contains("top"), "{e}");
         }
+        std::fs::write(&path, [&bytes[..], &[0; 3]].concat()).unwrap();
+        let e = Spilled { path: path.clone(), faces: 2 }.load().err().expect("bytes past the end fail");
+        assert!(e.to_string().contains("3 bytes after a top"), "{e}");
         let mut wrong = bytes.clone();
         wrong[12 * 4 + 8 + 8..][..4].copy_from_slice(&9u32.to_le_bytes());
         std::fs::write(&path, &wrong).unwrap();

@@ -20,8 +20,9 @@ pub struct VertexNormals {
 /// Vertices encoded at once, on every core.
 const CHUNK: usize = 1 << 20;
 
-/// Ids closer than this share one read.
+/// Ids closer than this share one read, of at most `SPAN` codes.
 const GAP: u64 = 1024;
+const SPAN: u64 = 1 << 16;
 
 impl VertexNormals {
     /// Encode the normalized `sums` (a zero sum gets +Z) into a new file at `path`.
@@ -50,9 +51,11 @@ impl VertexNormals {
         let mut rest = &order[..];
         while let Some(&k) = rest.first() {
             let first = ids[k as usize] as u64;
-            let run =
-                rest.iter().zip(rest.iter().skip(1)).take_while(|&(&a, &b)| ids[b as usize] as u64 - ids[a as usize] as u64 <= GAP).count()
-                    + 1;
+            let near = |(&a, &b): (&u32, &u32)| {
+                let (a, b) = (ids[a as usize] as u64, ids[b as usize] as u64);
+                b - a <= GAP && b - first < SPAN
+            };
+            let run = rest.iter().zip(rest.iter().skip(1)).take_while(|&pair| near(pair)).count() + 1;
             let last = ids[rest[run - 1] as usize] as u64;
             if last >= self.count {
                 return Err(Error::invalid(&self.path, None, format!("vertex {last} of {}", self.count)));
@@ -89,5 +92,17 @@ mod tests {
         assert!(file.read(&[]).unwrap().is_empty());
         let e = file.read(&[1, 5000]).unwrap_err();
         assert!(e.to_string().contains("vertex 5000 of 5000"), "{e}");
+    }
+
+    #[test]
+    fn codes_of_ids_spread_over_many_vertices_read_back_across_spans() {
+        let dir = tempfile::tempdir().unwrap();
+        let sums: Vec<Vec3> = (0..150_000).map(|i| Vec3::new(1.0, (i % 1000) as f32 * 0.001, (i / 1000) as f32 * 0.01)).collect();
+        let file = VertexNormals::write(dir.path().join("n"), &sums).unwrap();
+        let ids: Vec<u32> = (0..150_000).rev().step_by(1000).collect();
+        let codes = file.read(&ids).unwrap();
+        for (&id, &code) in ids.iter().zip(&codes) {
+            assert_eq!(code, octa::encode(sums[id as usize].normalize()), "vertex {id}");
+        }
     }
 }

@@ -146,6 +146,7 @@ pub fn build<W: Write + Send>(
                 }
             }
         }
+        // Each top's positions are read here and again when its part loads it.
         let pins: Pins = part_of.into_iter().filter(|&(_, p)| p == u32::MAX).map(|(k, _)| k).collect();
         let mut groups: Vec<Option<Vec<Spilled>>> = Vec::with_capacity(runs.len());
         let mut rest = tops.into_iter();
@@ -156,7 +157,10 @@ pub fn build<W: Write + Send>(
         let next = run(runs.len(), threads, progress, |p| {
             let spilled = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
             let part = spilled.into_iter().map(Spilled::load).collect::<Result<Vec<Top>>>()?;
-            job.spill(merge(job, part, first, Some((p, levels, &pins)), &writer, &gathered)?, round + 1, p)
+            // The part's own shared positions: a simplified vertex may land where other parts meet.
+            let own: Pins =
+                part.iter().flat_map(|t| t.level.mesh.positions.iter().map(|&q| position_key(q))).filter(|k| pins.contains(k)).collect();
+            job.spill(merge(job, part, first, Some((p, levels, &own)), &writer, &gathered)?, round + 1, p)
         })?;
         drop(pins);
         tops = next.into_iter().flatten().collect();
