@@ -182,12 +182,12 @@ impl Orderer {
             Eye::At(_) => Eye::At(grid_eye(&sk.header.grid, camera.eye)),
             along => along,
         };
+        // A front node met as an ancestor first is marked above, then shown; one met first stops
+        // the walks up from below it, as the ancestors it would have marked are marked.
         for &n in front {
             if let Some(s) = self.state.get_mut(n as usize) {
                 *s = shown;
             }
-        }
-        for &n in front {
             let mut p = self.links.get(n as usize).map_or(u32::MAX, |l| l[0]);
             while let Some(s) = self.state.get_mut(p as usize) {
                 if *s >= above {
@@ -281,16 +281,27 @@ impl View<'_> {
             Eye::At(g) => (g, false),
             Eye::Along(d) => (-d, true),
         };
-        let mut before = [0u32; SMALL];
-        let range = self.planes.range(parent);
-        for e in &self.tests[range] {
-            let (a, b, n) = (e.first as u32, e.second as u32, e.normal);
-            let both = (live >> a) & (live >> b) & 1;
+        // Whether the entry's first child goes first (`Some(true)`), its second, or neither.
+        let decide = |e: &Test| {
+            let n = e.normal;
             let s = (n.x as f64 * g.x + n.y as f64 * g.y) + n.z as f64 * g.z;
             let (low, high) = if along { (0.0, 0.0) } else { (e.second_min as f64, e.first_max as f64) };
-            let first = (s < low) as u32 & both;
-            before[b as usize] |= first << a;
-            before[a as usize] |= ((s > high) as u32 & both & !first) << b;
+            (s < low).then_some(true).or((s > high).then_some(false))
+        };
+        let range = self.planes.range(parent);
+        if live.count_ones() == 2 {
+            return self.push_two(live, shown, kids.start, &self.tests[range], decide, stack, out);
+        }
+        let mut before = [0u32; SMALL];
+        for e in &self.tests[range] {
+            let (a, b) = (e.first as u32 % SMALL as u32, e.second as u32 % SMALL as u32);
+            if (live >> a) & (live >> b) & 1 != 0 {
+                match decide(e) {
+                    Some(true) => before[b as usize] |= 1 << a,
+                    Some(false) => before[a as usize] |= 1 << b,
+                    None => {}
+                }
+            }
         }
         // While the planes leave one child ready at a time, keys cannot change the order.
         let mut order = [0u32; SMALL];
@@ -309,22 +320,65 @@ impl View<'_> {
             taken += 1;
             left &= !ready;
         }
-        let mut sorted = [(0i64, 0u32); SMALL];
-        let mut m = 0;
-        let mut bits = left;
-        while bits != 0 {
-            let k = bits.trailing_zeros();
-            bits &= bits - 1;
-            sorted[m] = (ordered_bits(key(&self.boxes[(kids.start + k) as usize], self.key_eye)), k);
-            m += 1;
+        let mut m = taken;
+        if left != 0 {
+            let mut sorted = [(0i64, 0u32); SMALL];
+            let mut bits = left;
+            let mut undecided = 0;
+            while bits != 0 {
+                let k = bits.trailing_zeros();
+                bits &= bits - 1;
+                sorted[undecided] = (ordered_bits(key(&self.boxes[(kids.start + k) as usize], self.key_eye)), k);
+                undecided += 1;
+            }
+            insertion_sort(&mut sorted[..undecided]);
+            take_in_order(&sorted[..undecided], &before, &mut order[taken..]);
+            m += undecided;
         }
-        insertion_sort(&mut sorted[..m]);
-        take_in_order(&sorted[..m], &before, &mut order[taken..]);
-        let m = taken + m;
         if shown == live {
             out.extend(order[..m].iter().map(|&k| kids.start + k));
         } else {
             stack.extend(order[..m].iter().rev().map(|&k| (kids.start + k, shown >> k & 1 != 0)));
+        }
+    }
+
+    /// [`View::push_few`] for exactly two live children (the common case: most parents have two
+    /// or three), by the same rule: the planes' entries between the two decide unless they
+    /// contradict each other; else the nearer key goes first, the lower offset on a tie.
+    #[allow(clippy::too_many_arguments)]
+    fn push_two(
+        &self,
+        live: u32,
+        shown: u32,
+        start: u32,
+        tests: &[Test],
+        decide: impl Fn(&Test) -> Option<bool>,
+        stack: &mut Vec<(u32, bool)>,
+        out: &mut Vec<u32>,
+    ) {
+        let (x, y) = (live.trailing_zeros(), 31 - live.leading_zeros());
+        let (mut x_first, mut y_first) = (false, false);
+        for e in tests {
+            let (a, b) = (e.first as u32 % SMALL as u32, e.second as u32 % SMALL as u32);
+            if (live >> a) & (live >> b) & 1 != 0 {
+                if let Some(first) = decide(e) {
+                    let winner = if first { a } else { b };
+                    x_first |= winner == x;
+                    y_first |= winner == y;
+                }
+            }
+        }
+        let x_goes_first = if x_first != y_first {
+            x_first
+        } else {
+            let k = |c: u32| ordered_bits(key(&self.boxes[(start + c) as usize], self.key_eye));
+            k(x) <= k(y)
+        };
+        let (p, q) = if x_goes_first { (x, y) } else { (y, x) };
+        if shown == live {
+            out.extend([start + p, start + q]);
+        } else {
+            stack.extend([(start + q, shown >> q & 1 != 0), (start + p, shown >> p & 1 != 0)]);
         }
     }
 
