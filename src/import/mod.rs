@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::format::Georef;
 use crate::mesh::{coordinate_problem, triangle_cross, CleanReport, Mesh};
 use crate::texture::SourceImage;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 pub use heightfield::{DemCrs, DemEncoding, DemOptions, GridSummary};
 use std::collections::HashMap;
 use std::path::{Component, Path, PathBuf};
@@ -286,19 +286,32 @@ pub(crate) fn usable_uv(uv: Vec2) -> bool {
 /// mesh: a normal follows from the positions (writers emit NaN ones for degenerate faces), and a UV
 /// only places a texture, so the file stays usable, and the warning says what changed.
 fn replace_unusable_corners(mesh: &mut Mesh, warnings: &mut Vec<String>) {
-    let mut normals = 0;
-    for (c, n) in mesh.normals.iter_mut().enumerate() {
-        if !n.is_finite() {
-            *n = triangle_cross(&mesh.positions, &mesh.triangles[c / 3]).normalize_or_zero().as_vec3();
-            normals += 1;
-        }
-    }
-    let mut uvs = 0;
-    for uv in mesh.uvs.iter_mut().filter(|uv| !usable_uv(**uv)) {
-        *uv = Vec2::ZERO;
-        uvs += 1;
+    let (mut normals, mut uvs) = (0, 0);
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        let corners = 3 * f..3 * f + 3;
+        let n = mesh.normals.get_mut(corners.clone()).unwrap_or_default();
+        let (a, b) = replace_unusable_face_corners(&mesh.positions, t, n, mesh.uvs.get_mut(corners).unwrap_or_default());
+        (normals, uvs) = (normals + a, uvs + b);
     }
     replaced_corners_warnings(normals, uvs, warnings);
+}
+
+/// [`replace_unusable_corners`] for the corners of one face `t`: its `normals` and `uvs` (each
+/// three, or none); returns how many of each it replaced.
+pub(crate) fn replace_unusable_face_corners(positions: &[Vec3], t: &[u32; 3], normals: &mut [Vec3], uvs: &mut [Vec2]) -> (u64, u64) {
+    let (mut replaced_normals, mut replaced_uvs) = (0, 0);
+    if normals.iter().any(|n| !n.is_finite()) {
+        let face = triangle_cross(positions, t).normalize_or_zero().as_vec3();
+        for n in normals.iter_mut().filter(|n| !n.is_finite()) {
+            *n = face;
+            replaced_normals += 1;
+        }
+    }
+    for uv in uvs.iter_mut().filter(|uv| !usable_uv(**uv)) {
+        *uv = Vec2::ZERO;
+        replaced_uvs += 1;
+    }
+    (replaced_normals, replaced_uvs)
 }
 
 /// The warnings for `normals` corner normals and `uvs` corner UVs replaced on import.

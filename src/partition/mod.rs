@@ -361,19 +361,11 @@ impl Distribute {
                 Some(&corners) => corners,
                 None => t.map(|i| v.normals[i as usize]),
             };
-            if n.iter().any(|c| !c.is_finite()) {
-                let face = crate::mesh::triangle_cross(v.positions, t).normalize_or_zero().as_vec3();
-                for c in n.iter_mut().filter(|c| !c.is_finite()) {
-                    *c = face;
-                    self.replaced_normals += 1;
-                }
-            }
             let c = if self.layout.colors { t.map(|i| v.colors[i as usize]) } else { [[0; 4]; 3] };
             let mut uvs = faces.uvs.get(f).copied().unwrap_or([glam::Vec2::ZERO; 3]);
-            for uv in uvs.iter_mut().filter(|uv| !crate::import::usable_uv(**uv)) {
-                *uv = glam::Vec2::ZERO;
-                self.replaced_uvs += 1;
-            }
+            let (normals, uv_count) = crate::import::replace_unusable_face_corners(v.positions, t, &mut n, &mut uvs);
+            self.replaced_normals += normals;
+            self.replaced_uvs += uv_count;
             let material = faces.materials.get(f).copied().unwrap_or(0);
             let welded = t.map(|i| self.weld[i as usize]);
             if let Some(sums) = &mut self.sums {
