@@ -275,32 +275,16 @@ impl View<'_> {
             }
             return;
         }
-        // §5's test with one comparison per side: for an orthographic camera the eye is the
-        // reversed view direction and both bounds 0 (the same f64 products, negated exactly).
-        let (g, along) = match self.eye {
-            Eye::At(g) => (g, false),
-            Eye::Along(d) => (-d, true),
-        };
-        // Whether the entry's first child goes first (`Some(true)`), its second, or neither.
-        let decide = |e: &Test| {
-            let n = e.normal;
-            let s = (n.x as f64 * g.x + n.y as f64 * g.y) + n.z as f64 * g.z;
-            let (low, high) = if along { (0.0, 0.0) } else { (e.second_min as f64, e.first_max as f64) };
-            (s < low).then_some(true).or((s > high).then_some(false))
-        };
-        let range = self.planes.range(parent);
+        let tests = &self.tests[self.planes.range(parent)];
         if live.count_ones() == 2 {
-            return self.push_two(live, shown, kids.start, &self.tests[range], decide, stack, out);
+            return self.push_two(live, shown, kids.start, tests, stack, out);
         }
         let mut before = [0u32; SMALL];
-        for e in &self.tests[range] {
-            let (a, b) = (e.first as u32 % SMALL as u32, e.second as u32 % SMALL as u32);
-            if (live >> a) & (live >> b) & 1 != 0 {
-                match decide(e) {
-                    Some(true) => before[b as usize] |= 1 << a,
-                    Some(false) => before[a as usize] |= 1 << b,
-                    None => {}
-                }
+        for (a, b, e) in live_entries(tests, live) {
+            match self.decide(e) {
+                Some(true) => before[b as usize] |= 1 << a,
+                Some(false) => before[a as usize] |= 1 << b,
+                None => {}
             }
         }
         // While the planes leave one child ready at a time, keys cannot change the order.
@@ -345,27 +329,14 @@ impl View<'_> {
     /// [`View::push_few`] for exactly two live children (the common case: most parents have two
     /// or three), by the same rule: the planes' entries between the two decide unless they
     /// contradict each other; else the nearer key goes first, the lower offset on a tie.
-    #[allow(clippy::too_many_arguments)]
-    fn push_two(
-        &self,
-        live: u32,
-        shown: u32,
-        start: u32,
-        tests: &[Test],
-        decide: impl Fn(&Test) -> Option<bool>,
-        stack: &mut Vec<(u32, bool)>,
-        out: &mut Vec<u32>,
-    ) {
+    fn push_two(&self, live: u32, shown: u32, start: u32, tests: &[Test], stack: &mut Vec<(u32, bool)>, out: &mut Vec<u32>) {
         let (x, y) = (live.trailing_zeros(), 31 - live.leading_zeros());
         let (mut x_first, mut y_first) = (false, false);
-        for e in tests {
-            let (a, b) = (e.first as u32 % SMALL as u32, e.second as u32 % SMALL as u32);
-            if (live >> a) & (live >> b) & 1 != 0 {
-                if let Some(first) = decide(e) {
-                    let winner = if first { a } else { b };
-                    x_first |= winner == x;
-                    y_first |= winner == y;
-                }
+        for (a, b, e) in live_entries(tests, live) {
+            if let Some(first) = self.decide(e) {
+                let winner = if first { a } else { b };
+                x_first |= winner == x;
+                y_first |= winner == y;
             }
         }
         let x_goes_first = if x_first != y_first {
@@ -380,6 +351,20 @@ impl View<'_> {
         } else {
             stack.extend([(start + q, shown >> q & 1 != 0), (start + p, shown >> p & 1 != 0)]);
         }
+    }
+
+    /// §5's test of entry `e` for the eye: whether its first child goes first (`Some(true)`), its
+    /// second, or neither. One comparison per side: for an orthographic camera the eye is the
+    /// reversed view direction and both bounds 0 (the same f64 products, negated exactly).
+    fn decide(&self, e: &Test) -> Option<bool> {
+        let (g, along) = match self.eye {
+            Eye::At(g) => (g, false),
+            Eye::Along(d) => (-d, true),
+        };
+        let n = e.normal;
+        let s = (n.x as f64 * g.x + n.y as f64 * g.y) + n.z as f64 * g.z;
+        let (low, high) = if along { (0.0, 0.0) } else { (e.second_min as f64, e.first_max as f64) };
+        (s < low).then_some(true).or((s > high).then_some(false))
     }
 
     /// Put `s.live` (two or more children of `parent`, ascending) in drawing order.
@@ -521,6 +506,15 @@ fn take_in_order(sorted: &[(i64, u32)], before: &[u32; SMALL], order: &mut [u32]
         left &= !(1 << k);
         *slot = k;
     }
+}
+
+/// The entries of `tests` (a parent's of at most [`SMALL`] children) between two children live in
+/// `live` (a mask over offsets), with their first and second child's offsets.
+fn live_entries(tests: &[Test], live: u32) -> impl Iterator<Item = (u32, u32, &Test)> {
+    tests
+        .iter()
+        .map(|e| (e.first as u32 % SMALL as u32, e.second as u32 % SMALL as u32, e))
+        .filter(move |&(a, b, _)| (live >> a) & (live >> b) & 1 != 0)
 }
 
 /// Sort a few keyed children (faster than the library's sort at this size).
