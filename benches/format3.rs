@@ -5,7 +5,11 @@
 //! 15 is 4.0 bytes per input face and 50M faces/s; Corto (Nexus) reaches 4.48 on the CT head.
 //!
 //! `cargo bench --bench format3 [-- mesh ...]`; without arguments the bunny, the gargoyle and the
-//! CT head of ../shared/meshes when present, else the noisy-sphere fixture.
+//! CT head of ../shared/meshes when present, else the noisy-sphere fixture. `STRATA_GRID_BITS`,
+//! `STRATA_LATTICE`, `STRATA_NORMAL_BITS` and `STRATA_COLOR_BITS` set format 3's precision, and
+//! `STRATA_GEOMETRY_NORMALS=1` derives its normals from each level's geometry (`--normals
+//! geometry`; format 2 keeps the input's, so the image measure then shows what replacing them
+//! changes).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -120,10 +124,15 @@ fn main() {
         normal_bits: env("STRATA_NORMAL_BITS").map_or(d.normal_bits, |v| v as u32),
         uv_bits: d.uv_bits,
         color_bits: env("STRATA_COLOR_BITS").map_or(d.color_bits, |v| v as u32),
+        normals_from_geometry: env("STRATA_GEOMETRY_NORMALS").is_some_and(|v| v != 0.0),
     };
     println!(
-        "format 3 at grid {} bits, lattice {} of the error, normals {} bits, UVs {} bits",
-        p.grid_bits, p.lattice, p.normal_bits, p.uv_bits
+        "format 3 at grid {} bits, lattice {} of the error, normals {} bits{}, UVs {} bits",
+        p.grid_bits,
+        p.lattice,
+        p.normal_bits,
+        if p.normals_from_geometry { " derived from each level's geometry" } else { "" },
+        p.uv_bits
     );
     for input in &inputs {
         let name = input.file_name().unwrap().to_string_lossy();

@@ -69,6 +69,26 @@ pub enum Normals {
     Input,
     /// None: the smallest file, drawn flat-shaded.
     None,
+    /// Smooth normals of each level's own geometry, split at edges sharper than `crease_angle`
+    /// radians; the input's are dropped. Format 3 stores them as its readers predict them
+    /// ([`crate::derived_normals`]), at a few hundredths of a bit where a node holds a vertex's
+    /// faces, so files are much smaller than with the input's normals; format 2 stores the
+    /// smooth normals of level 0, carried to coarser levels.
+    Geometry { crease_angle: f32 },
+}
+
+impl ConvertOptions {
+    /// The encoding files are written with: format 3 derives normals from geometry when
+    /// `normals` asks for it.
+    pub(crate) fn write_encoding(&self) -> Encoding {
+        match self.encoding {
+            Encoding::V3(p) => Encoding::V3(Precision {
+                normals_from_geometry: p.normals_from_geometry || matches!(self.normals, Normals::Geometry { .. }),
+                ..p
+            }),
+            e => e,
+        }
+    }
 }
 
 /// Progress of a long conversion, reported stage by stage.
@@ -197,6 +217,7 @@ pub fn convert(
         Normals::Auto { crease_angle } if imported.mesh.normals.is_empty() => {
             imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
         }
+        Normals::Geometry { crease_angle } => imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle),
         Normals::None => imported.mesh.normals.clear(),
         _ => {}
     }
@@ -229,7 +250,7 @@ pub fn convert(
         params: opts.hierarchy,
         level_ratio: opts.levels.ratio,
         georef,
-        encoding: opts.encoding,
+        encoding: opts.write_encoding(),
         images: images.into(),
         ..WriteOptions::default()
     };

@@ -6,6 +6,7 @@
 
 use crate::atomic::AtomicFile;
 use crate::bounds;
+use crate::derived_normals::DerivedNormals;
 use crate::error::{Error, Result};
 use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
 use crate::format::geom::v3::Lattice;
@@ -68,11 +69,14 @@ pub struct Precision {
     pub uv_bits: u32,
     /// Bits of each colour channel, 1..=8 (8 keeps colours exactly).
     pub color_bits: u32,
+    /// Store each level's normals as readers derive them from its geometry
+    /// ([`crate::derived_normals`]) instead of the normals the mesh carries.
+    pub normals_from_geometry: bool,
 }
 
 impl Default for Precision {
     fn default() -> Self {
-        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 8, uv_bits: 16, color_bits: 8 }
+        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 8, uv_bits: 16, color_bits: 8, normals_from_geometry: false }
     }
 }
 
@@ -233,6 +237,12 @@ impl Piece {
             let hl = &h.levels[l];
             let mesh = &lv.levels[l].mesh;
             let file_level = l + place.offset;
+            let derived = match precision {
+                Some(p) if p.normals_from_geometry && attributes.normals => {
+                    Some(DerivedNormals::new(mesh, &self.quant[l].points, p.normal_bits))
+                }
+                _ => None,
+            };
             for (g, b) in self.bounds[l].iter().enumerate() {
                 let clusters = (file_level == 0).then_some(&h.clusters);
                 let lattice = precision.map_or(Lattice::default(), |p| Lattice {
@@ -242,7 +252,8 @@ impl Piece {
                     color_bits: if attributes.colors { p.color_bits } else { 0 },
                 });
                 let geometry =
-                    node_geometry(mesh, &self.quant[l], grid, self.faces[l].get(g), clusters, attributes, lattice).map_err(bad)?;
+                    node_geometry(mesh, &self.quant[l], grid, self.faces[l].get(g), clusters, attributes, lattice, derived.as_ref())
+                        .map_err(bad)?;
                 let uv_density = if textured { uv_density(mesh, self.faces[l].get(g)) } else { 0.0 };
                 let top = file_level + 1 == place.file_levels;
                 add(NodeIn {
@@ -435,7 +446,8 @@ fn uv_bits(mesh: &Mesh, order: &[u32], bits: u32) -> u32 {
 /// The geometry of `faces` of `mesh`, as the format stores it. Faces are ordered by culling cluster
 /// (level 0), then material, then along a Morton curve; vertices are deduplicated corners (grid point and attributes) in
 /// order of first use. Cluster records start from the hierarchy's cones and spheres
-/// ([`bounds::cluster`]).
+/// ([`bounds::cluster`]). With `derived`, format 3's normals are those of the level's geometry.
+#[allow(clippy::too_many_arguments)]
 fn node_geometry(
     mesh: &Mesh,
     q: &Quantized,
@@ -444,6 +456,7 @@ fn node_geometry(
     clusters: Option<&hierarchy::Level>,
     attrs: Attributes,
     lattice: Lattice,
+    derived: Option<&DerivedNormals>,
 ) -> std::result::Result<GeometryCodes, String> {
     let cluster_of = |f: u32| clusters.map_or(0, |c| c.face_group[f as usize]);
     // Within a cluster and material, faces go along a Morton curve of their centroids, so that
@@ -486,7 +499,9 @@ fn node_geometry(
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
                 (true, 0) => octa::encode(mesh.normals[corner]),
-                (true, bits) => octa::encode_bits(mesh.normals[corner], bits),
+                (true, bits) => {
+                    derived.and_then(|d| d.code(v, mesh.normals[corner])).unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], bits))
+                }
             };
             let uv = match (attrs.uvs, lattice.uv_bits) {
                 (false, _) => [0; 2],

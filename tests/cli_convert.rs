@@ -168,3 +168,23 @@ fn crowded_isosurface_vertices_stay_distinct() {
     assert_eq!(distinct.len(), input.vertex_count());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn normals_of_the_geometry_make_a_smaller_file_that_verifies() {
+    let dir = temp_dir("geometry-normals");
+    let input = fixture("noisy_sphere.ply");
+    let size = |args: &[&str], name: &str| {
+        let out = dir.join(name);
+        let mut all = vec!["convert", &input, out.to_str().unwrap(), "--quiet"];
+        all.extend_from_slice(args);
+        let o = strata(&all);
+        assert!(o.status.success(), "convert {args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
+        let o = strata(&["verify", out.to_str().unwrap()]);
+        assert!(o.status.success(), "verify failed: {}", String::from_utf8_lossy(&o.stdout));
+        std::fs::metadata(&out).unwrap().len()
+    };
+    let input_normals = size(&[], "input.strata");
+    let geometry = size(&["--normals", "geometry"], "geometry.strata");
+    assert!(geometry < input_normals, "--normals geometry: {geometry} bytes, the input's normals {input_normals}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -38,7 +38,9 @@ pub struct Args {
     #[command(flatten)]
     pub levels: LevelArgs,
     /// Normals to store: the input's, else smooth ones computed with --crease-angle (auto); only
-    /// the input's (input); none, for the smallest file drawn flat-shaded (none).
+    /// the input's (input); none, for the smallest file drawn flat-shaded (none); smooth ones of
+    /// each level's own geometry, as readers predict them, the input's dropped (geometry: format
+    /// 3 stores them almost for free).
     #[arg(long, value_enum, default_value_t = NormalsArg::Auto)]
     pub normals: NormalsArg,
     /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
@@ -89,6 +91,7 @@ pub enum NormalsArg {
     Auto,
     Input,
     None,
+    Geometry,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -99,6 +102,7 @@ pub fn run(a: Args) -> Result<()> {
             NormalsArg::Auto => Normals::Auto { crease_angle: a.crease_angle.to_radians() },
             NormalsArg::Input => Normals::Input,
             NormalsArg::None => Normals::None,
+            NormalsArg::Geometry => Normals::Geometry { crease_angle: a.crease_angle.to_radians() },
         },
         build: if a.partitioned {
             Build::Partitioned

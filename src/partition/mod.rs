@@ -206,7 +206,7 @@ pub fn convert(
         return Err(Error::invalid(input, None, "nothing to convert: no faces"));
     };
     crate::import::replaced_corners_warnings(d.replaced_normals, d.replaced_uvs, &mut warnings);
-    let precision = match opts.encoding {
+    let precision = match opts.write_encoding() {
         Encoding::V3(p) => Some(p),
         Encoding::V2 => None,
     };
@@ -225,7 +225,7 @@ pub fn convert(
     lap(&mut times.texture_ms);
     let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: layout.uvs, colors: layout.colors };
     let crease = match opts.normals {
-        Normals::Auto { crease_angle } => crease_angle,
+        Normals::Auto { crease_angle } | Normals::Geometry { crease_angle } => crease_angle,
         _ => 0.0,
     };
     let k = cell_levels(cell_faces);
@@ -317,12 +317,12 @@ impl Distribute {
         let cells = Cells::split(v.positions, faces, cell_faces);
         let given = !v.normals.is_empty() || !first.normals.is_empty();
         let layout = Layout {
-            normals: given && normals != Normals::None,
+            normals: given && matches!(normals, Normals::Auto { .. } | Normals::Input),
             uvs: !first.uvs.is_empty(),
             colors: !v.colors.is_empty(),
             materials: !first.materials.is_empty(),
         };
-        let compute = !given && matches!(normals, Normals::Auto { .. });
+        let compute = matches!(normals, Normals::Geometry { .. }) || (!given && matches!(normals, Normals::Auto { .. }));
         let spool = Spool::create(temp, cells.count, layout)?;
         let n = v.positions.len();
         let sums = compute.then(|| vec![Vec3::ZERO; n]);
