@@ -7,21 +7,19 @@
 //! `cargo bench --bench format3 [-- mesh ...]`; without arguments the bunny, the gargoyle and the
 //! CT head of ../shared/meshes when present, else the noisy-sphere fixture. `STRATA_GRID_BITS`,
 //! `STRATA_LATTICE`, `STRATA_NORMAL_BITS` and `STRATA_COLOR_BITS` set format 3's precision, and
-//! `STRATA_GEOMETRY_NORMALS=1` derives its normals from each level's geometry (`--normals
-//! geometry`; format 2 keeps the input's, so the image measure then shows what replacing them
-//! changes).
+//! `STRATA_GEOMETRY_NORMALS=A` converts both formats with `--normals geometry --crease-angle A`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use strata::format::geom::{self, v3};
 use strata::format::Reader;
-use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::pipeline::{convert, ConvertOptions, Normals, Silent};
 use strata::write::{Encoding, Precision};
 
-fn write(input: &Path, encoding: Encoding, tag: &str) -> (PathBuf, strata::format::WriteSummary) {
+fn write(input: &Path, encoding: Encoding, normals: Normals, tag: &str) -> (PathBuf, strata::format::WriteSummary) {
     let name = input.file_stem().unwrap().to_string_lossy();
     let out = std::env::temp_dir().join(format!("strata-format3-{name}-{tag}-{}.strata", std::process::id()));
-    let opts = ConvertOptions { encoding, ..ConvertOptions::default() };
+    let opts = ConvertOptions { encoding, normals, ..ConvertOptions::default() };
     let s = convert(input, &Default::default(), &out, &opts, &mut Silent).expect("convert").summary;
     (out, s)
 }
@@ -124,20 +122,22 @@ fn main() {
         normal_bits: env("STRATA_NORMAL_BITS").map_or(d.normal_bits, |v| v as u32),
         uv_bits: d.uv_bits,
         color_bits: env("STRATA_COLOR_BITS").map_or(d.color_bits, |v| v as u32),
-        normals_from_geometry: env("STRATA_GEOMETRY_NORMALS").is_some_and(|v| v != 0.0),
     };
+    // `--normals geometry` at this crease angle (degrees).
+    let geometry_normals = env("STRATA_GEOMETRY_NORMALS");
     println!(
         "format 3 at grid {} bits, lattice {} of the error, normals {} bits{}, UVs {} bits",
         p.grid_bits,
         p.lattice,
         p.normal_bits,
-        if p.normals_from_geometry { " derived from each level's geometry" } else { "" },
+        geometry_normals.map_or(String::new(), |a| format!(" of each level's geometry, creases at {a}°")),
         p.uv_bits
     );
     for input in &inputs {
         let name = input.file_name().unwrap().to_string_lossy();
-        let (f2, s2) = write(input, Encoding::V2, "2");
-        let (f3, s3) = write(input, Encoding::V3(p), "3");
+        let normals = geometry_normals.map_or(ConvertOptions::default().normals, |a| Normals::Geometry { crease_angle: a.to_radians() });
+        let (f2, s2) = write(input, Encoding::V2, normals, "2");
+        let (f3, s3) = write(input, Encoding::V3(p), normals, "3");
         let faces = s3.input_faces as f64;
         let bits = Reader::open_path(&f3).expect("open").header().grid.bits;
         println!("\n{name}: {} input faces, {} nodes, format 3 grid {bits} bits", s3.input_faces, s3.nodes);

@@ -44,6 +44,7 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
         tool: "strata vectors".into(),
         georef,
         encoding: encoding(major),
+        derive_normals: false,
         images: Default::default(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
@@ -90,6 +91,7 @@ fn textured(major: u16) -> Vec<u8> {
         tool: "strata vectors".into(),
         georef: None,
         encoding: encoding(major),
+        derive_normals: false,
         images: images.into(),
     };
     write_to(&mut out, &h, &lv, &opts).expect("the textured vector writes");

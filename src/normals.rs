@@ -1,9 +1,10 @@
-//! Smooth per-corner normals for meshes that come without any, as scanners' PLY files often do.
+//! Smooth per-corner normals for meshes that come without any, as scanners' PLY files often do
+//! (seed 000: members without smooth shading normals are flat shaded and lose most of the image).
 //!
-//! Stored in the chunk file, they are what keeps a coarse level looking like the full-detail model:
-//! the simplifier carries them down, so a coarse face is shaded with the input's normals instead of
-//! its own flat one (seed 000 makes the same point: members without smooth shading normals are
-//! flat shaded and lose most of the image).
+//! The simplifier carries them down to every level. Where they are computed (not the input's),
+//! the writer stores instead each level's own smooth normals as readers predict them
+//! ([`crate::derived_normals`]), which cost almost nothing; the computed ones still decide where
+//! a vertex splits at creases, and stay at vertices on open edges.
 
 use crate::mesh::{Mesh, VertexFaces};
 use glam::Vec3;

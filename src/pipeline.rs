@@ -62,33 +62,17 @@ impl Default for ConvertOptions {
 /// Which normals the chunk file stores.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Normals {
-    /// The input's normals; when it has none, smooth normals split at edges sharper than
-    /// `crease_angle` radians ([`crate::normals::smooth_normals`]).
+    /// The input's normals; when it has none, smooth ones as [`Normals::Geometry`] makes them.
     Auto { crease_angle: f32 },
     /// The input's normals, if any.
     Input,
     /// None: the smallest file, drawn flat-shaded.
     None,
     /// Smooth normals of each level's own geometry, split at edges sharper than `crease_angle`
-    /// radians; the input's are dropped. Format 3 stores them as its readers predict them
-    /// ([`crate::derived_normals`]), at a few hundredths of a bit where a node holds a vertex's
-    /// faces, so files are much smaller than with the input's normals; format 2 stores the
-    /// smooth normals of level 0, carried to coarser levels.
+    /// radians ([`crate::normals::smooth_normals`] decides the splits), the input's dropped:
+    /// stored as format 3's readers predict them ([`crate::derived_normals`]), at a few
+    /// hundredths of a bit where a node holds all of a vertex's faces.
     Geometry { crease_angle: f32 },
-}
-
-impl ConvertOptions {
-    /// The encoding files are written with: format 3 derives normals from geometry when
-    /// `normals` asks for it.
-    pub(crate) fn write_encoding(&self) -> Encoding {
-        match self.encoding {
-            Encoding::V3(p) => Encoding::V3(Precision {
-                normals_from_geometry: p.normals_from_geometry || matches!(self.normals, Normals::Geometry { .. }),
-                ..p
-            }),
-            e => e,
-        }
-    }
 }
 
 /// Progress of a long conversion, reported stage by stage.
@@ -213,14 +197,19 @@ pub fn convert(
     crate::atomic::check_output(output)?;
     progress.stage("import", 0);
     let mut imported = import_with(input, import)?;
-    match opts.normals {
-        Normals::Auto { crease_angle } if imported.mesh.normals.is_empty() => {
+    let derive_normals = match opts.normals {
+        Normals::Auto { crease_angle } | Normals::Geometry { crease_angle }
+            if imported.mesh.normals.is_empty() || matches!(opts.normals, Normals::Geometry { .. }) =>
+        {
             imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
+            true
         }
-        Normals::Geometry { crease_angle } => imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle),
-        Normals::None => imported.mesh.normals.clear(),
-        _ => {}
-    }
+        Normals::None => {
+            imported.mesh.normals.clear();
+            false
+        }
+        _ => false,
+    };
     lap(&mut times.import_ms);
 
     let textured = imported.mesh.images.len() as u64;
@@ -250,7 +239,8 @@ pub fn convert(
         params: opts.hierarchy,
         level_ratio: opts.levels.ratio,
         georef,
-        encoding: opts.write_encoding(),
+        encoding: opts.encoding,
+        derive_normals,
         images: images.into(),
         ..WriteOptions::default()
     };

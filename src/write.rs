@@ -39,6 +39,9 @@ pub struct WriteOptions {
     pub georef: Option<Georef>,
     /// How node geometry is stored.
     pub encoding: Encoding,
+    /// Store each level's normals as readers derive them from its geometry
+    /// ([`crate::derived_normals`]) rather than the normals the mesh carries.
+    pub derive_normals: bool,
     /// The images level 0's materials index, each with its levels ([`crate::texture::pyramid`]);
     /// shared, so that options are cheap to copy however large the images.
     pub images: Arc<Vec<ImageIn>>,
@@ -69,14 +72,11 @@ pub struct Precision {
     pub uv_bits: u32,
     /// Bits of each colour channel, 1..=8 (8 keeps colours exactly).
     pub color_bits: u32,
-    /// Store each level's normals as readers derive them from its geometry
-    /// ([`crate::derived_normals`]) instead of the normals the mesh carries.
-    pub normals_from_geometry: bool,
 }
 
 impl Default for Precision {
     fn default() -> Self {
-        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 8, uv_bits: 16, color_bits: 8, normals_from_geometry: false }
+        Precision { grid_bits: 0, lattice: 0.25, normal_bits: 8, uv_bits: 16, color_bits: 8 }
     }
 }
 
@@ -98,6 +98,7 @@ impl Default for WriteOptions {
             tool: format!("strata {}", env!("CARGO_PKG_VERSION")),
             georef: None,
             encoding: Encoding::V3(Precision::default()),
+            derive_normals: false,
             images: Arc::default(),
         }
     }
@@ -157,7 +158,8 @@ fn write_named<W: Write>(
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
     let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g };
     let textured = !opts.images.is_empty();
-    piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, attributes, precision, textured, &place)?;
+    let looks = Looks { attributes, precision, textured, derive_normals: opts.derive_normals };
+    piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, looks, &place)?;
     writer.finish()
 }
 
@@ -172,6 +174,17 @@ pub(crate) struct Place<'a> {
     pub levels: std::ops::Range<usize>,
     pub file_levels: usize,
     pub key: &'a (dyn Fn(usize, u32) -> u32 + Sync),
+}
+
+/// What a piece's nodes store besides positions and faces: the attributes, format 3's precision
+/// (`None`: format 2), whether materials have images, and whether normals are derived from each
+/// level's geometry ([`crate::derived_normals`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Looks {
+    pub attributes: Attributes,
+    pub precision: Option<Precision>,
+    pub textured: bool,
+    pub derive_normals: bool,
 }
 
 /// A hierarchy and its level meshes made ready to write: positions on the file's grid, node
@@ -228,21 +241,17 @@ impl Piece {
         h: &Hierarchy,
         lv: &LevelMeshes,
         grid: &Grid,
-        attributes: Attributes,
-        precision: Option<Precision>,
-        textured: bool,
+        looks: Looks,
         place: &Place,
     ) -> Result<()> {
+        let Looks { attributes, precision, textured, derive_normals } = looks;
+        // Format 2 stores normals at 16 bits.
+        let normal_bits = precision.map_or(16, |p| p.normal_bits);
         for l in place.levels.clone() {
             let hl = &h.levels[l];
             let mesh = &lv.levels[l].mesh;
             let file_level = l + place.offset;
-            let derived = match precision {
-                Some(p) if p.normals_from_geometry && attributes.normals => {
-                    Some(DerivedNormals::new(mesh, &self.quant[l].points, p.normal_bits))
-                }
-                _ => None,
-            };
+            let derived = (derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &self.quant[l].points, normal_bits));
             for (g, b) in self.bounds[l].iter().enumerate() {
                 let clusters = (file_level == 0).then_some(&h.clusters);
                 let lattice = precision.map_or(Lattice::default(), |p| Lattice {
@@ -498,7 +507,7 @@ fn node_geometry(
             let g = q.points[v as usize];
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
-                (true, 0) => octa::encode(mesh.normals[corner]),
+                (true, 0) => derived.and_then(|d| d.code(v, mesh.normals[corner])).unwrap_or_else(|| octa::encode(mesh.normals[corner])),
                 (true, bits) => {
                     derived.and_then(|d| d.code(v, mesh.normals[corner])).unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], bits))
                 }

@@ -98,3 +98,35 @@ fn derived_normals_agree_across_nodes_follow_the_surface_and_cost_less() {
     assert!(derived_partitioned * 100 < input_normals * 97, "partitioned: {derived_partitioned} bytes against {input_normals}");
     let _ = std::fs::remove_dir(&work);
 }
+
+#[test]
+fn a_mesh_without_normals_gets_them_derived_from_each_level_by_default() {
+    let work = temp("work-auto");
+    std::fs::create_dir_all(&work).unwrap();
+    // The CAD part without its normals (its creases make smooth classes at 60°).
+    let text = std::fs::read_to_string(fixture("cad_part.obj")).unwrap();
+    let stripped: Vec<String> = text
+        .lines()
+        .filter(|l| !l.starts_with("vn "))
+        .map(|l| match l.strip_prefix("f ") {
+            Some(rest) => format!("f {}", rest.split_whitespace().map(|c| c.split('/').next().unwrap()).collect::<Vec<_>>().join(" ")),
+            None => l.to_string(),
+        })
+        .collect();
+    let input = temp("no-normals.obj");
+    std::fs::write(&input, stripped.join("\n")).unwrap();
+    let geometry = Normals::Geometry { crease_angle: 60f32.to_radians() };
+    for build in [Build::InCore, Build::Partitioned] {
+        let base = ConvertOptions { build, memory: 16 << 20, temp: Some(work.clone()), ..ConvertOptions::default() };
+        let (auto, derived) = (temp("auto.strata"), temp("geometry.strata"));
+        convert(&input, &Default::default(), &auto, &base, &mut Silent).expect("default convert");
+        convert(&input, &Default::default(), &derived, &ConvertOptions { normals: geometry, ..base.clone() }, &mut Silent)
+            .expect("convert with --normals geometry");
+        assert!(
+            std::fs::read(&auto).unwrap() == std::fs::read(&derived).unwrap(),
+            "{build:?}: a mesh without normals should be written as with --normals geometry"
+        );
+        let _ = (std::fs::remove_file(&auto), std::fs::remove_file(&derived));
+    }
+    let _ = (std::fs::remove_file(&input), std::fs::remove_dir(&work));
+}

@@ -196,6 +196,7 @@ fn options() -> WriteOptions {
         tool: "strata test".into(),
         georef: None,
         encoding: strata::write::Encoding::V2,
+        derive_normals: false,
         images: Default::default(),
     }
 }

@@ -206,7 +206,7 @@ pub fn convert(
         return Err(Error::invalid(input, None, "nothing to convert: no faces"));
     };
     crate::import::replaced_corners_warnings(d.replaced_normals, d.replaced_uvs, &mut warnings);
-    let precision = match opts.write_encoding() {
+    let precision = match opts.encoding {
         Encoding::V3(p) => Some(p),
         Encoding::V2 => None,
     };
@@ -261,6 +261,7 @@ pub fn convert(
         precision,
         materials: &materials,
         textured,
+        derive_normals: vertex_normals.is_some(),
         temp: temp.path(),
     };
     let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;

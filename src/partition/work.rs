@@ -20,7 +20,7 @@ use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
 use crate::mesh::{Adjacency, Mesh};
 use crate::pipeline::Progress;
-use crate::write::{Piece, Place, Precision};
+use crate::write::{Looks, Piece, Place, Precision};
 use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::io::Write;
@@ -66,6 +66,8 @@ pub struct Job<'a> {
     pub materials: &'a [crate::mesh::Material],
     /// Whether the file has images (then nodes get their UV density).
     pub textured: bool,
+    /// Whether nodes store normals derived from each level's geometry (the computed ones).
+    pub derive_normals: bool,
     /// The folder where tops wait between rounds.
     pub temp: &'a Path,
 }
@@ -74,6 +76,11 @@ impl Job<'_> {
     /// Keep `top`, piece `p`'s of round `round`, in a file until the next round.
     fn spill(&self, top: Option<Top>, round: usize, p: usize) -> Result<Option<Spilled>> {
         top.map(|t| t.spill(self.temp.join(format!("top-{round}-{p}")))).transpose()
+    }
+
+    /// What every piece's nodes store besides positions and faces.
+    fn looks(&self) -> Looks {
+        Looks { attributes: self.attributes, precision: self.precision, textured: self.textured, derive_normals: self.derive_normals }
     }
 }
 
@@ -406,7 +413,7 @@ fn merge<W: Write>(
             w.set_levels(file_levels as u32)?;
             let place =
                 Place { offset: first, levels: 0..h.levels.len(), file_levels, key: &|l, g| if l == 0 { keys[g as usize] } else { g } };
-            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.attributes, job.precision, job.textured, &place)?;
+            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.looks(), &place)?;
             Ok(None)
         }
     }
@@ -445,7 +452,7 @@ fn finish_piece<W: Write>(
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
     let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
     let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
-    piece.add(&mut add, bad, &h, &lv, &job.grid, job.attributes, job.precision, job.textured, &place)?;
+    piece.add(&mut add, bad, &h, &lv, &job.grid, job.looks(), &place)?;
     gathered.lock().map_err(|_| poisoned())?.borders.push(border);
     let mut levels = lv.levels;
     let level = levels.swap_remove(n);
