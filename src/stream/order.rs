@@ -20,8 +20,10 @@ pub struct Orderer {
     tests: Vec<Test>,
     /// Per node, its box: low then high corner.
     boxes: Vec<[f32; 6]>,
-    /// Per node: parent, first child, child count (the skeleton's, packed for the walk).
-    links: Vec<[u32; 3]>,
+    /// Per node: first child, child count (the skeleton's, packed for the walk).
+    links: Vec<[u32; 2]>,
+    /// Per node, its parent alone, for marking the front's ancestors.
+    parents: Vec<u32>,
     /// Per node, the mark of the walk that touched it last: `2·walks + 1` on the front, `2·walks`
     /// above it, anything less neither (earlier walks' marks go stale without being cleared).
     state: Vec<u32>,
@@ -130,7 +132,7 @@ struct View<'a> {
     planes: &'a Planes,
     tests: &'a [Test],
     boxes: &'a [[f32; 6]],
-    links: &'a [[u32; 3]],
+    links: &'a [[u32; 2]],
     state: &'a [u32],
     /// The mark of a node above the front this walk (one more: on the front).
     above: u32,
@@ -159,8 +161,9 @@ impl Orderer {
                 [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z]
             })
             .collect();
-        let links = sk.nodes.iter().map(|n| [n.parent, n.first_child, n.child_count]).collect();
-        Orderer { planes, tests, boxes, links, ..Orderer::default() }
+        let links = sk.nodes.iter().map(|n| [n.first_child, n.child_count]).collect();
+        let parents = sk.nodes.iter().map(|n| n.parent).collect();
+        Orderer { planes, tests, boxes, links, parents, ..Orderer::default() }
     }
 
     pub fn planes(&self) -> &Planes {
@@ -188,13 +191,13 @@ impl Orderer {
             if let Some(s) = self.state.get_mut(n as usize) {
                 *s = shown;
             }
-            let mut p = self.links.get(n as usize).map_or(u32::MAX, |l| l[0]);
+            let mut p = self.parents.get(n as usize).copied().unwrap_or(u32::MAX);
             while let Some(s) = self.state.get_mut(p as usize) {
                 if *s >= above {
                     break;
                 }
                 *s = above;
-                p = self.links.get(p as usize).map_or(u32::MAX, |l| l[0]);
+                p = self.parents.get(p as usize).copied().unwrap_or(u32::MAX);
             }
         }
         let top = sk.level_nodes(sk.top());
@@ -214,7 +217,7 @@ impl Orderer {
 
 impl View<'_> {
     fn children(&self, c: u32) -> std::ops::Range<u32> {
-        let [_, first, count] = self.links[c as usize];
+        let [first, count] = self.links[c as usize];
         first..first + count
     }
 
