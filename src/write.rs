@@ -16,10 +16,10 @@ use crate::format::{
     NO_PARENT,
 };
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
-use crate::levels::LevelMeshes;
+use crate::levels::{position_key, LevelMeshes};
 use crate::mesh::{Material, Mesh};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
@@ -156,7 +156,7 @@ fn write_named<W: Write>(
         images: opts.images.clone(),
     };
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
-    let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g };
+    let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g, shared: None };
     let textured = !opts.images.is_empty();
     let looks = Looks { attributes, precision, textured, derive_normals: opts.derive_normals };
     piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, looks, &place)?;
@@ -174,6 +174,10 @@ pub(crate) struct Place<'a> {
     pub levels: std::ops::Range<usize>,
     pub file_levels: usize,
     pub key: &'a (dyn Fn(usize, u32) -> u32 + Sync),
+    /// The positions ([`crate::levels::position_key`]) of the vertices the piece shares with pieces
+    /// written apart: their faces on the other side are not in this piece, so their normals stay
+    /// the carried ones.
+    pub shared: Option<&'a FxHashSet<[u32; 3]>>,
 }
 
 /// What a piece's nodes store besides positions and faces: the attributes, format 3's precision
@@ -251,7 +255,9 @@ impl Piece {
             let hl = &h.levels[l];
             let mesh = &lv.levels[l].mesh;
             let file_level = l + place.offset;
-            let derived = (derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &self.quant[l].points, normal_bits));
+            let shared = |v: u32| place.shared.is_some_and(|s| s.contains(&position_key(mesh.positions[v as usize])));
+            let derived =
+                (derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &self.quant[l].points, normal_bits, shared));
             for (g, b) in self.bounds[l].iter().enumerate() {
                 let clusters = (file_level == 0).then_some(&h.clusters);
                 let lattice = precision.map_or(Lattice::default(), |p| Lattice {
@@ -507,10 +513,8 @@ fn node_geometry(
             let g = q.points[v as usize];
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
-                (true, 0) => derived.and_then(|d| d.code(v, mesh.normals[corner])).unwrap_or_else(|| octa::encode(mesh.normals[corner])),
-                (true, bits) => {
-                    derived.and_then(|d| d.code(v, mesh.normals[corner])).unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], bits))
-                }
+                (true, 0) => derived.and_then(|d| d.code(corner)).unwrap_or_else(|| octa::encode(mesh.normals[corner])),
+                (true, bits) => derived.and_then(|d| d.code(corner)).unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], bits)),
             };
             let uv = match (attrs.uvs, lattice.uv_bits) {
                 (false, _) => [0; 2],

@@ -331,7 +331,7 @@ fn cell<W: Write>(
     let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
     let keys = |_: usize, g: u32| piece_key(c, g);
     let kept: Vec<bool> = lv.levels[0].mesh.positions.iter().map(|&q| pinned.contains(&position_key(q))).collect();
-    let top = finish_piece(job, h, lv, Base::Input(&kept), 0, k, &keys, writer, gathered, &bad)?;
+    let top = finish_piece(job, h, lv, Base::Input(&kept), &pinned, 0, k, &keys, writer, gathered, &bad)?;
     gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
     Ok(top)
 }
@@ -403,7 +403,7 @@ fn merge<W: Write>(
             let lp = LevelParams { top_faces: usize::MAX, ..job.levels };
             let lv = levels::build_from(first_level, &mut h, &lp, Some(pinned), &mut |_| {});
             let key = |l: usize, g: u32| if l == 0 { keys[g as usize] } else { piece_key(p, g) };
-            finish_piece(job, h, lv, Base::Tops(bounds), first, n, &key, writer, gathered, &bad)
+            finish_piece(job, h, lv, Base::Tops(bounds), pinned, first, n, &key, writer, gathered, &bad)
         }
         None => {
             let lv = levels::build_from(first_level, &mut h, &job.levels, None, &mut |_| {});
@@ -411,8 +411,13 @@ fn merge<W: Write>(
             let file_levels = first + h.levels.len();
             let mut w = writer.lock().map_err(|_| poisoned())?;
             w.set_levels(file_levels as u32)?;
-            let place =
-                Place { offset: first, levels: 0..h.levels.len(), file_levels, key: &|l, g| if l == 0 { keys[g as usize] } else { g } };
+            let place = Place {
+                offset: first,
+                levels: 0..h.levels.len(),
+                file_levels,
+                key: &|l, g| if l == 0 { keys[g as usize] } else { g },
+                shared: None,
+            };
             piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.looks(), &place)?;
             Ok(None)
         }
@@ -427,13 +432,15 @@ enum Base<'a> {
 }
 
 /// Write the levels `0..n` of a cell or part (piece level `l` is file level `first + l`, keys
-/// from `key`), record its open edges, and return its top (level `n`).
+/// from `key`; `pinned`, the positions it shares with other pieces), record its open edges, and
+/// return its top (level `n`).
 #[allow(clippy::too_many_arguments)]
 fn finish_piece<W: Write>(
     job: &Job,
     mut h: Hierarchy,
     lv: LevelMeshes,
     base: Base,
+    pinned: &Pins,
     first: usize,
     n: usize,
     key: &(dyn Fn(usize, u32) -> u32 + Sync),
@@ -450,7 +457,7 @@ fn finish_piece<W: Write>(
     }
     .map_err(bad)?;
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
-    let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key };
+    let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key, shared: Some(pinned) };
     let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
     piece.add(&mut add, bad, &h, &lv, &job.grid, job.looks(), &place)?;
     gathered.lock().map_err(|_| poisoned())?.borders.push(border);
