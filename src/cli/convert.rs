@@ -37,10 +37,10 @@ pub struct Args {
     pub grouping: GroupingArgs,
     #[command(flatten)]
     pub levels: LevelArgs,
-    /// Normals to store: the input's, else smooth ones computed with --crease-angle (auto); only
-    /// the input's (input); none, for the smallest file drawn flat-shaded (none); smooth ones of
-    /// each level's own geometry, as readers predict them, the input's dropped (geometry: format
-    /// 3 stores them almost for free).
+    /// Normals to store: the input's, else each level's own smooth ones, sharp at --crease-angle
+    /// (auto); only the input's (input); none, for the smallest file drawn flat-shaded (none);
+    /// each level's own smooth ones even where the input has normals (geometry). A level's own
+    /// normals are stored as readers predict them, almost for free.
     #[arg(long, value_enum, default_value_t = NormalsArg::Auto)]
     pub normals: NormalsArg,
     /// Edges whose faces' normals differ by more than this many degrees stay sharp in computed normals.
