@@ -13,7 +13,7 @@
 //! whose faces all vanish on the grid gets the reader's prediction for a zero sum, (0, 0): its
 //! faces cover no pixel, so the cheapest code is as good as any.
 
-use crate::format::geom::v3::predict_octa;
+use crate::format::geom::v3::{face_cross, predict_octa};
 use crate::format::octa;
 use crate::mesh::Mesh;
 use rayon::prelude::*;
@@ -110,15 +110,6 @@ impl DerivedNormals {
         let code = self.codes[*self.class.get(corner)? as usize];
         (code != KEEP).then_some(code)
     }
-}
-
-/// The cross product of a face's edges from its first corner, on the grid, as a reader computes
-/// it: exact in f64 (components below 2^43 on a 21-bit grid), the same for any rotation of the
-/// corners.
-fn face_cross(q: [[u32; 3]; 3]) -> [f64; 3] {
-    let u = [0, 1, 2].map(|k| q[1][k] as f64 - q[0][k] as f64);
-    let w = [0, 1, 2].map(|k| q[2][k] as f64 - q[0][k] as f64);
-    [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]]
 }
 
 #[cfg(test)]

@@ -75,6 +75,19 @@ pub enum Normals {
     Geometry { crease_angle: f32 },
 }
 
+impl Normals {
+    /// The crease angle of the smooth normals strata computes for an input with or without normals
+    /// of its own, which the file then stores as each level's own ([`crate::derived_normals`]);
+    /// `None` where it stores the input's normals, or none.
+    pub fn computed(self, input_has_normals: bool) -> Option<f32> {
+        match self {
+            Normals::Geometry { crease_angle } => Some(crease_angle),
+            Normals::Auto { crease_angle } if !input_has_normals => Some(crease_angle),
+            _ => None,
+        }
+    }
+}
+
 /// Progress of a long conversion, reported stage by stage.
 pub trait Progress {
     /// A stage begins; `steps` is how many [`Progress::step`] calls it will make (0 if unknown).
@@ -197,19 +210,12 @@ pub fn convert(
     crate::atomic::check_output(output)?;
     progress.stage("import", 0);
     let mut imported = import_with(input, import)?;
-    let derive_normals = match opts.normals {
-        Normals::Auto { crease_angle } | Normals::Geometry { crease_angle }
-            if imported.mesh.normals.is_empty() || matches!(opts.normals, Normals::Geometry { .. }) =>
-        {
-            imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle);
-            true
-        }
-        Normals::None => {
-            imported.mesh.normals.clear();
-            false
-        }
-        _ => false,
-    };
+    let computed = opts.normals.computed(!imported.mesh.normals.is_empty());
+    match computed {
+        Some(crease_angle) => imported.mesh.normals = smooth_normals(&imported.mesh, crease_angle),
+        None if opts.normals == Normals::None => imported.mesh.normals.clear(),
+        None => {}
+    }
     lap(&mut times.import_ms);
 
     let textured = imported.mesh.images.len() as u64;
@@ -240,7 +246,7 @@ pub fn convert(
         level_ratio: opts.levels.ratio,
         georef,
         encoding: opts.encoding,
-        derive_normals,
+        derive_normals: computed.is_some(),
         images: images.into(),
         ..WriteOptions::default()
     };

@@ -513,8 +513,10 @@ fn node_geometry(
             let g = q.points[v as usize];
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
-                (true, 0) => derived.and_then(|d| d.code(corner)).unwrap_or_else(|| octa::encode(mesh.normals[corner])),
-                (true, bits) => derived.and_then(|d| d.code(corner)).unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], bits)),
+                // Format 2 (bits 0) stores normals at 16 bits.
+                (true, bits) => derived
+                    .and_then(|d| d.code(corner))
+                    .unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], if bits == 0 { 16 } else { bits })),
             };
             let uv = match (attrs.uvs, lattice.uv_bits) {
                 (false, _) => [0; 2],

@@ -224,10 +224,8 @@ pub fn convert(
     let textured = !images.is_empty();
     lap(&mut times.texture_ms);
     let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: layout.uvs, colors: layout.colors };
-    let crease = match opts.normals {
-        Normals::Auto { crease_angle } | Normals::Geometry { crease_angle } => crease_angle,
-        _ => 0.0,
-    };
+    // The crease angle of computed normals (unused where the input's are kept).
+    let crease = opts.normals.computed(false).unwrap_or(0.0);
     let k = cell_levels(cell_faces);
     let writer_opts = WriterOptions {
         metres_per_unit: 0.0,
@@ -317,13 +315,13 @@ impl Distribute {
     fn new(v: &Vertices, first: &Faces, faces: u64, cell_faces: u64, normals: Normals, temp: &Path) -> Result<Distribute> {
         let cells = Cells::split(v.positions, faces, cell_faces);
         let given = !v.normals.is_empty() || !first.normals.is_empty();
+        let compute = normals.computed(given).is_some();
         let layout = Layout {
-            normals: given && matches!(normals, Normals::Auto { .. } | Normals::Input),
+            normals: given && !compute && normals != Normals::None,
             uvs: !first.uvs.is_empty(),
             colors: !v.colors.is_empty(),
             materials: !first.materials.is_empty(),
         };
-        let compute = matches!(normals, Normals::Geometry { .. }) || (!given && matches!(normals, Normals::Auto { .. }));
         let spool = Spool::create(temp, cells.count, layout)?;
         let n = v.positions.len();
         let sums = compute.then(|| vec![Vec3::ZERO; n]);

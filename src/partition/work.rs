@@ -330,8 +330,7 @@ fn cell<W: Write>(
     let lv = levels::build_from(first, &mut h, &p, Some(&pinned), &mut |_| {});
     let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
     let keys = |_: usize, g: u32| piece_key(c, g);
-    let kept: Vec<bool> = lv.levels[0].mesh.positions.iter().map(|&q| pinned.contains(&position_key(q))).collect();
-    let top = finish_piece(job, h, lv, Base::Input(&kept), &pinned, 0, k, &keys, writer, gathered, &bad)?;
+    let top = finish_piece(job, h, lv, Base::Input, &pinned, 0, k, &keys, writer, gathered, &bad)?;
     gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
     Ok(top)
 }
@@ -424,10 +423,9 @@ fn merge<W: Write>(
     }
 }
 
-/// What a piece's level 0 is: the input (a cell), with the vertices it shares with other cells,
-/// or tops whose bounds are known (a part).
-enum Base<'a> {
-    Input(&'a [bool]),
+/// What a piece's level 0 is: the input (a cell), or tops whose bounds are known (a part).
+enum Base {
+    Input,
     Tops(Vec<NodeBounds>),
 }
 
@@ -452,7 +450,11 @@ fn finish_piece<W: Write>(
         return Err(bad(format!("{g} groups in one level, at most {}", 1 << GROUP_BITS)));
     }
     let piece = match base {
-        Base::Input(kept) => Piece::new(&h, &lv, &job.grid, job.precision, None, kept, n),
+        Base::Input => {
+            // The input's vertices it shares with other cells keep their grid points exactly.
+            let kept: Vec<bool> = lv.levels[0].mesh.positions.iter().map(|&q| pinned.contains(&position_key(q))).collect();
+            Piece::new(&h, &lv, &job.grid, job.precision, None, &kept, n)
+        }
         Base::Tops(bounds) => Piece::new(&h, &lv, &job.grid, job.precision, Some(bounds), &[], n),
     }
     .map_err(bad)?;

@@ -563,15 +563,22 @@ fn floor(v: f64) -> i32 {
     t - ((t as f64) > v) as i32
 }
 
-/// Each vertex's predicted normal: the sum over faces, in face order, of the cross product of
-/// its edges from the first corner, added to each corner in turn (f64).
+/// The cross product of a face's edges from its first corner, on the grid, as §5.5 computes it:
+/// exact in f64 (components below 2^43 on a 21-bit grid), so the same for any rotation of the
+/// corners and any order of summing.
+#[inline]
+pub fn face_cross(q: [[u32; 3]; 3]) -> [f64; 3] {
+    let u = [0, 1, 2].map(|k| q[1][k] as f64 - q[0][k] as f64);
+    let w = [0, 1, 2].map(|k| q[2][k] as f64 - q[0][k] as f64);
+    [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]]
+}
+
+/// Each vertex's predicted normal: the sum over faces, in face order, of [`face_cross`], added
+/// to each corner in turn (f64).
 fn normal_sums(p: &[[u32; 3]], t: &[u32]) -> Vec<[f64; 3]> {
     let mut sum = vec![[0f64; 3]; p.len()];
     for f in t.chunks_exact(3) {
-        let (q0, q1, q2) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
-        let u = [q1[0] as f64 - q0[0] as f64, q1[1] as f64 - q0[1] as f64, q1[2] as f64 - q0[2] as f64];
-        let v = [q2[0] as f64 - q0[0] as f64, q2[1] as f64 - q0[1] as f64, q2[2] as f64 - q0[2] as f64];
-        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        let n = face_cross([p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]]);
         for &i in f {
             let s = &mut sum[i as usize];
             s[0] += n[0];
