@@ -117,6 +117,11 @@ pub struct SimplifyOptions {
     /// cap's move and a dropped tetrahedron (its spread and its vertices' errors) count in the
     /// group's error. Default false.
     pub topology: bool,
+    /// Radians. Corners of one vertex whose normals lie within this angle of each other (chained:
+    /// a chain of such pairs joins) become one: each gets their normalized sum, and no seam runs
+    /// between them. Level meshes set it so that a scanner's near-equal normals at welded vertices
+    /// do not lock those vertices at every level. Default 0: any difference is a seam.
+    pub normal_seam_angle: f32,
 }
 
 impl Default for SimplifyOptions {
@@ -129,6 +134,7 @@ impl Default for SimplifyOptions {
             border_weight: 10.0,
             seam_weight: 1.0,
             topology: false,
+            normal_seam_angle: 0.0,
         }
     }
 }
@@ -184,6 +190,7 @@ pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opt
     assert!(pinned.is_empty() || pinned.len() == mesh.positions.len(), "simplify: one pin flag per vertex");
     let opts = &SimplifyOptions { topology: opts.topology && !pinned.contains(&true), ..opts.clone() };
     let mut s = State::new(mesh, groups);
+    s.merge_normal_seams(opts.normal_seam_angle);
     s.pinned = pinned.to_vec();
     if mesh.triangles.len() > opts.target_faces {
         s.init(opts, false);
@@ -191,6 +198,7 @@ pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opt
         let face_target = opts.target_faces > 0 || opts.max_error.is_none();
         if opts.topology && face_target && s.faces_left > opts.target_faces {
             s = State::new(mesh, groups);
+            s.merge_normal_seams(opts.normal_seam_angle);
             s.pinned = pinned.to_vec();
             s.init(opts, true);
             s.run(opts);

@@ -142,6 +142,48 @@ impl State {
         }
     }
 
+    /// [`SimplifyOptions::normal_seam_angle`]: per vertex, join its corners' normals that lie
+    /// within `angle` of each other (transitively) and give each joined set its normalized sum.
+    pub(super) fn merge_normal_seams(&mut self, angle: f32) {
+        if angle <= 0.0 || self.normals.is_empty() {
+            return;
+        }
+        let cos = angle.cos();
+        let mut corners: Vec<usize> = Vec::new();
+        let mut set: Vec<usize> = Vec::new();
+        for v in 0..self.verts.len() as u32 {
+            corners.clear();
+            corners.extend(self.faces_of(v).iter().map(|&f| self.corner(f, v)));
+            let first = self.normals[corners[0]];
+            if corners.iter().all(|&c| self.normals[c] == first) {
+                continue;
+            }
+            // Union of corners by angle, as labels: small sets, quadratic is fine.
+            set.clear();
+            set.extend(0..corners.len());
+            for i in 0..corners.len() {
+                for j in 0..i {
+                    let (a, b) = (set[i], set[j]);
+                    if a != b && self.normals[corners[i]].dot(self.normals[corners[j]]) >= cos {
+                        set.iter_mut().filter(|s| **s == a).for_each(|s| *s = b);
+                    }
+                }
+            }
+            for i in 0..corners.len() {
+                if set[i] != i {
+                    continue;
+                }
+                let sum: Vec3 = (0..corners.len()).filter(|&j| set[j] == i).map(|j| self.normals[corners[j]]).sum();
+                let n = sum.try_normalize().unwrap_or(self.normals[corners[i]]);
+                for j in 0..corners.len() {
+                    if set[j] == i {
+                        self.normals[corners[j]] = n;
+                    }
+                }
+            }
+        }
+    }
+
     pub(super) fn faces_of(&self, v: u32) -> &[u32] {
         let x = &self.verts[v as usize];
         &self.face_lists[x.start as usize..(x.start + x.len) as usize]

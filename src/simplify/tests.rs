@@ -522,3 +522,42 @@ proptest! {
         prop_assert!(free.mesh.face_count() <= plain.mesh.face_count().max(target));
     }
 }
+
+/// A flat grid whose corners carry one of two normals `degrees` apart, at random, as a scanner's
+/// split vertices welded on import do (at a few vertices there; here at all of them).
+fn jittered_normals_grid(n: u32, degrees: f32) -> Mesh {
+    let mut m = fixtures::open_grid(n);
+    let half = 0.5 * degrees.to_radians();
+    m.normals = (0..3 * m.face_count() as u64)
+        .map(|c| {
+            let side = if noise(c) < 0.0 { -1.0 } else { 1.0 };
+            Vec3::new(side * half.sin(), 0.0, half.cos())
+        })
+        .collect();
+    m
+}
+
+#[test]
+fn near_equal_normals_are_one_seam_free_normal_within_the_angle() {
+    let m = jittered_normals_grid(12, 4.0);
+    let target = m.face_count() / 8;
+    // Exact comparison: every interior vertex is a seam of two normals, and the grid barely
+    // simplifies.
+    let exact = simplify(&m, None, &opts(target));
+    assert!(exact.mesh.face_count() > 2 * target, "{} faces", exact.mesh.face_count());
+    // Within 5°: one normal per vertex, the target reached, and every vertex's corners alike.
+    let merged = simplify(&m, None, &SimplifyOptions { normal_seam_angle: 5f32.to_radians(), ..opts(target) });
+    check(&m, &merged);
+    assert!(merged.mesh.face_count() <= target, "{} faces", merged.mesh.face_count());
+    let mut first: Vec<Option<Vec3>> = vec![None; merged.mesh.positions.len()];
+    for (f, t) in merged.mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let n = merged.mesh.normals[3 * f + k];
+            assert!((n.length() - 1.0).abs() < 1e-5);
+            assert_eq!(*first[t[k] as usize].get_or_insert(n), n, "vertex {} keeps a seam", t[k]);
+        }
+    }
+    // A seam wider than the angle stays a seam.
+    let wide = simplify(&m, None, &SimplifyOptions { normal_seam_angle: 3f32.to_radians(), ..opts(target) });
+    assert_eq!(wide.mesh.face_count(), exact.mesh.face_count());
+}
