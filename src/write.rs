@@ -63,7 +63,8 @@ pub struct Precision {
     /// them from the mesh ([`crate::quantize::auto_grid_bits`]: a 64th of the median edge).
     pub grid_bits: u32,
     /// A node's lattice is the largest power-of-two number of grid steps not above this fraction of
-    /// its error before quantization, so quantization adds at most `√3/2` of the fraction to it.
+    /// its error before quantization (or of its median edge, if smaller), so quantization adds at
+    /// most `√3/2` of the fraction to its error.
     pub lattice: f32,
     /// Bits of each octahedral normal coordinate, 2..=16.
     pub normal_bits: u32,
@@ -223,14 +224,17 @@ impl Piece {
             Some(_) => Quantized::new(grid, &lv.levels[0].mesh),
         });
         quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(grid, &l.mesh)));
+        let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
         let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
         if let Some(p) = precision {
             for l in 1..snapped.min(lv.levels.len()) {
-                shifts[l] = lv.levels[l].group_error.iter().map(|&e| lattice_shift(e, p.lattice, grid)).collect();
-                quant[l].snap_inner(grid, &lv.levels[l].mesh, &lv.levels[l].face_group, &shifts[l]);
+                let level = &lv.levels[l];
+                shifts[l] = (0..level.group_error.len())
+                    .map(|g| lattice_shift(level.group_error[g].min(median_edge(&level.mesh, faces[l].get(g))), p.lattice, grid))
+                    .collect();
+                quant[l].snap_inner(grid, &level.mesh, &level.face_group, &shifts[l]);
             }
         }
-        let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
         let bounds = bounds::nodes(h, lv, &faces, grid, &quant, base)?;
         Ok(Piece { quant, shifts, faces, bounds })
     }
@@ -302,8 +306,26 @@ fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
     Ok(p)
 }
 
-/// The lattice shift of a node whose error before quantization is `error`: the largest `s` with
-/// `2^s` grid steps at most `fraction · error`, below the grid's bits.
+/// The median edge length of `faces` of `mesh` (each face's three edges), infinite for none.
+fn median_edge(mesh: &Mesh, faces: &[u32]) -> f32 {
+    let mut lengths: Vec<f32> = faces
+        .iter()
+        .flat_map(|&f| {
+            let p = mesh.triangles[f as usize].map(|v| mesh.positions[v as usize]);
+            [p[0].distance(p[1]), p[1].distance(p[2]), p[2].distance(p[0])]
+        })
+        .collect();
+    if lengths.is_empty() {
+        return f32::INFINITY;
+    }
+    let mid = lengths.len() / 2;
+    *lengths.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+/// The lattice shift of a node whose error before quantization, or the median length of its
+/// edges if smaller, is `error`: the largest `s` with `2^s` grid steps at most `fraction · error`,
+/// below the grid's bits. The edges bound it where a level's error outgrows its faces (a handle
+/// cut at a coarse level): a lattice a quarter of the error would fold most of those faces flat.
 fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
     let steps = (fraction as f64 * error as f64) / grid.step;
     if steps.is_nan() || steps < 2.0 {
@@ -570,4 +592,40 @@ fn node_geometry(
         out.clusters = Some((shift, records));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A coarse level whose error outgrows its faces (a handle cut there counts in the whole
+    /// node's error) gets its lattice from its edges, so its faces stay faces.
+    #[test]
+    fn lattice_is_bounded_by_the_nodes_edges() {
+        let mesh = crate::fixtures::icosphere(5);
+        let adjacency = crate::mesh::Adjacency::build(&mesh);
+        let mut h = hierarchy::build(&mesh, &adjacency, &HierarchyParams::default());
+        let mut lv = crate::levels::build(mesh, &mut h, &crate::levels::LevelParams::default(), &mut |_| {});
+        assert!(lv.levels.len() >= 3);
+        for level in &mut lv.levels[1..] {
+            level.group_error.iter_mut().for_each(|e| *e = 1e3);
+        }
+        let grid = Grid::fit(glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0), 16);
+        let n = lv.levels.len();
+        let piece = Piece::new(&h, &lv, &grid, Some(Precision::default()), None, &[], n).expect("piece");
+        for l in 1..n {
+            let level = &lv.levels[l];
+            for g in 0..level.group_error.len() {
+                let edge = median_edge(&level.mesh, piece.faces[l].get(g));
+                let step = (1u64 << piece.shifts[l][g]) as f64 * grid.step;
+                assert!(piece.shifts[l][g] > 0 && step <= 0.25 * edge as f64, "level {l} node {g}: lattice {step} for edges of {edge}");
+            }
+            let points = &piece.quant[l].points;
+            let folded = level.mesh.triangles.iter().filter(|t| {
+                let p = t.map(|v| points[v as usize]);
+                p[0] == p[1] || p[1] == p[2] || p[2] == p[0]
+            });
+            assert_eq!(folded.count(), 0, "level {l}");
+        }
+    }
 }

@@ -69,7 +69,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub grid_bits: u32,
     /// Format 3: vertices inside a coarser level's node lie on a lattice of at most this fraction
-    /// of its geometric error (0 keeps them on the grid).
+    /// of its geometric error or of its median edge, whichever is smaller (0 keeps them on the grid).
     #[arg(long, default_value_t = 0.25)]
     pub lattice: f32,
     /// Format 3: bits of each octahedral normal coordinate, 2..=16.
