@@ -1,7 +1,7 @@
 //! The level meshes M0 … ML: M0 is the input; Mℓ is Mℓ−1 simplified while every group of level ℓ
 //! stays a non-empty patch (METHOD.md §4), minus the small components that leave it
-//! ([`crate::small_components`]); connected too, except where coarse levels cut handles and
-//! necks (groups made of whole components, [`crate::simplify::SimplifyOptions::topology`]).
+//! ([`crate::small_components`]); connected too, except where a level cuts a handle or neck
+//! inside a group ([`crate::simplify::SimplifyOptions::topology`]).
 //! A node — group g of level ℓ — owns the faces of Mℓ labelled g.
 //!
 //! A node's geometric error bounds, in model units, how far its surface may lie from the input:
@@ -147,10 +147,9 @@ fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Optio
     let parent = &h.levels[l - 1].parent;
     let labels: Vec<u32> = below.face_group.iter().map(|&g| parent[g as usize]).collect();
     let target = ((below.mesh.face_count() as f64) * ratio as f64).round() as usize;
-    // Topology changes apply where every group is whole components (coarse levels of a mesh of
-    // many parts), which is where handles stop the simplification; not in a piece of a
-    // partitioned build, whose top is welded by position to its neighbours (which would join a
-    // cut's copies back to their originals).
+    // Topology changes apply where the simplification would stop at handles (coarse levels of a
+    // scan); not in a piece of a partitioned build, whose top is welded by position to its
+    // neighbours (which would join a cut's copies back to their originals).
     let opts = SimplifyOptions {
         target_faces: target,
         topology: pinned.is_none(),

@@ -32,7 +32,7 @@
 //! face is duplicated), turns a face normal by more than `max_normal_turn` from its input normal, or
 //! creates a degenerate or sliver face.
 //!
-//! Topology (opt-in; with groups only where each group is whole components): a noisy scan has many
+//! Topology (opt-in; with groups only inside one group): a noisy scan has many
 //! tiny handles and components, each of which keeps a dozen faces that no collapse may remove. When the target is not reached, the
 //! simplification runs again, and where a collapse is blocked by the link condition alone the
 //! mesh is cut along the triangle of edges that blocks it (a handle or neck) and both sides are
@@ -110,12 +110,13 @@ pub struct SimplifyOptions {
     /// originals are, and where no later collapse moves them, a reader that welds vertices by
     /// position (the chunk file's writer does, by grid point) sees the two caps as one doubled
     /// face and the cut's edges as edges of four faces. Without it a mesh of many handles and
-    /// components (a noisy scan) stops at a few faces per handle and component. With groups, only
-    /// where every face around the vertices changed is of one group, so a cap joins no groups and
-    /// no group border moves; no group loses its last faces (a tetrahedron is dropped only from a
-    /// group that keeps others), but a cut through a neck leaves its group in two pieces, and the
-    /// cap's move and a dropped tetrahedron (its spread and its vertices' errors) count in the
-    /// group's error. Default false.
+    /// components (a noisy scan) stops at a few faces per handle and component. With groups, a cut
+    /// only where the faces along its cycle are of one group, which the caps take (other groups'
+    /// faces around its vertices keep their edges, so no group gains or loses a neighbour), and a
+    /// tetrahedron dropped only where every face around it is of one group; no group loses its
+    /// last faces (a tetrahedron is dropped only from a group that keeps others), but a cut
+    /// through a neck leaves its group in two pieces, and the cap's move and a dropped
+    /// tetrahedron (its spread and its vertices' errors) count in the group's error. Default false.
     pub topology: bool,
     /// Radians. Corners of one vertex whose normals lie within this angle of each other (chained:
     /// a chain of such pairs joins) become one: each gets their normalized sum, and no seam runs

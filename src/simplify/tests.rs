@@ -561,3 +561,26 @@ fn near_equal_normals_are_one_seam_free_normal_within_the_angle() {
     let wide = simplify(&m, None, &SimplifyOptions { normal_seam_angle: 3f32.to_radians(), ..opts(target) });
     assert_eq!(wide.mesh.face_count(), exact.mesh.face_count());
 }
+
+/// A cut may pass through vertices that faces of other groups touch, as long as the faces along
+/// its cycle are of one group: those other faces keep their edges.
+#[test]
+fn cuts_pass_by_other_groups_at_a_vertex() {
+    let m = tori(1, 40);
+    // One face of group 1 on each tenth cross-section, touching its ring at one vertex only: the
+    // ring's own edges lie between faces of group 0.
+    let ring = |i: u32, j: u32| (i % 40) * 3 + j % 3;
+    let mut groups = vec![0u32; m.face_count()];
+    for i in (0..40).step_by(4) {
+        let f = m.triangles.iter().position(|t| *t == [ring(i, 1), ring(i + 1, 1), ring(i + 1, 2)]).expect("face");
+        groups[f] = 1 + i / 4;
+    }
+    let out = simplify(&m, Some(&groups), &SimplifyOptions { topology: true, ..opts(0) });
+    check_manifold(&m, &out);
+    assert_eq!(group_pairs(&out.mesh, &out.face_groups), group_pairs(&m, &groups));
+    for g in 0..11u32 {
+        assert!(out.face_groups.contains(&g), "group {g} kept faces");
+    }
+    // 72 when every face around a cut's vertices had to be of one group.
+    assert!(out.mesh.face_count() <= 56, "{} faces", out.mesh.face_count());
+}

@@ -13,10 +13,10 @@ impl State {
     /// shape checks. `out` gets the vertices whose edges must be ranked again.
     pub(super) fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64, out: &mut Vec<u32>) -> bool {
         out.clear();
-        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 || !self.one_group(&[u, v]) {
+        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 {
             return false;
         }
-        if self.drop_tetrahedron(u, v, e, limit) {
+        if self.one_group(&[u, v]) && self.drop_tetrahedron(u, v, e, limit) {
             return true;
         }
         // A third common neighbour y of u and v: (u, v, y) is a cycle of edges but no face.
@@ -81,6 +81,29 @@ impl State {
         faces.all(|&f| self.faces[f as usize].group == group)
     }
 
+    /// Whether the faces along the cycle of edges a → b → c → a are all of one group (or there are
+    /// no groups). A cut there separates faces of that group only and caps both sides with it;
+    /// other groups' faces around the cycle's vertices keep their edges, only moving to a copy
+    /// of the vertex at the same place, so no group gains or loses a border.
+    fn cycle_in_one_group(&self, cycle: [u32; 3]) -> bool {
+        if !self.grouped {
+            return true;
+        }
+        let mut group = None;
+        for i in 0..3 {
+            let (a, b) = (cycle[i], cycle[(i + 1) % 3]);
+            for &f in self.faces_of(a) {
+                if self.tri(f).contains(&b) {
+                    let g = self.faces[f as usize].group;
+                    if *group.get_or_insert(g) != g {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+
     /// The largest squared distance of the vertices `vs` from their centroid: how far a cap over
     /// them, or their removal, moves the surface.
     fn spread_sq(&self, vs: &[u32]) -> f64 {
@@ -93,7 +116,7 @@ impl State {
     /// right. Only where every fan around the cycle is closed and manifold. A handle through the
     /// cycle is removed, or the component split in two at a neck; the mesh stays manifold.
     fn cut(&mut self, cycle: [u32; 3], out: &mut Vec<u32>) -> bool {
-        if cycle.iter().any(|&w| self.verts[w as usize].locked) || !self.one_group(&cycle) {
+        if cycle.iter().any(|&w| self.verts[w as usize].locked) || !self.cycle_in_one_group(cycle) {
             return false;
         }
         let mut sides = Vec::with_capacity(3);
