@@ -56,7 +56,7 @@ pub enum Encoding {
 }
 
 /// Format 3's quantization (strata-v3.md §6): level 0 on the grid, coarser levels' inner vertices
-/// on lattices tied to their error, normals, colours and UVs to stated bits.
+/// on lattices tied to their error and edges, normals, colours and UVs to stated bits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Precision {
     /// Grid bits per axis over the model's largest extent (level 0's precision), 1..=21; 0 picks

@@ -118,9 +118,9 @@ pub struct SimplifyOptions {
     /// through a neck leaves its group in two pieces, and the cap's move and a dropped
     /// tetrahedron (its spread and its vertices' errors) count in the group's error. Default false.
     pub topology: bool,
-    /// Radians. Corners of one vertex whose normals lie within this angle of each other (chained:
-    /// a chain of such pairs joins) become one: each gets their normalized sum, and no seam runs
-    /// between them. Level meshes set it so that a scanner's near-equal normals at welded vertices
+    /// Radians. Corners of one vertex whose normals lie within this angle of the first normal of a
+    /// set become one: each gets the set's normalized sum, and no seam runs between them (a set
+    /// spans at most twice the angle). Level meshes set it so that a scanner's near-equal normals at welded vertices
     /// do not lock those vertices at every level. Default 0: any difference is a seam.
     pub normal_seam_angle: f32,
 }

@@ -142,43 +142,48 @@ impl State {
         }
     }
 
-    /// [`SimplifyOptions::normal_seam_angle`]: per vertex, join its corners' normals that lie
-    /// within `angle` of each other (transitively) and give each joined set its normalized sum.
+    /// [`SimplifyOptions::normal_seam_angle`]: per vertex, each corner in face-list order joins
+    /// the first set whose first normal lies within `angle` of its own (or starts a set), and the
+    /// corners of a set holding two or more different normals get their normalized sum. Directions
+    /// are compared, not lengths; a set spans at most twice the angle.
     pub(super) fn merge_normal_seams(&mut self, angle: f32) {
         if angle <= 0.0 || self.normals.is_empty() {
             return;
         }
         let cos = angle.cos();
+        let bits = |n: Vec3| n.to_array().map(f32::to_bits);
         let mut corners: Vec<usize> = Vec::new();
-        let mut set: Vec<usize> = Vec::new();
+        // Per set: its first normal's direction and bits, the sum of its directions, and whether
+        // it holds another normal.
+        let mut sets: Vec<(Vec3, [u32; 3], Vec3, bool)> = Vec::new();
+        let mut set_of: Vec<usize> = Vec::new();
         for v in 0..self.verts.len() as u32 {
             corners.clear();
             corners.extend(self.faces_of(v).iter().map(|&f| self.corner(f, v)));
-            let first = self.normals[corners[0]];
-            if corners.iter().all(|&c| self.normals[c] == first) {
+            let Some(&c0) = corners.first() else { continue };
+            let first = bits(self.normals[c0]);
+            if corners.iter().all(|&c| bits(self.normals[c]) == first) {
                 continue;
             }
-            // Union of corners by angle, as labels: small sets, quadratic is fine.
-            set.clear();
-            set.extend(0..corners.len());
-            for i in 0..corners.len() {
-                for j in 0..i {
-                    let (a, b) = (set[i], set[j]);
-                    if a != b && self.normals[corners[i]].dot(self.normals[corners[j]]) >= cos {
-                        set.iter_mut().filter(|s| **s == a).for_each(|s| *s = b);
+            sets.clear();
+            set_of.clear();
+            for &c in &corners {
+                let n = self.normals[c];
+                let u = n.normalize_or_zero();
+                let k = match sets.iter().position(|s| s.0.dot(u) >= cos) {
+                    Some(k) => k,
+                    None => {
+                        sets.push((u, bits(n), Vec3::ZERO, false));
+                        sets.len() - 1
                     }
-                }
+                };
+                sets[k].2 += u;
+                sets[k].3 |= bits(n) != sets[k].1;
+                set_of.push(k);
             }
-            for i in 0..corners.len() {
-                if set[i] != i {
-                    continue;
-                }
-                let sum: Vec3 = (0..corners.len()).filter(|&j| set[j] == i).map(|j| self.normals[corners[j]]).sum();
-                let n = sum.try_normalize().unwrap_or(self.normals[corners[i]]);
-                for j in 0..corners.len() {
-                    if set[j] == i {
-                        self.normals[corners[j]] = n;
-                    }
+            for (&c, &k) in corners.iter().zip(&set_of) {
+                if let (Some(n), true) = (sets[k].2.try_normalize(), sets[k].3) {
+                    self.normals[c] = n;
                 }
             }
         }

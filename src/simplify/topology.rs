@@ -147,12 +147,11 @@ impl State {
         }
         let spread_sq = self.spread_sq(&cycle);
         self.error_sq = self.error_sq.max(spread_sq);
-        if self.grouped {
-            // The cap's move counts in the group's error (its vertices', which the copies inherit).
-            for &v in &cycle {
-                let q = &mut self.quadrics[v as usize];
-                q.err_sq = q.err_sq.max(spread_sq);
-            }
+        // The cap's move counts in the error of the group the cut runs through, not in that of
+        // other groups whose faces touch the cycle's vertices.
+        let cut_group = self.faces[sides[0].0[0] as usize].group as usize;
+        if let Some(lost) = self.group_lost_sq.get_mut(cut_group) {
+            *lost = lost.max(spread_sq);
         }
         let copies: [u32; 3] = std::array::from_fn(|i| self.verts.len() as u32 + i as u32);
         for (i, &v) in cycle.iter().enumerate() {
