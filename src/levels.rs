@@ -137,6 +137,12 @@ pub fn expected_levels(faces: usize, grouped: usize, p: &LevelParams) -> usize {
     n
 }
 
+/// Per vertex of `mesh`, whether its position ([`position_key`]) is in `set`: the vertices a piece
+/// of a partitioned build shares with other pieces.
+pub fn pinned_flags(mesh: &Mesh, set: &FxHashSet<[u32; 3]>) -> Vec<bool> {
+    mesh.positions.iter().map(|&p| set.contains(&position_key(p))).collect()
+}
+
 /// A position as the key welding compares: its coordinates' bits, −0 as +0.
 pub fn position_key(p: glam::Vec3) -> [u32; 3] {
     (p + glam::Vec3::ZERO).to_array().map(f32::to_bits)
@@ -156,7 +162,7 @@ fn coarsen(below: &LevelMesh, h: &Hierarchy, l: usize, ratio: f32, pinned: Optio
         normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
         ..SimplifyOptions::default()
     };
-    let pins: Vec<bool> = pinned.map_or(Vec::new(), |set| below.mesh.positions.iter().map(|&p| set.contains(&position_key(p))).collect());
+    let pins: Vec<bool> = pinned.map_or(Vec::new(), |set| pinned_flags(&below.mesh, set));
     let s = simplify_pinned(&below.mesh, Some(&labels), &pins, &opts);
     let groups = &h.levels[l];
     let group_error = (0..groups.groups.len())

@@ -16,7 +16,7 @@ use crate::format::{
     NO_PARENT,
 };
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
-use crate::levels::{position_key, LevelMeshes};
+use crate::levels::{pinned_flags, LevelMeshes};
 use crate::mesh::{Material, Mesh};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use rustc_hash::{FxHashMap, FxHashSet};
@@ -253,15 +253,15 @@ impl Piece {
         place: &Place,
     ) -> Result<()> {
         let Looks { attributes, precision, textured, derive_normals } = looks;
-        // Format 2 stores normals at 16 bits.
-        let normal_bits = precision.map_or(16, |p| p.normal_bits);
+        let normal_bits = precision.map_or(octa::BITS, |p| p.normal_bits);
         for l in place.levels.clone() {
             let hl = &h.levels[l];
             let mesh = &lv.levels[l].mesh;
             let file_level = l + place.offset;
-            let shared = |v: u32| place.shared.is_some_and(|s| s.contains(&position_key(mesh.positions[v as usize])));
-            let derived =
-                (derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &self.quant[l].points, normal_bits, shared));
+            let derived = (derive_normals && attributes.normals).then(|| {
+                let shared = place.shared.map(|s| pinned_flags(mesh, s));
+                DerivedNormals::new(mesh, &self.quant[l].points, normal_bits, |v| shared.as_ref().is_some_and(|f| f[v as usize]))
+            });
             for (g, b) in self.bounds[l].iter().enumerate() {
                 let clusters = (file_level == 0).then_some(&h.clusters);
                 let lattice = precision.map_or(Lattice::default(), |p| Lattice {
@@ -535,10 +535,10 @@ fn node_geometry(
             let g = q.points[v as usize];
             let n = match (attrs.normals, lattice.normal_bits) {
                 (false, _) => [0; 2],
-                // Format 2 (bits 0) stores normals at 16 bits.
+                // Format 2 (bits 0) stores full-precision codes.
                 (true, bits) => derived
                     .and_then(|d| d.code(corner))
-                    .unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], if bits == 0 { 16 } else { bits })),
+                    .unwrap_or_else(|| octa::encode_bits(mesh.normals[corner], if bits == 0 { octa::BITS } else { bits })),
             };
             let uv = match (attrs.uvs, lattice.uv_bits) {
                 (false, _) => [0; 2],

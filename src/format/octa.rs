@@ -5,7 +5,9 @@
 
 use glam::{Vec2, Vec3};
 
-/// Grid steps per unit of the unfolded square.
+/// Bits per coordinate of full-precision codes (format 2's, and [`encode`]'s).
+pub const BITS: u32 = 16;
+/// Grid steps per unit of the unfolded square at [`BITS`].
 pub const SCALE: f32 = 32767.0;
 /// Largest angle, in radians, between a unit normal and its decoded code (checked in the tests).
 pub const MAX_ERROR: f32 = 5e-5;
@@ -54,7 +56,7 @@ pub fn decode_at(q: [i32; 2], scale: f32) -> Vec3 {
 
 /// Encode a normal (any length; zero or non-finite becomes +Z).
 pub fn encode(n: Vec3) -> [i16; 2] {
-    encode_bits(n, 16)
+    encode_bits(n, BITS)
 }
 
 /// Encode a normal with `bits` (2..=16) per coordinate, scale `2^(bits−1) − 1` (format 3).

@@ -452,8 +452,7 @@ fn finish_piece<W: Write>(
     let piece = match base {
         Base::Input => {
             // The input's vertices it shares with other cells keep their grid points exactly.
-            let kept: Vec<bool> = lv.levels[0].mesh.positions.iter().map(|&q| pinned.contains(&position_key(q))).collect();
-            Piece::new(&h, &lv, &job.grid, job.precision, None, &kept, n)
+            Piece::new(&h, &lv, &job.grid, job.precision, None, &levels::pinned_flags(&lv.levels[0].mesh, pinned), n)
         }
         Base::Tops(bounds) => Piece::new(&h, &lv, &job.grid, job.precision, Some(bounds), &[], n),
     }
