@@ -109,6 +109,20 @@ impl<'a> BitReader<'a> {
         v
     }
 
+    /// Read `bits` (0..=32) bits without a branch on `bits` (0 reads nothing and gives 0): for
+    /// values whose width is data, which a branch would mispredict.
+    #[inline(always)]
+    pub fn get_any(&mut self, bits: u32) -> u32 {
+        if self.avail < bits {
+            self.refill();
+        }
+        let v = ((self.buf >> (63 - bits)) >> 1) as u32;
+        self.buf = (self.buf << (bits >> 1)) << (bits - (bits >> 1));
+        self.avail -= bits;
+        self.consumed += bits as u64;
+        v
+    }
+
     /// Bits read so far.
     pub fn consumed(&self) -> u64 {
         self.consumed
@@ -257,6 +271,23 @@ impl PrefixCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reads_of_any_width_match_plain_reads() {
+        let mut w = BitWriter::default();
+        let widths: Vec<u32> = (0..400).map(|i| (i * 7) % 33).collect();
+        for (i, &n) in widths.iter().enumerate() {
+            w.put(if n == 0 { 0 } else { (i as u32).wrapping_mul(0x9E37_79B9) >> (32 - n) }, n);
+        }
+        let bytes = w.finish();
+        let (mut a, mut b) = (BitReader::new(&bytes), BitReader::new(&bytes));
+        for &n in &widths {
+            assert_eq!(a.get_any(n), b.get(n), "{n} bits");
+            assert_eq!(a.consumed(), b.consumed());
+        }
+        assert_eq!(a.get_any(0), 0);
+        assert!(!a.overrun());
+    }
 
     #[test]
     fn values_round_trip() {

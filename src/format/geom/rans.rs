@@ -236,15 +236,14 @@ pub fn bucket(u: u32) -> (u8, u32, u32) {
     (4 + 2 * (b - 3) as u8 + top as u8, b - 2, u & ((1 << (b - 2)) - 1))
 }
 
-/// The value of residual symbol `s` (below [`BUCKETS`]) whose raw bits are `raw(count)`.
+/// The value of residual symbol `s` (below [`BUCKETS`]) whose raw bits are `raw(count)`; `raw`
+/// is called for symbols 0–3 too, with a count of 0 (it must then read nothing and give 0), so
+/// that decoding has no branch on the symbol, which would be mispredicted.
 #[inline(always)]
 pub fn unbucket(s: u32, raw: impl FnOnce(u32) -> u32) -> u32 {
-    if s < 4 {
-        return s;
-    }
-    let k = s - 4;
-    let extra = k / 2 + 1;
-    ((2 | (k & 1)) << extra) | raw(extra)
+    let extra = s.saturating_sub(2) >> 1;
+    let head = if extra == 0 { s } else { (2 | (s & 1)) << extra };
+    head | raw(extra)
 }
 
 /// Signed residuals as unsigned: 0, −1, 1, −2, … → 0, 1, 2, 3, ….

@@ -647,7 +647,7 @@ impl In<'_> {
             return Err(self.fault(format!("symbol {s} of alphabet {} is not a value", alphabet_name(al))));
         }
         let raw = &mut self.raw;
-        Ok(unbucket(s, |k| raw.get(k)))
+        Ok(unbucket(s, |k| raw.get_any(k)))
     }
 
     #[inline(always)]
