@@ -5,7 +5,8 @@
 //! a neighbour of another level along a border they do not share. Silhouette differences reach the
 //! edge and are not counted. The peer is the full-detail model, drawn in the same run. Fronts of
 //! one level cannot crack; what they show (a coarse level's own notches) is printed apart, as the
-//! floor of the measure.
+//! floor of the measure. The same fronts are drawn again with the streamer's seams
+//! (`strata::stream::seams`, selection.md §8), which close those slivers.
 //!
 //! `cargo bench --bench cracks [-- file.strata ...]`; without arguments the shipped noisy sphere
 //! and, when present, the bunny and the CT head of ../shared/meshes, converted with defaults.
@@ -13,7 +14,8 @@
 use std::path::{Path, PathBuf};
 use strata::camera::Camera;
 use strata::format::Reader;
-use strata::render::{Image, BACKGROUND};
+use strata::render::{crack_pixels, Image};
+use strata::stream::seams::Seams;
 use strata::stream::{session, Budgets, Streamer};
 
 const W: u32 = 640;
@@ -28,39 +30,14 @@ fn convert(input: &Path) -> PathBuf {
     out
 }
 
-/// Background pixels of `img` not connected to the picture's edge through background.
-fn enclosed(img: &Image) -> Vec<bool> {
-    let (w, h) = (img.width as usize, img.height as usize);
-    let bg: Vec<bool> = img.rgba.chunks_exact(4).map(|p| p == BACKGROUND).collect();
-    let mut outside = vec![false; w * h];
-    let mut stack: Vec<usize> = (0..w).flat_map(|x| [x, (h - 1) * w + x]).chain((0..h).flat_map(|y| [y * w, y * w + w - 1])).collect();
-    while let Some(i) = stack.pop() {
-        if outside[i] || !bg[i] {
-            continue;
-        }
-        outside[i] = true;
-        let (x, y) = (i % w, i / w);
-        if x > 0 {
-            stack.push(i - 1);
-        }
-        if x + 1 < w {
-            stack.push(i + 1);
-        }
-        if y > 0 {
-            stack.push(i - w);
-        }
-        if y + 1 < h {
-            stack.push(i + w);
-        }
-    }
-    bg.iter().zip(&outside).map(|(&b, &o)| b && !o).collect()
-}
-
-fn draw(camera: &Camera, mesh: &strata::Mesh) -> Image {
+fn draw(camera: &Camera, mesh: &strata::Mesh, seams: Option<&Seams>) -> Image {
     let mut img = Image::new(W, H);
     let positions: Vec<glam::Vec3> = mesh.triangles.iter().flatten().map(|&v| mesh.positions[v as usize]).collect();
     let indices: Vec<u32> = (0..positions.len() as u32).collect();
     img.draw(camera, &positions, &[], &indices, [200, 200, 200, 255]);
+    if let Some(s) = seams {
+        img.draw(camera, &s.positions, &[], &s.indices, [200, 200, 200, 255]);
+    }
     img
 }
 
@@ -79,8 +56,17 @@ fn main() {
         }
     }
     println!(
-        "{:<28} {:>6} {:>6} {:>12} {:>9} {:>13} {:>11} {:>15}",
-        "file", "frames", "mixed", "with cracks", "crack px", "max px/frame", "of covered", "one-level px"
+        "{:<28} {:>6} {:>6} {:>12} {:>9} {:>13} {:>11} {:>15} {:>16} {:>17}",
+        "file",
+        "frames",
+        "mixed",
+        "with cracks",
+        "crack px",
+        "max px/frame",
+        "of covered",
+        "one-level px",
+        "px with seams",
+        "seam faces/frame"
     );
     for f in files {
         let rd = Reader::open_path(&f).expect("open");
@@ -89,14 +75,15 @@ fn main() {
         let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
         let mut streamer = Streamer::new(rd, Budgets::default()).expect("streamer");
         let (mut mixed, mut cracked, mut total, mut worst, mut covered, mut floor) = (0, 0, 0u64, 0u64, 0u64, 0u64);
+        let (mut with_seams, mut seam_faces) = (0u64, 0u64);
         for i in 0..FRAMES {
             let camera = session::orbit(center, radius, i, FRAMES, W, H);
             let report = streamer.update(&camera, None).expect("frame");
             let levels = report.stats.levels.iter().filter(|&&n| n > 0).count();
-            let front = draw(&camera, &streamer.front_mesh().expect("front"));
-            let reference = draw(&camera, &full);
-            let holes = enclosed(&front);
-            let cracks = holes.iter().zip(reference.depth.iter()).filter(|(&h, d)| h && d.is_finite()).count() as u64;
+            let mesh = streamer.front_mesh().expect("front");
+            let reference = draw(&camera, &full, None);
+            let cracks = crack_pixels(&draw(&camera, &mesh, None), &reference);
+            let sealed = crack_pixels(&draw(&camera, &mesh, Some(streamer.seams())), &reference);
             if levels < 2 {
                 floor += cracks;
                 continue;
@@ -105,11 +92,13 @@ fn main() {
             cracked += usize::from(cracks > 0);
             total += cracks;
             worst = worst.max(cracks);
+            with_seams += sealed;
+            seam_faces += streamer.seams().face_count() as u64;
             covered += reference.depth.iter().filter(|d| d.is_finite()).count() as u64;
         }
         let name = f.file_name().unwrap().to_string_lossy().replace("strata-cracks-", "");
         println!(
-            "{:<28} {:>6} {:>6} {:>12} {:>9} {:>13} {:>10.4}% {:>15}",
+            "{:<28} {:>6} {:>6} {:>12} {:>9} {:>13} {:>10.4}% {:>15} {:>16} {:>17.1}",
             name.split('-').next().unwrap_or(&name),
             FRAMES,
             mixed,
@@ -117,7 +106,9 @@ fn main() {
             total,
             worst,
             100.0 * total as f64 / covered.max(1) as f64,
-            floor
+            floor,
+            with_seams,
+            seam_faces as f64 / mixed.max(1) as f64
         );
     }
 }

@@ -1220,6 +1220,40 @@ pub fn changed_share(a: &Image, b: &Image, tolerance: u8) -> f64 {
     }
 }
 
+/// Crack pixels of a front's image against the full model's from the same camera: pixels the full
+/// model covers that the front leaves to the background, where that background is enclosed by the
+/// front (not reachable from the picture's edge through background). Silhouette differences reach
+/// the edge and do not count; pinholes between nodes that do not meet do.
+pub fn crack_pixels(front: &Image, full: &Image) -> u64 {
+    let (w, h) = (front.width as usize, front.height as usize);
+    if front.width != full.width || front.height != full.height || front.depth.len() != w * h || full.depth.len() != w * h {
+        return 0;
+    }
+    let bg: Vec<bool> = front.depth.iter().map(|d| !d.is_finite()).collect();
+    let mut outside = vec![false; w * h];
+    let mut stack: Vec<usize> = (0..w).flat_map(|x| [x, (h - 1) * w + x]).chain((0..h).flat_map(|y| [y * w, y * w + w - 1])).collect();
+    while let Some(i) = stack.pop() {
+        if outside[i] || !bg[i] {
+            continue;
+        }
+        outside[i] = true;
+        let (x, y) = (i % w, i / w);
+        if x > 0 {
+            stack.push(i - 1);
+        }
+        if x + 1 < w {
+            stack.push(i + 1);
+        }
+        if y > 0 {
+            stack.push(i - w);
+        }
+        if y + 1 < h {
+            stack.push(i + w);
+        }
+    }
+    (0..w * h).filter(|&i| bg[i] && !outside[i] && full.depth[i].is_finite()).count() as u64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

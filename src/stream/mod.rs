@@ -10,6 +10,7 @@
 //! - [`order`]: the front from front to back, by the file's separating planes (selection.md §5);
 //! - [`budget`]: the frame-time controller on the pixel-error threshold;
 //! - [`retention`]: shape retention of a front's image against the full-detail one;
+//! - [`seams`]: triangles that close the slivers between displayed nodes of adjacent levels;
 //! - [`session`]: cameras to play: an orbit moving in from far, or a path file's lines;
 //! - [`play`]: a viewing session played frame by frame, drawn with the software renderer.
 
@@ -21,6 +22,7 @@ pub mod order;
 pub mod play;
 pub mod refine;
 pub mod retention;
+pub mod seams;
 pub mod session;
 #[cfg(test)]
 mod tests;
@@ -82,6 +84,8 @@ pub struct Stats {
     pub refine_ms: f64,
     /// Of that, the time to put the front in drawing order.
     pub order_ms: f64,
+    /// Of that, the time to find the seams between levels (selection.md §8).
+    pub seams_ms: f64,
     /// Bytes of image level files read so far, and image levels held as RGBA8 (counted in the
     /// memory budget with the geometry).
     pub texture_bytes_read: u64,
@@ -129,6 +133,9 @@ pub struct Streamer<S> {
     warnings: Vec<String>,
     /// Nodes the renderer found hidden in the last frame, ascending: not refined in the next.
     hidden: Vec<u32>,
+    /// The open border of each displayed node, and the seams of the front between levels.
+    borders: rustc_hash::FxHashMap<u32, seams::Border>,
+    seams: seams::Seams,
 }
 
 impl<S: ByteSource> Streamer<S> {
@@ -162,6 +169,8 @@ impl<S: ByteSource> Streamer<S> {
         Ok(Streamer {
             warnings: Vec::new(),
             hidden: Vec::new(),
+            borders: Default::default(),
+            seams: Default::default(),
             orderer: None,
             cache: Cache::new(budgets.bytes.map(|b| b - pinned)),
             images: ImageCache::default(),
@@ -277,6 +286,9 @@ impl<S: ByteSource> Streamer<S> {
             None => order::nearest_box_first(self.reader.skeleton(), &cut.shown, camera, &mut order),
         }
         let order_ms = ordered.elapsed().as_secs_f64() * 1e3;
+        let sealing = Instant::now();
+        self.update_seams(&cut.shown);
+        let seams_ms = sealing.elapsed().as_secs_f64() * 1e3;
         let mut levels = vec![0u32; self.reader.levels().len()];
         for &i in &cut.shown {
             levels[self.reader.nodes()[i as usize].level as usize] += 1;
@@ -291,6 +303,7 @@ impl<S: ByteSource> Streamer<S> {
             pixel_error: limits.pixel_error,
             refine_ms: start.elapsed().as_secs_f64() * 1e3,
             order_ms,
+            seams_ms,
             texture_bytes_read: self.images.bytes_read(),
             texture_resident_bytes: self.images.resident_bytes(),
             texture_levels: self.images.drawn().iter().map(|(&i, &(w, d))| [i, w, d]).collect(),
@@ -301,6 +314,33 @@ impl<S: ByteSource> Streamer<S> {
         let report = FrameReport { frame: self.frame, front: cut.shown, order, added, removed, culled: cut.culled, stats };
         self.frame += 1;
         Ok(report)
+    }
+
+    /// Triangles that close the slivers between displayed nodes of adjacent levels (selection.md
+    /// §8), to draw with the front.
+    pub fn seams(&self) -> &seams::Seams {
+        &self.seams
+    }
+
+    /// Borders of the nodes of `front` (kept while they stay displayed) and the seams between them.
+    fn update_seams(&mut self, front: &[u32]) {
+        let shown: rustc_hash::FxHashSet<u32> = front.iter().copied().collect();
+        self.borders.retain(|n, _| shown.contains(n));
+        let nodes = self.reader.nodes();
+        for &n in front {
+            if !self.borders.contains_key(&n) {
+                if let Some(g) = self.cache.get(n) {
+                    let r = &nodes[n as usize];
+                    self.borders.insert(n, seams::Border::of(r.level, r.error, g));
+                }
+            }
+        }
+        // Seams run between a node and the children of a neighbour, or the parent of one: only
+        // nodes with a neighbour of their level not displayed take part.
+        let reader = &self.reader;
+        let borders: Vec<&seams::Border> =
+            front.iter().filter(|&&n| reader.neighbors(n).iter().any(|m| !shown.contains(m))).filter_map(|n| self.borders.get(n)).collect();
+        self.seams = seams::seams(&borders);
     }
 
     /// The displayed front as one mesh, each node's vertices kept apart, with the file's materials

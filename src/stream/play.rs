@@ -11,6 +11,9 @@ use crate::render::{palette, DrawStats, Image, Part, Strips};
 use crate::texture::draw::node_parts;
 use std::time::Instant;
 
+/// The color of the seams between levels in a frame whose nodes are drawn in a color each.
+const SEAM_COLOR: [u8; 4] = [200, 200, 200, 255];
+
 /// What to produce per frame besides the report.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PlayOptions {
@@ -78,7 +81,7 @@ pub fn play<S: ByteSource>(
         let nodes = if opts.ordered { &report.order } else { &report.front };
         // Each part's node, for counting the nodes occlusion culling skipped.
         let mut owner = Vec::new();
-        let parts: Vec<Part> = nodes
+        let mut parts: Vec<Part> = nodes
             .iter()
             .filter_map(|&i| s.geometry(i).map(|g| (i, g)))
             .flat_map(|(i, g)| {
@@ -92,6 +95,11 @@ pub fn play<S: ByteSource>(
                 parts.into_iter().map(move |p| p.with_bounds(lo, hi))
             })
             .collect();
+        // The seams between levels, last: they fill slivers behind nothing.
+        let seams = s.seams();
+        if !seams.indices.is_empty() {
+            parts.push(Part::new(&seams.positions, &seams.normals, &seams.indices, SEAM_COLOR));
+        }
         strips.draw(camera, &parts, |row, line| {
             if let Some(out) = rgba.get_mut(row as usize * row_bytes..row as usize * row_bytes + line.len()) {
                 out.copy_from_slice(line);
@@ -99,7 +107,7 @@ pub fn play<S: ByteSource>(
         });
         let draw_ms = start.elapsed().as_secs_f64() * 1e3;
         let draw = strips.stats();
-        // A node is hidden when all its parts are.
+        // A node is hidden when all its parts are (the seams' part, last, belongs to none).
         let hidden: Vec<u32> = if opts.occlusion {
             let mut shown: Vec<(u32, bool)> = owner.iter().enumerate().map(|(k, &i)| (i, !strips.part_hidden(k))).collect();
             shown.sort_unstable();
@@ -128,6 +136,8 @@ pub fn play<S: ByteSource>(
                     front.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
                 }
             }
+            let seams = streamer.seams();
+            front.draw(camera, &seams.positions, &seams.normals, &seams.indices, PLAIN);
             for g in full {
                 whole.draw(camera, &g.positions, &g.normals, &g.indices, PLAIN);
             }

@@ -1,0 +1,215 @@
+//! Seams between displayed nodes of adjacent levels (selection.md §8): where a node borders
+//! displayed nodes one level finer, its border is the simplified version of theirs and the two
+//! leave slivers of background between them. Nodes share the file's grid, so a vertex both sides
+//! keep has the same position on both: the border edges no other displayed node has the other way
+//! round close into loops, each a run of the coarser node's border and a run of the finer nodes'
+//! between two shared vertices, and a fan of triangles fills each such loop.
+//!
+//! Only loops with edges of two levels are filled, and only those no wider on average than the
+//! coarser node's error: a hole of the model itself (an open border of the input) that lies along
+//! a level change is wider than that unless it is too small to see at that level.
+
+use crate::format::NodeGeometry;
+use glam::Vec3;
+use rustc_hash::{FxHashMap, FxHashSet};
+
+/// A position as readers match it across nodes: its coordinates' bits (−0 as +0).
+type Key = [u32; 3];
+
+fn key(p: Vec3) -> Key {
+    (p + Vec3::ZERO).to_array().map(f32::to_bits)
+}
+
+/// One border edge of a node, directed as its face runs: its ends, and the position and normal of
+/// the first (the normal is zero when the file has none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Edge {
+    from: Key,
+    to: Key,
+    at: Vec3,
+    normal: Vec3,
+}
+
+/// A node's open border: the edges of its faces that no other face of the node has the other way
+/// round (edges of zero length and edges the node's faces use twice the same way are left out).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Border {
+    level: u32,
+    error: f32,
+    edges: Vec<Edge>,
+}
+
+impl Border {
+    /// The border of `g`, a node of `level` with geometric error `error`.
+    pub fn of(level: u32, error: f32, g: &NodeGeometry) -> Border {
+        let mut count: FxHashMap<(Key, Key), (u32, u32)> = FxHashMap::default();
+        for f in g.indices.chunks_exact(3) {
+            for k in 0..3 {
+                let (a, b) = (f[k], f[(k + 1) % 3]);
+                let (ka, kb) = (key(g.positions[a as usize]), key(g.positions[b as usize]));
+                if ka != kb {
+                    count.entry((ka, kb)).or_insert((0, a)).0 += 1;
+                }
+            }
+        }
+        let mut edges: Vec<Edge> = count
+            .iter()
+            .filter(|&(&(a, b), &(n, _))| n == 1 && !count.contains_key(&(b, a)))
+            .map(|(&(from, to), &(_, v))| Edge {
+                from,
+                to,
+                at: g.positions[v as usize],
+                normal: g.normals.get(v as usize).copied().unwrap_or(Vec3::ZERO),
+            })
+            .collect();
+        // In a fixed order, so that seams do not depend on the hash map's.
+        edges.sort_unstable_by_key(|e| (e.from, e.to));
+        Border { level, error, edges }
+    }
+}
+
+/// Triangles that fill the seams of a front, as plain arrays; `normals` is empty when the borders
+/// carry none.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Seams {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub indices: Vec<u32>,
+}
+
+impl Seams {
+    pub fn face_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// The seams between the displayed nodes whose borders are `borders` (selection.md §8).
+pub fn seams(borders: &[&Border]) -> Seams {
+    let present: FxHashSet<(Key, Key)> = borders.iter().flat_map(|b| b.edges.iter().map(|e| (e.from, e.to))).collect();
+    // Edges no displayed node has the other way round, with their node's level and error.
+    let open: Vec<(&Edge, u32, f32)> = borders
+        .iter()
+        .flat_map(|b| b.edges.iter().map(move |e| (e, b.level, b.error)))
+        .filter(|(e, _, _)| !present.contains(&(e.to, e.from)))
+        .collect();
+    let mut leaving: FxHashMap<Key, Vec<u32>> = FxHashMap::default();
+    for (i, (e, _, _)) in open.iter().enumerate() {
+        leaving.entry(e.from).or_default().push(i as u32);
+    }
+    let with_normals = borders.iter().any(|b| b.edges.iter().any(|e| e.normal != Vec3::ZERO));
+    let mut out = Seams::default();
+    let mut used = vec![false; open.len()];
+    let mut ring: Vec<u32> = Vec::new();
+    for start in 0..open.len() {
+        if used[start] {
+            continue;
+        }
+        ring.clear();
+        let mut e = start;
+        let closed = loop {
+            used[e] = true;
+            ring.push(e as u32);
+            let (edge, level, _) = open[e];
+            if edge.to == open[start].0.from {
+                break true;
+            }
+            // Where loops touch, a loop turns from one level's run to the other's.
+            let next = leaving.get(&edge.to).and_then(|c| {
+                let free = || c.iter().copied().filter(|&x| !used[x as usize]);
+                free().find(|&x| open[x as usize].1 != level).or_else(|| free().next())
+            });
+            match next {
+                Some(x) => e = x as usize,
+                None => break false,
+            }
+        };
+        if closed {
+            fill(&open, &ring, with_normals, &mut out);
+        }
+    }
+    out
+}
+
+/// Fill loop `ring` (edges of `open`) when it joins two levels and is thin: a fan from its
+/// lowest vertex (by [`Key`]), wound against the loop, which runs the way its nodes' faces do
+/// around a gap.
+fn fill(open: &[(&Edge, u32, f32)], ring: &[u32], with_normals: bool, out: &mut Seams) {
+    let edges: Vec<&Edge> = ring.iter().map(|&i| open[i as usize].0).collect();
+    let levels = ring.iter().map(|&i| open[i as usize].1);
+    let (lo, hi) = levels.clone().fold((u32::MAX, 0), |(lo, hi), l| (lo.min(l), hi.max(l)));
+    if edges.len() < 3 || lo == hi {
+        return;
+    }
+    let error = ring.iter().map(|&i| open[i as usize].2).fold(0.0f32, f32::max);
+    let p0 = edges[0].at;
+    let (mut area, mut perimeter) = (Vec3::ZERO, 0.0f32);
+    for (k, e) in edges.iter().enumerate() {
+        let next = edges[(k + 1) % edges.len()].at;
+        area += (e.at - p0).cross(next - p0);
+        perimeter += e.at.distance(next);
+    }
+    // Mean width: the area over half the perimeter.
+    if 0.5 * area.length() > error * 0.5 * perimeter {
+        return;
+    }
+    let first = (0..edges.len()).min_by_key(|&k| edges[k].from).unwrap_or(0);
+    let base = out.positions.len() as u32;
+    let n = edges.len();
+    for k in 0..n {
+        let e = edges[(first + k) % n];
+        out.positions.push(e.at);
+        if with_normals {
+            out.normals.push(e.normal);
+        }
+    }
+    for k in 1..n as u32 - 1 {
+        out.indices.extend_from_slice(&[base, base + k + 1, base + k]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn geometry(positions: &[[f32; 3]], indices: &[u32]) -> NodeGeometry {
+        NodeGeometry {
+            positions: positions.iter().map(|&p| Vec3::from_array(p)).collect(),
+            indices: indices.to_vec(),
+            ..Default::default()
+        }
+    }
+
+    /// A coarse node of one triangle whose lower edge runs straight, beside a finer node whose
+    /// upper edge has a vertex below the middle of it: a sliver between them.
+    fn pair(dip: f32) -> (NodeGeometry, NodeGeometry) {
+        let coarse = geometry(&[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 1.0, 0.0]], &[0, 1, 2]);
+        let fine = geometry(&[[0.0, 0.0, 0.0], [1.0, -dip, 0.0], [2.0, 0.0, 0.0], [1.0, -1.0, 0.0]], &[0, 3, 1, 1, 3, 2]);
+        (coarse, fine)
+    }
+
+    #[test]
+    fn a_sliver_between_levels_is_filled_against_its_loop() {
+        let (coarse, fine) = pair(0.05);
+        let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
+        let s = seams(&[&a, &b]);
+        assert_eq!(s.face_count(), 1);
+        let t: Vec<Vec3> = s.indices.iter().map(|&i| s.positions[i as usize]).collect();
+        assert!((t[1] - t[0]).cross(t[2] - t[0]).z > 0.0, "wound as the faces around it: {t:?}");
+        assert!(t.contains(&Vec3::new(1.0, -0.05, 0.0)));
+    }
+
+    #[test]
+    fn nodes_of_one_level_a_wide_gap_and_matching_borders_get_no_seam() {
+        let (coarse, fine) = pair(0.05);
+        let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(1, 0.1, &fine));
+        assert_eq!(seams(&[&a, &b]).face_count(), 0, "one level");
+        let (coarse, fine) = pair(0.5);
+        let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
+        assert_eq!(seams(&[&a, &b]).face_count(), 0, "wider than the error");
+        let (_, fine) = pair(0.0);
+        let straight = geometry(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 1.0, 0.0]], &[0, 1, 3, 1, 2, 3]);
+        let (a, b) = (Border::of(1, 0.1, &straight), Border::of(0, 0.0, &fine));
+        assert_eq!(seams(&[&a, &b]).face_count(), 0, "shared border");
+        assert_eq!(seams(&[&a]).face_count(), 0, "a node alone");
+    }
+}
