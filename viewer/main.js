@@ -39,6 +39,10 @@ let measuring = false;
 let lastClick = null;
 let opened = null;
 let idleWaiters = [];
+/** The uploaded seams between levels and the streamer's count of their changes they are from. */
+let seamHandle = null;
+let seamsVersion = 0;
+let drawSeams = true;
 
 function fmtBytes(n) {
   if (n < 1024) return `${n} B`;
@@ -119,7 +123,16 @@ function frame() {
   const s = streamer.skeleton;
   const images = (image) => streamer.imageHandle(image);
   // Front to back, so that the depth test rejects what lies behind before it is shaded.
-  renderer.draw(camera, streamer.localOrigin, streamer.drawOrder.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] })), colorMode, s.materials, images);
+  const drawn = streamer.drawOrder.map((id) => ({ id, handle: streamer.handle(id), level: s.level[id] }));
+  // The seams between levels, last: they fill slivers behind nothing.
+  if (seamsVersion !== streamer.seamsVersion) {
+    renderer.release(seamHandle);
+    const f = streamer.seams;
+    seamHandle = f && f.faces > 0 ? renderer.upload({ local: f.local, normals: f.normals, indices: f.indices, materialRanges: [[0, 0, f.indices.length]] }) : null;
+    seamsVersion = streamer.seamsVersion;
+  }
+  if (seamHandle && drawSeams) drawn.push({ id: -1, handle: seamHandle, level: 0 });
+  renderer.draw(camera, streamer.localOrigin, drawn, colorMode, s.materials, images);
   frameMs = performance.now() - t0;
   if (firstTextured === null && streamer.textureLevels().some(([, , level]) => level !== null)) {
     const { textureBytesRead, textureRequests } = streamer;
@@ -169,6 +182,9 @@ async function open(source) {
   const generation = ++opens;
   streamer?.close();
   streamer = null;
+  renderer?.release(seamHandle);
+  seamHandle = null;
+  seamsVersion = 0;
   openStart = generation === 1 ? 0 : performance.now();
   showMessage('');
   showWarning(null);
@@ -483,6 +499,11 @@ window.strata = {
   },
   setColor(mode) {
     colorMode = mode;
+    dirty = true;
+  },
+  /** Draw the seams between levels (selection.md §8) or not, to see what they close. */
+  setSeams(on) {
+    drawSeams = on;
     dirty = true;
   },
   /** The front `strata stream --print-front` would print for this camera and limits (no loading);

@@ -25,6 +25,7 @@ import { Orderer } from './order.js';
 import { NodeDecodeError } from './decoder.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
+import { border, seams } from './seams.js';
 
 const NO_PARENT = 0xffffffff;
 
@@ -199,6 +200,10 @@ export class Streamer {
     this.mainDecodeMs = 0;
     this.onLoad = options.onLoad ?? (() => null);
     this.onEvict = options.onEvict ?? (() => {});
+    /** The fill of the seams between the drawn nodes' levels (selection.md §8), and a count of its changes. */
+    this.seams = null;
+    this.seamsVersion = 0;
+    this.seamNodes = '';
     this.onChange = options.onChange ?? (() => {});
     this.maps = options.maps ?? ['baseColor'];
     this.onImage = options.onImage ?? (() => null);
@@ -344,9 +349,12 @@ export class Streamer {
     if (this.cache.has(i)) return;
     const size = recordBytes(this.skeleton, i);
     const handle = this.onLoad(i, geometry);
-    // What picking needs stays on this side; the rest lives in the renderer's buffers.
+    // What picking needs stays on this side, with the node's open border for the seams (made
+    // here, where the normals still are); the rest lives in the renderer's buffers.
     const kept = { local: geometry.local, positions: geometry.local ? null : geometry.positions, indices: geometry.indices, materialRanges: geometry.materialRanges };
-    this.cache.set(i, { geometry: kept, handle, bytes: size });
+    const s = this.skeleton;
+    const edge = border(s.level[i], s.error[i], { positions: geometry.local ?? geometry.positions, normals: geometry.normals, indices: geometry.indices });
+    this.cache.set(i, { geometry: kept, handle, bytes: size, border: edge });
     this.residentBytes += size;
     this.peakResidentBytes = Math.max(this.peakResidentBytes, this.residentBytes);
   }
@@ -398,6 +406,7 @@ export class Streamer {
     }
     this.drawn = drawn;
     this.drawOrder = this.orderer.order(drawn, camera);
+    this.sealSeams(drawn);
     // Drawn nodes and their ancestors become the most recently used, ancestors first, so that
     // moving away finds the coarser nodes still resident.
     for (const i of drawn) {
@@ -767,6 +776,21 @@ export class Streamer {
   textureLevels() {
     const t = this.skeleton.textures;
     return [...this.imagePlan].map(([image, p]) => [image, p.wanted, p.drawn === null ? null : t.levels[p.drawn].level]);
+  }
+
+  /**
+   * The seams between the drawn nodes (selection.md §8): from the borders of those with a
+   * neighbour of their level not drawn, made again when that set changes.
+   */
+  sealSeams(drawn) {
+    const s = this.skeleton;
+    const shown = new Set(drawn);
+    const sealing = drawn.filter((i) => this.cache.has(i) && Array.from(s.neighbors(i)).some((m) => !shown.has(m))).sort((a, b) => a - b);
+    const key = sealing.join(',');
+    if (key === this.seamNodes) return;
+    this.seamNodes = key;
+    this.seams = seams(sealing.map((i) => this.cache.get(i).border));
+    this.seamsVersion++;
   }
 
   geometry(i) {

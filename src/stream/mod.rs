@@ -86,6 +86,8 @@ pub struct Stats {
     pub order_ms: f64,
     /// Of that, the time to find the seams between levels (selection.md §8).
     pub seams_ms: f64,
+    /// Triangles that fill those seams.
+    pub seam_faces: u64,
     /// Bytes of image level files read so far, and image levels held as RGBA8 (counted in the
     /// memory budget with the geometry).
     pub texture_bytes_read: u64,
@@ -304,6 +306,7 @@ impl<S: ByteSource> Streamer<S> {
             refine_ms: start.elapsed().as_secs_f64() * 1e3,
             order_ms,
             seams_ms,
+            seam_faces: self.seams.face_count() as u64,
             texture_bytes_read: self.images.bytes_read(),
             texture_resident_bytes: self.images.resident_bytes(),
             texture_levels: self.images.drawn().iter().map(|(&i, &(w, d))| [i, w, d]).collect(),

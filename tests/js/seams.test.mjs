@@ -1,0 +1,67 @@
+// The viewer's seams between levels (viewer/seams.js, format-spec/selection.md §8) on hand-made
+// nodes, and against strata's Streamer (`strata stream --print-front`, its `seam_faces`) on the
+// fronts of an orbit over the converted noisy sphere fixture: the same fronts get as many fill
+// triangles in both readers.
+
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync } from 'node:fs';
+import { decodeSkeleton, decodeNode } from '../../viewer/format.js';
+import { border, seams } from '../../viewer/seams.js';
+import { root, strataBin, converted, run } from './helpers.mjs';
+
+const geometry = (positions, indices) => ({ positions: new Float32Array(positions.flat()), indices: new Uint32Array(indices), normals: null });
+
+/** A coarse triangle over a finer pair whose shared vertex lies `dip` below the coarse edge. */
+function pair(dip) {
+  const coarse = geometry([[0, 0, 0], [2, 0, 0], [1, 1, 0]], [0, 1, 2]);
+  const fine = geometry([[0, 0, 0], [1, -dip, 0], [2, 0, 0], [1, -1, 0]], [0, 3, 1, 1, 3, 2]);
+  return [coarse, fine];
+}
+
+test('a sliver between levels is filled, wound as the faces around it', () => {
+  const [coarse, fine] = pair(0.05);
+  const s = seams([border(1, 0.1, coarse), border(0, 0, fine)]);
+  assert.equal(s.faces, 1);
+  const p = (k) => Array.from(s.local.subarray(3 * s.indices[k], 3 * s.indices[k] + 3));
+  const [a, b, c] = [p(0), p(1), p(2)];
+  assert.ok((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) > 0);
+  assert.ok([a, b, c].some((v) => v[0] === 1 && v[1] === Math.fround(-0.05)));
+});
+
+test('one level, a gap wider than the error, a shared border: no seam', () => {
+  let [coarse, fine] = pair(0.05);
+  assert.equal(seams([border(1, 0.1, coarse), border(1, 0.1, fine)]).faces, 0);
+  [coarse, fine] = pair(0.5);
+  assert.equal(seams([border(1, 0.1, coarse), border(0, 0, fine)]).faces, 0);
+  [, fine] = pair(0);
+  const straight = geometry([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0]], [0, 1, 3, 1, 2, 3]);
+  assert.equal(seams([border(1, 0.1, straight), border(0, 0, fine)]).faces, 0);
+});
+
+test('the seams of strata stream on a converted fixture', (t) => {
+  const file = converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, []);
+  const out = run(strataBin(), ['stream', file, '--json', '--print-front', '--orbit', '32']);
+  const frames = out.trim().split('\n').map((l) => JSON.parse(l));
+  const bytes = new Uint8Array(readFileSync(file));
+  const s = decodeSkeleton(bytes, bytes.length);
+  const borders = new Map();
+  let filled = 0;
+  for (const f of frames) {
+    const shown = new Set(f.front);
+    const list = [];
+    for (const i of f.front) {
+      if (!Array.from(s.neighbors(i)).some((m) => !shown.has(m))) continue;
+      if (!borders.has(i)) {
+        const g = decodeNode(s, i, bytes.subarray(s.offset[i], s.offset[i] + s.size[i]));
+        borders.set(i, border(s.level[i], s.error[i], g));
+      }
+      list.push(borders.get(i));
+    }
+    const faces = seams(list).faces;
+    assert.equal(faces, f.seam_faces, `frame ${f.frame}: seam faces`);
+    filled += faces;
+  }
+  assert.ok(filled > 0, 'the orbit shows seams');
+  t.diagnostic(`${frames.length} fronts, ${filled} seam faces, as strata stream finds them`);
+});
