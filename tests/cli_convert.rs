@@ -188,3 +188,23 @@ fn normals_of_the_geometry_make_a_smaller_file_that_verifies() {
     assert!(geometry < input_normals, "--normals geometry: {geometry} bytes, the input's normals {input_normals}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_growth_follows_the_level_ratio_unless_given() {
+    let dir = temp_dir("growth");
+    let input = fixture("icosphere.obj");
+    let growth = |args: &[&str]| -> u64 {
+        let out = dir.join("ico.strata");
+        let o = strata(&[&["convert", "-q", input.as_str(), out.to_str().unwrap()], args].concat());
+        assert!(o.status.success(), "convert {args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let o = strata(&["inspect", "--json", out.to_str().unwrap()]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        v["header"]["params"]["growth"].as_u64().expect("the recorded growth")
+    };
+    assert_eq!(growth(&[]), 2, "the default ratio 0.5");
+    assert_eq!(growth(&["--level-ratio", "0.25"]), 4);
+    assert_eq!(growth(&["--level-ratio", "0.3"]), 3);
+    assert_eq!(growth(&["--level-ratio", "0.8"]), 2);
+    assert_eq!(growth(&["--level-ratio", "0.25", "--growth", "2"]), 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}

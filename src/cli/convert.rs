@@ -96,7 +96,7 @@ pub enum NormalsArg {
 
 pub fn run(a: Args) -> Result<()> {
     let opts = strata::pipeline::ConvertOptions {
-        hierarchy: a.grouping.params(),
+        hierarchy: a.grouping.params(a.levels.level_ratio),
         levels: a.levels.params(),
         normals: match a.normals {
             NormalsArg::Auto => Normals::Auto { crease_angle: a.crease_angle.to_radians() },

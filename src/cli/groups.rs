@@ -34,7 +34,7 @@ pub fn run(a: Args) -> Result<()> {
     let m = &imp.mesh;
     let start = Instant::now();
     let adj = mesh::Adjacency::build(m);
-    let mut h = hierarchy::build(m, &adj, &a.grouping.params());
+    let mut h = hierarchy::build(m, &adj, &a.grouping.params(a.level_params.level_ratio));
     let hierarchy_ms = start.elapsed().as_secs_f64() * 1e3;
     let stats = culling::measure(&h, m, a.views.max(1));
     let level_meshes = a.levels.then(|| {

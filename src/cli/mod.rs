@@ -189,9 +189,10 @@ pub struct GroupingArgs {
     /// Threshold relaxation per level, degrees.
     #[arg(long, default_value_t = HierarchyParams::default().angle_step.to_degrees().round())]
     angle_step: f32,
-    /// Size cap growth factor per level.
-    #[arg(long, default_value_t = HierarchyParams::default().growth)]
-    growth: u32,
+    /// Size cap growth factor per level [default: the inverse of --level-ratio, rounded, at
+    /// least 2, so that nodes keep their size from level to level: 2 at the default ratio]
+    #[arg(long)]
+    growth: Option<u32>,
     /// Weight of cone tightness in the evaluation function.
     #[arg(long, default_value_t = HierarchyParams::default().kc)]
     kc: f32,
@@ -207,19 +208,30 @@ pub struct GroupingArgs {
 }
 
 impl GroupingArgs {
-    fn params(&self) -> HierarchyParams {
+    /// The grouping's parameters for levels made at `level_ratio`.
+    fn params(&self, level_ratio: f32) -> HierarchyParams {
         HierarchyParams {
             cluster_faces: self.cluster_faces.max(1),
             cluster_angle: self.cluster_angle.to_radians(),
             leaf_faces: self.leaf_faces.max(1),
             leaf_angle: self.leaf_angle.to_radians(),
             angle_step: self.angle_step.to_radians(),
-            growth: self.growth,
+            growth: self.growth.unwrap_or_else(|| growth_for(level_ratio)),
             kc: self.kc,
             ks: self.ks,
             kn: self.kn,
             top_groups: self.top_groups.max(1),
         }
+    }
+}
+
+/// The size cap growth that keeps nodes of one size when each level has `level_ratio` of the
+/// faces of the one below: groups merge about `1 / level_ratio` to one.
+fn growth_for(level_ratio: f32) -> u32 {
+    if level_ratio > 0.0 && level_ratio.is_finite() {
+        (1.0 / level_ratio).round().clamp(2.0, 64.0) as u32
+    } else {
+        HierarchyParams::default().growth
     }
 }
 
