@@ -77,35 +77,46 @@ export function border(level, error, geometry) {
  * indices, faces }` (`normals` null when the borders carry none).
  */
 export function seams(borders) {
+  // Vertices as integers for this front, so that edges compare as numbers.
+  const ids = new Map();
+  const idOf = (key) => {
+    let v = ids.get(key);
+    if (v === undefined) {
+      v = ids.size;
+      ids.set(key, v);
+    }
+    return v;
+  };
+  const all = [];
+  for (const b of borders) for (const e of b.edges) all.push({ e, level: b.level, error: b.error, a: idOf(e.fromKey), b: idOf(e.toKey) });
+  const M = ids.size;
   const present = new Set();
-  for (const b of borders) for (const e of b.edges) present.add(`${e.fromKey}|${e.toKey}`);
-  const open = [];
-  for (const b of borders) {
-    for (const e of b.edges) if (!present.has(`${e.toKey}|${e.fromKey}`)) open.push({ e, level: b.level, error: b.error });
-  }
+  for (const x of all) present.add(x.a * M + x.b);
+  const open = all.filter((x) => !present.has(x.b * M + x.a));
   const leaving = new Map();
   open.forEach((o, i) => {
-    const l = leaving.get(o.e.fromKey);
+    const l = leaving.get(o.a);
     if (l) l.push(i);
-    else leaving.set(o.e.fromKey, [i]);
+    else leaving.set(o.a, [i]);
   });
   const withNormals = borders.some((b) => b.edges.some((e) => e.normal));
   const used = new Uint8Array(open.length);
   const positions = [], normals = [], indices = [];
+  const ring = [];
   for (let start = 0; start < open.length; start++) {
     if (used[start]) continue;
-    const ring = [];
+    ring.length = 0;
     let e = start, closed = false;
     for (;;) {
       used[e] = 1;
       ring.push(e);
-      const { e: edge, level } = open[e];
-      if (edge.toKey === open[start].e.fromKey) {
+      const { b: to, level } = open[e];
+      if (to === open[start].a) {
         closed = true;
         break;
       }
       // Where loops touch, a loop turns from one level's run to the other's.
-      const c = leaving.get(edge.toKey) ?? [];
+      const c = leaving.get(to) ?? [];
       let next = c.find((x) => !used[x] && open[x].level !== level);
       if (next === undefined) next = c.find((x) => !used[x]);
       if (next === undefined) break;
