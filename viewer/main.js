@@ -131,7 +131,7 @@ function frame() {
     seamHandle = f && f.faces > 0 ? renderer.upload({ local: f.local, normals: f.normals, indices: f.indices, materialRanges: [[0, 0, f.indices.length]] }) : null;
     seamsVersion = streamer.seamsVersion;
   }
-  if (seamHandle && drawSeams) drawn.push({ id: -1, handle: seamHandle, level: 0 });
+  if (seamHandle && drawSeams) drawn.push({ id: -1, handle: seamHandle, level: 0, seam: true });
   renderer.draw(camera, streamer.localOrigin, drawn, colorMode, s.materials, images);
   frameMs = performance.now() - t0;
   if (firstTextured === null && streamer.textureLevels().some(([, , level]) => level !== null)) {

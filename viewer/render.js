@@ -194,7 +194,8 @@ export class Renderer {
   }
 
   /**
-   * Draw `nodes` (`[{id, handle, level}]`) seen by `camera`, positions relative to `origin`.
+   * Draw `nodes` (`[{id, handle, level, seam}]`) seen by `camera`, positions relative to `origin`;
+   * an entry with `seam` set holds the seams between levels, drawn plain whatever the mode.
    * `mode`: 'plain' | 'material' | 'level' | 'node'; `materials` from the skeleton; `imageOf(image)`
    * the texture handle of an image's level to draw, or null (the material is drawn untextured).
    */
@@ -222,13 +223,14 @@ export class Renderer {
       textured = !!tex;
     };
     gl.uniform1i(this.u.textured, 0);
-    for (const { id, handle, level } of nodes) {
+    for (const { id, handle, level, seam } of nodes) {
       if (!handle) continue;
       gl.bindVertexArray(handle.vao);
       gl.uniform1i(this.u.hasNormals, handle.normals ? 1 : 0);
       if (!handle.normals) gl.vertexAttrib3f(1, 0, 0, 1);
       if (!handle.uvs) gl.vertexAttrib2f(3, 0, 0);
-      const byMaterial = mode === 'material';
+      // The seams between levels (`seam`) belong to no node and no material: drawn plain.
+      const byMaterial = mode === 'material' && !seam;
       gl.uniform1i(this.u.useColors, byMaterial && handle.colors ? 1 : 0);
       if (!handle.colors) gl.vertexAttrib4f(2, 1, 1, 1, 1);
       if (byMaterial) {
@@ -247,7 +249,7 @@ export class Renderer {
         continue;
       }
       texture(null);
-      const c = mode === 'level' ? palette(level) : mode === 'node' ? palette(id) : PLAIN;
+      const c = seam ? PLAIN : mode === 'level' ? palette(level) : mode === 'node' ? palette(id) : PLAIN;
       gl.uniform4f(this.u.tint, c[0] / 255, c[1] / 255, c[2] / 255, 1);
       gl.drawElements(gl.TRIANGLES, handle.count, gl.UNSIGNED_INT, 0);
     }

@@ -4,7 +4,7 @@
 // exactly (a grid point decodes to the same f32 in every node), compared by their bits.
 //
 //   border(level, error, geometry)  a node's open border, kept while the node is displayed
-//   seams(borders)                  the fill of a front's seams: { local, normals, indices }
+//   seams(sealing, shown)           the fill of a front's seams: { local, normals, indices }
 
 const F = new Float32Array(1);
 const U = new Uint32Array(F.buffer);
@@ -70,13 +70,14 @@ export function border(level, error, geometry) {
 }
 
 /**
- * The triangles that fill the seams between the nodes whose borders are `borders` (those of
- * displayed nodes with a neighbour of their level not displayed, ascending by node): loops of
- * open edges with edges of two levels, no wider on average than their nodes' largest error, each
- * filled by a fan from its lowest vertex, wound against the loop. Returns `{ local, normals,
- * indices, faces }` (`normals` null when the borders carry none).
+ * The triangles that fill the seams of a front: `sealing` holds the borders of the displayed nodes
+ * with a neighbour of their level not displayed, ascending by node; `shown` the borders of every
+ * displayed node an edge of theirs could meet (those nodes and their displayed neighbours). Loops
+ * of open edges with edges of two levels, no wider on average than their nodes' largest error,
+ * are each filled by a fan from the lowest vertex, wound against the loop. Returns `{ local,
+ * normals, indices, faces }` (`normals` null when the borders carry none).
  */
-export function seams(borders) {
+export function seams(sealing, shown = []) {
   // Vertices as integers for this front, so that edges compare as numbers.
   const ids = new Map();
   const idOf = (key) => {
@@ -88,19 +89,40 @@ export function seams(borders) {
     return v;
   };
   const all = [];
-  for (const b of borders) for (const e of b.edges) all.push({ e, level: b.level, error: b.error, a: idOf(e.fromKey), b: idOf(e.toKey) });
-  const M = ids.size;
+  for (const b of sealing) for (const e of b.edges) all.push({ e, level: b.level, error: b.error, a: idOf(e.fromKey), b: idOf(e.toKey) });
+  const M = 2 ** 26;
   const present = new Set();
   for (const x of all) present.add(x.a * M + x.b);
+  for (const b of shown) {
+    for (const e of b.edges) {
+      const from = ids.get(e.fromKey), to = ids.get(e.toKey);
+      if (from !== undefined && to !== undefined) present.add(from * M + to);
+    }
+  }
   const open = all.filter((x) => !present.has(x.b * M + x.a));
+  // Per vertex, the open edges leaving it, a queue per level in their order: taking the next one
+  // costs the number of levels there, however many edges meet at the vertex.
   const leaving = new Map();
   open.forEach((o, i) => {
-    const l = leaving.get(o.a);
-    if (l) l.push(i);
-    else leaving.set(o.a, [i]);
+    let queues = leaving.get(o.a);
+    if (!queues) leaving.set(o.a, (queues = []));
+    let q = queues.find((x) => x.level === o.level);
+    if (!q) queues.push((q = { level: o.level, edges: [], at: 0 }));
+    q.edges.push(i);
   });
-  const withNormals = borders.some((b) => b.edges.some((e) => e.normal));
   const used = new Uint8Array(open.length);
+  /** The first unused edge leaving vertex `v` (by index) of a level other than `level`, else of `level`. */
+  const next = (v, level) => {
+    let best = -1, same = true;
+    for (const q of leaving.get(v) ?? []) {
+      while (q.at < q.edges.length && used[q.edges[q.at]]) q.at++;
+      if (q.at === q.edges.length) continue;
+      const x = q.edges[q.at], s = q.level === level;
+      if (best < 0 || (s === same ? x < best : !s)) [best, same] = [x, s];
+    }
+    return best;
+  };
+  const withNormals = sealing.some((b) => b.edges.some((e) => e.normal));
   const positions = [], normals = [], indices = [];
   const ring = [];
   for (let start = 0; start < open.length; start++) {
@@ -116,11 +138,9 @@ export function seams(borders) {
         break;
       }
       // Where loops touch, a loop turns from one level's run to the other's.
-      const c = leaving.get(to) ?? [];
-      let next = c.find((x) => !used[x] && open[x].level !== level);
-      if (next === undefined) next = c.find((x) => !used[x]);
-      if (next === undefined) break;
-      e = next;
+      const x = next(to, level);
+      if (x < 0) break;
+      e = x;
     }
     if (closed) fill(open, ring, withNormals, positions, normals, indices);
   }
@@ -153,8 +173,9 @@ function fill(open, ring, withNormals, positions, normals, indices) {
     az += ux * vy - uy * vx;
     perimeter += Math.hypot(b[0] - a[0], b[1] - a[1], b[2] - a[2]);
   }
-  // Mean width: the area over half the perimeter.
-  if (0.5 * Math.hypot(ax, ay, az) > error * 0.5 * perimeter) return;
+  // Mean width, the area over half the perimeter, at most the error; not filled where the sums are
+  // not finite.
+  if (!(0.5 * Math.hypot(ax, ay, az) <= error * 0.5 * perimeter)) return;
   let first = 0;
   for (let k = 1; k < n; k++) if (compare(open[ring[k]].e.from, open[ring[first]].e.from) < 0) first = k;
   const base = positions.length / 3;

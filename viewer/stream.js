@@ -353,7 +353,8 @@ export class Streamer {
     // here, where the normals still are); the rest lives in the renderer's buffers.
     const kept = { local: geometry.local, positions: geometry.local ? null : geometry.positions, indices: geometry.indices, materialRanges: geometry.materialRanges };
     const s = this.skeleton;
-    const edge = border(s.level[i], s.error[i], { positions: geometry.local ?? geometry.positions, normals: geometry.normals, indices: geometry.indices });
+    // Matched on the positions strata matches on, drawn from the local ones.
+    const edge = border(s.level[i], s.error[i], geometry);
     this.cache.set(i, { geometry: kept, handle, bytes: size, border: edge });
     this.residentBytes += size;
     this.peakResidentBytes = Math.max(this.peakResidentBytes, this.residentBytes);
@@ -789,7 +790,10 @@ export class Streamer {
     const key = sealing.join(',');
     if (key === this.seamNodes) return;
     this.seamNodes = key;
-    this.seams = seams(sealing.map((i) => this.cache.get(i).border));
+    // An edge of theirs can only meet theirs or their drawn neighbours'.
+    const near = new Set();
+    for (const i of sealing) for (const m of s.neighbors(i)) if (shown.has(m) && this.cache.has(m)) near.add(m);
+    this.seams = seams(sealing.map((i) => this.cache.get(i).border), [...near].map((i) => this.cache.get(i).border));
     this.seamsVersion++;
   }
 

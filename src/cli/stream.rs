@@ -144,7 +144,7 @@ pub fn run(a: Args) -> Result<()> {
                 "frame": rep.frame, "faces": s.faces, "nodes": s.nodes, "culled": s.culled, "levels": s.levels,
                 "added": rep.added.len(), "removed": rep.removed.len(), "bytes_read": s.bytes_read,
                 "resident_bytes": s.resident_bytes, "pixel_error": s.pixel_error,
-                "refine_ms": s.refine_ms, "order_ms": s.order_ms, "seams_ms": s.seams_ms, "seam_faces": s.seam_faces, "draw_ms": f.draw_ms, "since_open_ms": f.since_open_ms,
+                "refine_ms": s.refine_ms, "order_ms": s.order_ms, "seams_ms": s.seams_ms, "seam_faces": s.seam_faces, "seam_area": s.seam_area, "draw_ms": f.draw_ms, "since_open_ms": f.since_open_ms,
                 "faces_drawn": d.faces, "fragments": d.fragments, "shaded": d.writes, "covered_pixels": d.covered,
                 "depth_failures_per_pixel": d.failures_per_pixel(), "shaded_per_pixel": d.writes_per_pixel(),
                 "nodes_hidden": f.nodes_hidden, "faces_hidden": d.faces_hidden,

@@ -86,8 +86,9 @@ pub struct Stats {
     pub order_ms: f64,
     /// Of that, the time to find the seams between levels (selection.md §8).
     pub seams_ms: f64,
-    /// Triangles that fill those seams.
+    /// Triangles that fill those seams, and their area.
     pub seam_faces: u64,
+    pub seam_area: f64,
     /// Bytes of image level files read so far, and image levels held as RGBA8 (counted in the
     /// memory budget with the geometry).
     pub texture_bytes_read: u64,
@@ -307,6 +308,7 @@ impl<S: ByteSource> Streamer<S> {
             order_ms,
             seams_ms,
             seam_faces: self.seams.face_count() as u64,
+            seam_area: self.seams.area(),
             texture_bytes_read: self.images.bytes_read(),
             texture_resident_bytes: self.images.resident_bytes(),
             texture_levels: self.images.drawn().iter().map(|(&i, &(w, d))| [i, w, d]).collect(),
@@ -339,11 +341,15 @@ impl<S: ByteSource> Streamer<S> {
             }
         }
         // Seams run between a node and the children of a neighbour, or the parent of one: only
-        // nodes with a neighbour of their level not displayed take part.
+        // nodes with a neighbour of their level not displayed take part, and an edge of theirs can
+        // only meet theirs or their displayed neighbours'.
         let reader = &self.reader;
-        let borders: Vec<&seams::Border> =
-            front.iter().filter(|&&n| reader.neighbors(n).iter().any(|m| !shown.contains(m))).filter_map(|n| self.borders.get(n)).collect();
-        self.seams = seams::seams(&borders);
+        let sealing: Vec<u32> = front.iter().copied().filter(|&n| reader.neighbors(n).iter().any(|m| !shown.contains(m))).collect();
+        let mut near: Vec<u32> = sealing.iter().flat_map(|&n| reader.neighbors(n).iter().copied().filter(|m| shown.contains(m))).collect();
+        near.sort_unstable();
+        near.dedup();
+        let borders = |nodes: &[u32]| -> Vec<&seams::Border> { nodes.iter().filter_map(|n| self.borders.get(n)).collect() };
+        self.seams = seams::seams(&borders(&sealing), &borders(&near));
     }
 
     /// The displayed front as one mesh, each node's vertices kept apart, with the file's materials

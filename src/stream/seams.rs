@@ -81,22 +81,69 @@ impl Seams {
     pub fn face_count(&self) -> usize {
         self.indices.len() / 3
     }
+
+    /// The triangles' total area (f64).
+    pub fn area(&self) -> f64 {
+        self.indices
+            .chunks_exact(3)
+            .map(|t| {
+                let [a, b, c] = [0, 1, 2].map(|k| self.positions[t[k] as usize].as_dvec3());
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
 }
 
-/// The seams between the displayed nodes whose borders are `borders` (selection.md §8).
-pub fn seams(borders: &[&Border]) -> Seams {
-    let present: FxHashSet<(Key, Key)> = borders.iter().flat_map(|b| b.edges.iter().map(|e| (e.from, e.to))).collect();
+/// Edges leaving one vertex, a queue per level in the order of the open edges: taking the next
+/// edge costs the number of levels there, however many edges meet at the vertex.
+#[derive(Default)]
+struct Leaving {
+    queues: Vec<(u32, Vec<u32>, usize)>,
+}
+
+impl Leaving {
+    fn push(&mut self, level: u32, edge: u32) {
+        match self.queues.iter_mut().find(|q| q.0 == level) {
+            Some(q) => q.1.push(edge),
+            None => self.queues.push((level, vec![edge], 0)),
+        }
+    }
+
+    /// The first unused edge (by index) of a level other than `level`, else of `level`.
+    fn next(&mut self, level: u32, used: &[bool]) -> Option<u32> {
+        let mut best: Option<(bool, u32)> = None;
+        for (l, edges, cursor) in &mut self.queues {
+            while *cursor < edges.len() && used[edges[*cursor] as usize] {
+                *cursor += 1;
+            }
+            if let Some(&x) = edges.get(*cursor) {
+                let candidate = (*l == level, x);
+                if best.is_none_or(|b| candidate < b) {
+                    best = Some(candidate);
+                }
+            }
+        }
+        best.map(|(_, x)| x)
+    }
+}
+
+/// The seams of a front (selection.md §8): `sealing` holds the borders of the displayed nodes
+/// with a neighbour of their level not displayed, ascending by node; `shown` the borders of
+/// every displayed node an edge of theirs could meet (those nodes and their displayed
+/// neighbours; any superset will do).
+pub fn seams(sealing: &[&Border], shown: &[&Border]) -> Seams {
+    let present: FxHashSet<(Key, Key)> = shown.iter().chain(sealing).flat_map(|b| b.edges.iter().map(|e| (e.from, e.to))).collect();
     // Edges no displayed node has the other way round, with their node's level and error.
-    let open: Vec<(&Edge, u32, f32)> = borders
+    let open: Vec<(&Edge, u32, f32)> = sealing
         .iter()
         .flat_map(|b| b.edges.iter().map(move |e| (e, b.level, b.error)))
         .filter(|(e, _, _)| !present.contains(&(e.to, e.from)))
         .collect();
-    let mut leaving: FxHashMap<Key, Vec<u32>> = FxHashMap::default();
-    for (i, (e, _, _)) in open.iter().enumerate() {
-        leaving.entry(e.from).or_default().push(i as u32);
+    let mut leaving: FxHashMap<Key, Leaving> = FxHashMap::default();
+    for (i, (e, level, _)) in open.iter().enumerate() {
+        leaving.entry(e.from).or_default().push(*level, i as u32);
     }
-    let with_normals = borders.iter().any(|b| b.edges.iter().any(|e| e.normal != Vec3::ZERO));
+    let with_normals = sealing.iter().any(|b| b.edges.iter().any(|e| e.normal != Vec3::ZERO));
     let mut out = Seams::default();
     let mut used = vec![false; open.len()];
     let mut ring: Vec<u32> = Vec::new();
@@ -114,11 +161,7 @@ pub fn seams(borders: &[&Border]) -> Seams {
                 break true;
             }
             // Where loops touch, a loop turns from one level's run to the other's.
-            let next = leaving.get(&edge.to).and_then(|c| {
-                let free = || c.iter().copied().filter(|&x| !used[x as usize]);
-                free().find(|&x| open[x as usize].1 != level).or_else(|| free().next())
-            });
-            match next {
+            match leaving.get_mut(&edge.to).and_then(|l| l.next(level, &used)) {
                 Some(x) => e = x as usize,
                 None => break false,
             }
@@ -140,16 +183,18 @@ fn fill(open: &[(&Edge, u32, f32)], ring: &[u32], with_normals: bool, out: &mut 
     if edges.len() < 3 || lo == hi {
         return;
     }
-    let error = ring.iter().map(|&i| open[i as usize].2).fold(0.0f32, f32::max);
-    let p0 = edges[0].at;
-    let (mut area, mut perimeter) = (Vec3::ZERO, 0.0f32);
+    let error = ring.iter().map(|&i| open[i as usize].2 as f64).fold(0.0, f64::max);
+    let p0 = edges[0].at.as_dvec3();
+    let (mut area, mut perimeter) = (glam::DVec3::ZERO, 0.0f64);
     for (k, e) in edges.iter().enumerate() {
-        let next = edges[(k + 1) % edges.len()].at;
-        area += (e.at - p0).cross(next - p0);
-        perimeter += e.at.distance(next);
+        let (a, b) = (e.at.as_dvec3(), edges[(k + 1) % edges.len()].at.as_dvec3());
+        area += (a - p0).cross(b - p0);
+        perimeter += a.distance(b);
     }
-    // Mean width: the area over half the perimeter.
-    if 0.5 * area.length() > error * 0.5 * perimeter {
+    // Mean width, the area over half the perimeter, at most the error; not filled where the sums
+    // are not finite.
+    let thin = (0.5 * area.length()).partial_cmp(&(error * 0.5 * perimeter));
+    if !matches!(thin, Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)) {
         return;
     }
     let first = (0..edges.len()).min_by_key(|&k| edges[k].from).unwrap_or(0);
@@ -191,7 +236,7 @@ mod tests {
     fn a_sliver_between_levels_is_filled_against_its_loop() {
         let (coarse, fine) = pair(0.05);
         let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
-        let s = seams(&[&a, &b]);
+        let s = seams(&[&a, &b], &[]);
         assert_eq!(s.face_count(), 1);
         let t: Vec<Vec3> = s.indices.iter().map(|&i| s.positions[i as usize]).collect();
         assert!((t[1] - t[0]).cross(t[2] - t[0]).z > 0.0, "wound as the faces around it: {t:?}");
@@ -202,14 +247,34 @@ mod tests {
     fn nodes_of_one_level_a_wide_gap_and_matching_borders_get_no_seam() {
         let (coarse, fine) = pair(0.05);
         let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(1, 0.1, &fine));
-        assert_eq!(seams(&[&a, &b]).face_count(), 0, "one level");
+        assert_eq!(seams(&[&a, &b], &[]).face_count(), 0, "one level");
         let (coarse, fine) = pair(0.5);
         let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
-        assert_eq!(seams(&[&a, &b]).face_count(), 0, "wider than the error");
+        assert_eq!(seams(&[&a, &b], &[]).face_count(), 0, "wider than the error");
         let (_, fine) = pair(0.0);
         let straight = geometry(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 1.0, 0.0]], &[0, 1, 3, 1, 2, 3]);
         let (a, b) = (Border::of(1, 0.1, &straight), Border::of(0, 0.0, &fine));
-        assert_eq!(seams(&[&a, &b]).face_count(), 0, "shared border");
-        assert_eq!(seams(&[&a]).face_count(), 0, "a node alone");
+        assert_eq!(seams(&[&a, &b], &[]).face_count(), 0, "shared border");
+        assert_eq!(seams(&[&a], &[]).face_count(), 0, "a node alone");
+        let (coarse, mut fine) = pair(0.05);
+        fine.positions[1] = Vec3::new(1.0, f32::NAN, 0.0);
+        let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
+        assert_eq!(seams(&[&a, &b], &[]).face_count(), 0, "a loop whose width is not a number");
+    }
+
+    #[test]
+    fn a_neighbour_that_takes_no_part_still_closes_the_edges_it_shares() {
+        // The finer pair's edge to a third node of its level: open unless that node's border,
+        // given as shown, has it the other way round.
+        let (coarse, fine) = pair(0.05);
+        let below = geometry(&[[0.0, 0.0, 0.0], [1.0, -1.0, 0.0], [0.0, -2.0, 0.0]], &[0, 2, 1]);
+        let (a, b, c) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine), Border::of(0, 0.0, &below));
+        let open = |shown: &[&Border]| {
+            let present: FxHashSet<(Key, Key)> =
+                shown.iter().copied().chain([&b]).flat_map(|x| x.edges.iter().map(|e| (e.from, e.to))).collect();
+            b.edges.iter().filter(|e| !present.contains(&(e.to, e.from))).count()
+        };
+        assert_eq!(open(&[]) - open(&[&c]), 1);
+        assert_eq!(seams(&[&a, &b], &[&c]).face_count(), 1, "the sliver, still");
     }
 }

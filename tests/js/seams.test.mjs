@@ -1,7 +1,7 @@
 // The viewer's seams between levels (viewer/seams.js, format-spec/selection.md §8) on hand-made
-// nodes, and against strata's Streamer (`strata stream --print-front`, its `seam_faces`) on the
-// fronts of an orbit over the converted noisy sphere fixture: the same fronts get as many fill
-// triangles in both readers.
+// nodes, and against strata's Streamer (`strata stream --print-front`, its `seam_faces` and
+// `seam_area`) on the fronts of an orbit over the converted noisy sphere fixture: the same fronts
+// get as many fill triangles, of the same area, in both readers.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -39,29 +39,45 @@ test('one level, a gap wider than the error, a shared border: no seam', () => {
   assert.equal(seams([border(1, 0.1, straight), border(0, 0, fine)]).faces, 0);
 });
 
+/** The fill's area, from its local positions. */
+function area(f) {
+  let sum = 0;
+  for (let k = 0; k < f.indices.length; k += 3) {
+    const [a, b, c] = [0, 1, 2].map((j) => f.local.subarray(3 * f.indices[k + j], 3 * f.indices[k + j] + 3));
+    const u = [0, 1, 2].map((j) => b[j] - a[j]), v = [0, 1, 2].map((j) => c[j] - a[j]);
+    sum += 0.5 * Math.hypot(u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]);
+  }
+  return sum;
+}
+
 test('the seams of strata stream on a converted fixture', (t) => {
   const file = converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, []);
   const out = run(strataBin(), ['stream', file, '--json', '--print-front', '--orbit', '32']);
   const frames = out.trim().split('\n').map((l) => JSON.parse(l));
   const bytes = new Uint8Array(readFileSync(file));
   const s = decodeSkeleton(bytes, bytes.length);
+  // As the viewer decodes: positions relative to the model's centre too, drawn from those.
+  const h = s.header;
+  const localOrigin = h.min.map((m, k) => (m + h.max[k]) / 2);
   const borders = new Map();
+  const borderOf = (i) => {
+    if (!borders.has(i)) {
+      const g = decodeNode(s, i, bytes.subarray(s.offset[i], s.offset[i] + s.size[i]), { localOrigin });
+      borders.set(i, border(s.level[i], s.error[i], g));
+    }
+    return borders.get(i);
+  };
   let filled = 0;
   for (const f of frames) {
     const shown = new Set(f.front);
-    const list = [];
-    for (const i of f.front) {
-      if (!Array.from(s.neighbors(i)).some((m) => !shown.has(m))) continue;
-      if (!borders.has(i)) {
-        const g = decodeNode(s, i, bytes.subarray(s.offset[i], s.offset[i] + s.size[i]));
-        borders.set(i, border(s.level[i], s.error[i], g));
-      }
-      list.push(borders.get(i));
-    }
-    const faces = seams(list).faces;
-    assert.equal(faces, f.seam_faces, `frame ${f.frame}: seam faces`);
-    filled += faces;
+    const sealing = f.front.filter((i) => Array.from(s.neighbors(i)).some((m) => !shown.has(m)));
+    const near = [...new Set(sealing.flatMap((i) => Array.from(s.neighbors(i)).filter((m) => shown.has(m))))];
+    const fill = seams(sealing.map(borderOf), near.map(borderOf));
+    assert.equal(fill.faces, f.seam_faces, `frame ${f.frame}: seam faces`);
+    const a = area(fill);
+    assert.ok(Math.abs(a - f.seam_area) <= 1e-4 * f.seam_area + 1e-9, `frame ${f.frame}: seam area ${a} against ${f.seam_area}`);
+    filled += fill.faces;
   }
   assert.ok(filled > 0, 'the orbit shows seams');
-  t.diagnostic(`${frames.length} fronts, ${filled} seam faces, as strata stream finds them`);
+  t.diagnostic(`${frames.length} fronts, ${filled} seam faces of the same area as strata stream's`);
 });
