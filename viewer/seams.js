@@ -90,16 +90,23 @@ export function seams(sealing, shown = []) {
   };
   const all = [];
   for (const b of sealing) for (const e of b.edges) all.push({ e, level: b.level, error: b.error, a: idOf(e.fromKey), b: idOf(e.toKey) });
-  const M = 2 ** 26;
-  const present = new Set();
-  for (const x of all) present.add(x.a * M + x.b);
+  // Per vertex, where the border edges from it lead (small integers as keys stay cheap to hash).
+  const present = new Map();
+  const add = (a, b) => {
+    const l = present.get(a);
+    if (l) l.push(b);
+    else present.set(a, [b]);
+  };
+  for (const x of all) add(x.a, x.b);
   for (const b of shown) {
     for (const e of b.edges) {
-      const from = ids.get(e.fromKey), to = ids.get(e.toKey);
-      if (from !== undefined && to !== undefined) present.add(from * M + to);
+      const from = ids.get(e.fromKey);
+      if (from === undefined) continue;
+      const to = ids.get(e.toKey);
+      if (to !== undefined) add(from, to);
     }
   }
-  const open = all.filter((x) => !present.has(x.b * M + x.a));
+  const open = all.filter((x) => !present.get(x.b)?.includes(x.a));
   // Per vertex, the open edges leaving it, a queue per level in their order: taking the next one
   // costs the number of levels there, however many edges meet at the vertex.
   const leaving = new Map();
