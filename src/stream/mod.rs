@@ -327,19 +327,11 @@ impl<S: ByteSource> Streamer<S> {
         &self.seams
     }
 
-    /// Borders of the nodes of `front` (kept while they stay displayed) and the seams between them.
+    /// The seams between the nodes of `front`, from the borders of those that take part (each made
+    /// once, kept while its node stays displayed).
     fn update_seams(&mut self, front: &[u32]) {
         let shown: rustc_hash::FxHashSet<u32> = front.iter().copied().collect();
         self.borders.retain(|n, _| shown.contains(n));
-        let nodes = self.reader.nodes();
-        for &n in front {
-            if !self.borders.contains_key(&n) {
-                if let Some(g) = self.cache.get(n) {
-                    let r = &nodes[n as usize];
-                    self.borders.insert(n, seams::Border::of(r.level, r.error, g));
-                }
-            }
-        }
         // Seams run between a node and the children of a neighbour, or the parent of one: only
         // nodes with a neighbour of their level not displayed take part, and an edge of theirs can
         // only meet theirs or their displayed neighbours'.
@@ -348,6 +340,15 @@ impl<S: ByteSource> Streamer<S> {
         let mut near: Vec<u32> = sealing.iter().flat_map(|&n| reader.neighbors(n).iter().copied().filter(|m| shown.contains(m))).collect();
         near.sort_unstable();
         near.dedup();
+        let nodes = reader.nodes();
+        for &n in sealing.iter().chain(&near) {
+            if !self.borders.contains_key(&n) {
+                if let Some(g) = self.cache.get(n) {
+                    let r = &nodes[n as usize];
+                    self.borders.insert(n, seams::Border::of(r.level, r.error, g));
+                }
+            }
+        }
         let borders = |nodes: &[u32]| -> Vec<&seams::Border> { nodes.iter().filter_map(|n| self.borders.get(n)).collect() };
         self.seams = seams::seams(&borders(&sealing), &borders(&near));
     }

@@ -10,15 +10,14 @@
 //! a level change is wider than that unless it is too small to see at that level.
 
 use crate::format::NodeGeometry;
+use crate::levels::position_key;
+use crate::mesh::triangle_cross;
 use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 
-/// A position as readers match it across nodes: its coordinates' bits (−0 as +0).
+/// A position as readers match it across nodes: its coordinates' bits (−0 as +0), as welding
+/// compares them ([`position_key`]).
 type Key = [u32; 3];
-
-fn key(p: Vec3) -> Key {
-    (p + Vec3::ZERO).to_array().map(f32::to_bits)
-}
 
 /// One border edge of a node, directed as its face runs: its ends, and the position and normal of
 /// the first (the normal is zero when the file has none).
@@ -46,7 +45,7 @@ impl Border {
         for f in g.indices.chunks_exact(3) {
             for k in 0..3 {
                 let (a, b) = (f[k], f[(k + 1) % 3]);
-                let (ka, kb) = (key(g.positions[a as usize]), key(g.positions[b as usize]));
+                let (ka, kb) = (position_key(g.positions[a as usize]), position_key(g.positions[b as usize]));
                 if ka != kb {
                     count.entry((ka, kb)).or_insert((0, a)).0 += 1;
                 }
@@ -84,13 +83,7 @@ impl Seams {
 
     /// The triangles' total area (f64).
     pub fn area(&self) -> f64 {
-        self.indices
-            .chunks_exact(3)
-            .map(|t| {
-                let [a, b, c] = [0, 1, 2].map(|k| self.positions[t[k] as usize].as_dvec3());
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .sum()
+        self.indices.chunks_exact(3).map(|t| 0.5 * triangle_cross(&self.positions, &[t[0], t[1], t[2]]).length()).sum()
     }
 }
 
