@@ -781,18 +781,19 @@ export class Streamer {
 
   /**
    * The seams between the drawn nodes (selection.md §8): from the borders of those with a
-   * neighbour of their level not drawn, made again when that set changes.
+   * neighbour of their level not drawn, made again when those nodes or their drawn neighbours
+   * change.
    */
   sealSeams(drawn) {
     const s = this.skeleton;
     const shown = new Set(drawn);
     const sealing = drawn.filter((i) => this.cache.has(i) && Array.from(s.neighbors(i)).some((m) => !shown.has(m))).sort((a, b) => a - b);
-    const key = sealing.join(',');
-    if (key === this.seamNodes) return;
-    this.seamNodes = key;
     // An edge of theirs can only meet theirs or their drawn neighbours'.
     const near = new Set();
     for (const i of sealing) for (const m of s.neighbors(i)) if (shown.has(m) && this.cache.has(m)) near.add(m);
+    const key = `${sealing.join(',')}|${[...near].sort((a, b) => a - b).join(',')}`;
+    if (key === this.seamNodes) return;
+    this.seamNodes = key;
     this.seams = seams(sealing.map((i) => this.cache.get(i).border), [...near].map((i) => this.cache.get(i).border));
     this.seamsVersion++;
   }

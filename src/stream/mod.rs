@@ -136,9 +136,11 @@ pub struct Streamer<S> {
     warnings: Vec<String>,
     /// Nodes the renderer found hidden in the last frame, ascending: not refined in the next.
     hidden: Vec<u32>,
-    /// The open border of each displayed node, and the seams of the front between levels.
+    /// The open border of each displayed node, and the seams of the front between levels with
+    /// the nodes they were made from (taking part, and their displayed neighbours).
     borders: rustc_hash::FxHashMap<u32, seams::Border>,
     seams: seams::Seams,
+    seam_nodes: (Vec<u32>, Vec<u32>),
 }
 
 impl<S: ByteSource> Streamer<S> {
@@ -174,6 +176,7 @@ impl<S: ByteSource> Streamer<S> {
             hidden: Vec::new(),
             borders: Default::default(),
             seams: Default::default(),
+            seam_nodes: Default::default(),
             orderer: None,
             cache: Cache::new(budgets.bytes.map(|b| b - pinned)),
             images: ImageCache::default(),
@@ -328,7 +331,8 @@ impl<S: ByteSource> Streamer<S> {
     }
 
     /// The seams between the nodes of `front`, from the borders of those that take part (each made
-    /// once, kept while its node stays displayed).
+    /// once, kept while its node stays displayed); made again only when those nodes or their
+    /// displayed neighbours change.
     fn update_seams(&mut self, front: &[u32]) {
         let shown: rustc_hash::FxHashSet<u32> = front.iter().copied().collect();
         self.borders.retain(|n, _| shown.contains(n));
@@ -349,8 +353,13 @@ impl<S: ByteSource> Streamer<S> {
                 }
             }
         }
+        let nodes = (sealing, near);
+        if nodes == self.seam_nodes {
+            return;
+        }
         let borders = |nodes: &[u32]| -> Vec<&seams::Border> { nodes.iter().filter_map(|n| self.borders.get(n)).collect() };
-        self.seams = seams::seams(&borders(&sealing), &borders(&near));
+        self.seams = seams::seams(&borders(&nodes.0), &borders(&nodes.1));
+        self.seam_nodes = nodes;
     }
 
     /// The displayed front as one mesh, each node's vertices kept apart, with the file's materials

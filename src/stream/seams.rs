@@ -10,6 +10,7 @@
 //! a level change is wider than that unless it is too small to see at that level.
 
 use crate::format::NodeGeometry;
+use crate::hierarchy::Lists;
 use crate::levels::position_key;
 use crate::mesh::triangle_cross;
 use glam::Vec3;
@@ -41,22 +42,38 @@ pub struct Border {
 impl Border {
     /// The border of `g`, a node of `level` with geometric error `error`.
     pub fn of(level: u32, error: f32, g: &NodeGeometry) -> Border {
-        let mut count: FxHashMap<(Key, Key), (u32, u32)> = FxHashMap::default();
+        // Vertices welded by position, then each directed edge between them with how often the
+        // faces use it and the first corner it starts at.
+        let mut ids: FxHashMap<Key, u32> = FxHashMap::with_capacity_and_hasher(g.positions.len(), Default::default());
+        let mut keys: Vec<Key> = Vec::with_capacity(g.positions.len());
+        let weld: Vec<u32> = g
+            .positions
+            .iter()
+            .map(|&p| {
+                let k = position_key(p);
+                *ids.entry(k).or_insert_with(|| {
+                    keys.push(k);
+                    keys.len() as u32 - 1
+                })
+            })
+            .collect();
+        let pair = |a: u32, b: u32| (a as u64) << 32 | b as u64;
+        let mut count: FxHashMap<u64, (u32, u32)> = FxHashMap::with_capacity_and_hasher(g.indices.len(), Default::default());
         for f in g.indices.chunks_exact(3) {
             for k in 0..3 {
                 let (a, b) = (f[k], f[(k + 1) % 3]);
-                let (ka, kb) = (position_key(g.positions[a as usize]), position_key(g.positions[b as usize]));
-                if ka != kb {
-                    count.entry((ka, kb)).or_insert((0, a)).0 += 1;
+                let (wa, wb) = (weld[a as usize], weld[b as usize]);
+                if wa != wb {
+                    count.entry(pair(wa, wb)).or_insert((0, a)).0 += 1;
                 }
             }
         }
         let mut edges: Vec<Edge> = count
             .iter()
-            .filter(|&(&(a, b), &(n, _))| n == 1 && !count.contains_key(&(b, a)))
-            .map(|(&(from, to), &(_, v))| Edge {
-                from,
-                to,
+            .filter(|&(&e, &(n, _))| n == 1 && !count.contains_key(&e.rotate_right(32)))
+            .map(|(&e, &(_, v))| Edge {
+                from: keys[(e >> 32) as usize],
+                to: keys[e as u32 as usize],
                 at: g.positions[v as usize],
                 normal: g.normals.get(v as usize).copied().unwrap_or(Vec3::ZERO),
             })
@@ -87,30 +104,51 @@ impl Seams {
     }
 }
 
-/// Edges leaving one vertex, a queue per level in the order of the open edges: taking the next
-/// edge costs the number of levels there, however many edges meet at the vertex.
-#[derive(Default)]
+/// Per vertex, the open edges leaving it, a queue per level in the order of the open edges:
+/// taking the next edge costs the number of levels there, however many edges meet at the vertex.
 struct Leaving {
-    queues: Vec<(u32, Vec<u32>, usize)>,
+    /// Open edges by vertex, then level, then index.
+    order: Vec<u32>,
+    /// Runs of `order` of one vertex and level: level, cursor, end.
+    queues: Vec<(u32, u32, u32)>,
+    /// Per vertex, its queues: `queues[first[v]..first[v + 1]]`.
+    first: Vec<u32>,
 }
 
 impl Leaving {
-    fn push(&mut self, level: u32, edge: u32) {
-        match self.queues.iter_mut().find(|q| q.0 == level) {
-            Some(q) => q.1.push(edge),
-            None => self.queues.push((level, vec![edge], 0)),
+    /// The queues of open edges leaving from `from[i]` at `level[i]`, vertices below `vertices`.
+    fn new(from: &[u32], level: &[u32], vertices: usize) -> Leaving {
+        let Lists { offsets: start, items: mut order } = Lists::from_labels(from, vertices);
+        let (mut queues, mut first) = (Vec::new(), Vec::with_capacity(vertices + 1));
+        for v in 0..vertices {
+            first.push(queues.len() as u32);
+            let run = &mut order[start[v] as usize..start[v + 1] as usize];
+            run.sort_unstable_by_key(|&i| (level[i as usize], i));
+            let mut k = start[v];
+            while k < start[v + 1] {
+                let l = level[order[k as usize] as usize];
+                let mut end = k + 1;
+                while end < start[v + 1] && level[order[end as usize] as usize] == l {
+                    end += 1;
+                }
+                queues.push((l, k, end));
+                k = end;
+            }
         }
+        first.push(queues.len() as u32);
+        Leaving { order, queues, first }
     }
 
-    /// The first unused edge (by index) of a level other than `level`, else of `level`.
-    fn next(&mut self, level: u32, used: &[bool]) -> Option<u32> {
+    /// The first unused edge leaving `v` (by index) of a level other than `level`, else of `level`.
+    fn next(&mut self, v: u32, level: u32, used: &[bool]) -> Option<u32> {
         let mut best: Option<(bool, u32)> = None;
-        for (l, edges, cursor) in &mut self.queues {
-            while *cursor < edges.len() && used[edges[*cursor] as usize] {
+        let range = self.first[v as usize] as usize..self.first[v as usize + 1] as usize;
+        for (l, cursor, end) in &mut self.queues[range] {
+            while *cursor < *end && used[self.order[*cursor as usize] as usize] {
                 *cursor += 1;
             }
-            if let Some(&x) = edges.get(*cursor) {
-                let candidate = (*l == level, x);
+            if *cursor < *end {
+                let candidate = (*l == level, self.order[*cursor as usize]);
                 if best.is_none_or(|b| candidate < b) {
                     best = Some(candidate);
                 }
@@ -125,17 +163,33 @@ impl Leaving {
 /// every displayed node an edge of theirs could meet (those nodes and their displayed
 /// neighbours; any superset will do).
 pub fn seams(sealing: &[&Border], shown: &[&Border]) -> Seams {
-    let present: FxHashSet<(Key, Key)> = shown.iter().chain(sealing).flat_map(|b| b.edges.iter().map(|e| (e.from, e.to))).collect();
-    // Edges no displayed node has the other way round, with their node's level and error.
-    let open: Vec<(&Edge, u32, f32)> = sealing
-        .iter()
-        .flat_map(|b| b.edges.iter().map(move |e| (e, b.level, b.error)))
-        .filter(|(e, _, _)| !present.contains(&(e.to, e.from)))
-        .collect();
-    let mut leaving: FxHashMap<Key, Leaving> = FxHashMap::default();
-    for (i, (e, level, _)) in open.iter().enumerate() {
-        leaving.entry(e.from).or_default().push(*level, i as u32);
+    // The sealing edges' ends as small integers for this front, so that edges are pairs of them.
+    let total: usize = sealing.iter().map(|b| b.edges.len()).sum();
+    let mut ids: FxHashMap<Key, u32> = FxHashMap::with_capacity_and_hasher(2 * total, Default::default());
+    let mut id = |k: Key| {
+        let n = ids.len() as u32;
+        *ids.entry(k).or_insert(n)
+    };
+    let ends: Vec<(u32, u32)> = sealing.iter().flat_map(|b| &b.edges).map(|e| (id(e.from), id(e.to))).collect();
+    let pair = |a: u32, b: u32| (a as u64) << 32 | b as u64;
+    let mut present: FxHashSet<u64> = ends.iter().map(|&(a, b)| pair(a, b)).collect();
+    for e in shown.iter().flat_map(|b| &b.edges) {
+        if let (Some(&a), Some(&b)) = (ids.get(&e.from), ids.get(&e.to)) {
+            present.insert(pair(a, b));
+        }
     }
+    // Edges no displayed node has the other way round, with their node's level and error.
+    let mut open: Vec<(&Edge, u32, f32)> = Vec::new();
+    let (mut from, mut to, mut level) = (Vec::new(), Vec::new(), Vec::new());
+    for ((e, lv, error), &(a, b)) in sealing.iter().flat_map(|x| x.edges.iter().map(move |e| (e, x.level, x.error))).zip(&ends) {
+        if !present.contains(&pair(b, a)) {
+            open.push((e, lv, error));
+            from.push(a);
+            to.push(b);
+            level.push(lv);
+        }
+    }
+    let mut leaving = Leaving::new(&from, &level, ids.len());
     let with_normals = sealing.iter().any(|b| b.edges.iter().any(|e| e.normal != Vec3::ZERO));
     let mut out = Seams::default();
     let mut used = vec![false; open.len()];
@@ -149,12 +203,11 @@ pub fn seams(sealing: &[&Border], shown: &[&Border]) -> Seams {
         let closed = loop {
             used[e] = true;
             ring.push(e as u32);
-            let (edge, level, _) = open[e];
-            if edge.to == open[start].0.from {
+            if to[e] == from[start] {
                 break true;
             }
             // Where loops touch, a loop turns from one level's run to the other's.
-            match leaving.get_mut(&edge.to).and_then(|l| l.next(level, &used)) {
+            match leaving.next(to[e], level[e], &used) {
                 Some(x) => e = x as usize,
                 None => break false,
             }
@@ -253,6 +306,27 @@ mod tests {
         fine.positions[1] = Vec3::new(1.0, f32::NAN, 0.0);
         let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
         assert_eq!(seams(&[&a, &b], &[]).face_count(), 0, "a loop whose width is not a number");
+    }
+
+    #[test]
+    fn many_slivers_meeting_at_one_vertex_are_each_filled_once() {
+        // 48 coarse triangles and 48 finer pairs around the origin, each pair one sliver: 96 open
+        // edges leave the origin, two levels there.
+        let k = 48;
+        let turn = |i: usize, x: f32, y: f32| {
+            let a = std::f32::consts::TAU * i as f32 / k as f32;
+            [x * a.cos() - y * a.sin(), x * a.sin() + y * a.cos(), 0.0]
+        };
+        let (mut coarse, mut fine) = (geometry(&[], &[]), geometry(&[], &[]));
+        for i in 0..k {
+            let (c, f) = (coarse.positions.len() as u32, fine.positions.len() as u32);
+            coarse.positions.extend([[0.0; 3], turn(i, 2.0, 0.0), turn(i, 1.0, 1.0)].map(Vec3::from_array));
+            coarse.indices.extend([c, c + 1, c + 2]);
+            fine.positions.extend([[0.0; 3], turn(i, 1.0, -0.05), turn(i, 2.0, 0.0), turn(i, 1.0, -1.0)].map(Vec3::from_array));
+            fine.indices.extend([f, f + 3, f + 1, f + 1, f + 3, f + 2]);
+        }
+        let (a, b) = (Border::of(1, 0.1, &coarse), Border::of(0, 0.0, &fine));
+        assert_eq!(seams(&[&a, &b], &[]).face_count(), k);
     }
 
     #[test]

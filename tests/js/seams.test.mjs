@@ -39,6 +39,25 @@ test('one level, a gap wider than the error, a shared border: no seam', () => {
   assert.equal(seams([border(1, 0.1, straight), border(0, 0, fine)]).faces, 0);
 });
 
+test('many slivers meeting at one vertex are each filled once', () => {
+  // 48 coarse triangles and 48 finer pairs around the origin, each pair one sliver: 96 open
+  // edges leave the origin, two levels there.
+  const K = 48, turn = (k, [x, y]) => {
+    const a = (2 * Math.PI * k) / K;
+    return [x * Math.cos(a) - y * Math.sin(a), x * Math.sin(a) + y * Math.cos(a), 0];
+  };
+  const coarse = [], fine = [], ci = [], fi = [];
+  for (let k = 0; k < K; k++) {
+    const c = coarse.length, f = fine.length;
+    coarse.push([0, 0, 0], turn(k, [2, 0]), turn(k, [1, 1]));
+    ci.push(c, c + 1, c + 2);
+    fine.push([0, 0, 0], turn(k, [1, -0.05]), turn(k, [2, 0]), turn(k, [1, -1]));
+    fi.push(f, f + 3, f + 1, f + 1, f + 3, f + 2);
+  }
+  const s = seams([border(1, 0.1, geometry(coarse, ci)), border(0, 0, geometry(fine, fi))]);
+  assert.equal(s.faces, K);
+});
+
 /** The fill's area, from its local positions. */
 function area(f) {
   let sum = 0;
