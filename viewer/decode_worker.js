@@ -4,9 +4,11 @@
 //
 // Messages in: {op: 'open', bytes, length, localOrigin} (the bytes decodeSkeleton read, top pages
 // first), {op: 'complete', bytes} (the skeleton's bytes once the main thread completed its own),
-// {op: 'decode', id, node, bytes}. Out: {id, geometry} or {id, error: {message, name, offset, node}}.
+// {op: 'decode', id, node, bytes}. Out: {id, geometry} (with the node's open border for the seams
+// between levels, `geometry.border`, made here too) or {id, error: {message, name, offset, node}}.
 
 import { FormatError, completeSkeleton, decodeNode, decodeSkeleton } from './format.js';
+import { border } from './seams.js';
 
 /** The worker's state and its answer to each message: `{reply, transfer}` or null (no answer). */
 export function decodeHandler() {
@@ -33,7 +35,8 @@ export function decodeHandler() {
       if (broken) throw broken;
       if (!skeleton) throw new Error('the decoder has no skeleton (no open message)');
       const geometry = decodeNode(skeleton, msg.node, msg.bytes, { localOrigin });
-      return { reply: { id: msg.id, geometry }, transfer: buffersOf(geometry) };
+      geometry.border = border(skeleton.level[msg.node], skeleton.error[msg.node], geometry);
+      return { reply: { id: msg.id, geometry }, transfer: buffersOf(geometry, geometry.border) };
     } catch (e) {
       const error = { message: e?.message ?? String(e), name: e?.name ?? 'Error', format: e instanceof FormatError, offset: e?.offset, node: e?.node };
       return { reply: { id: msg.id, error }, transfer: [] };
@@ -41,10 +44,10 @@ export function decodeHandler() {
   };
 }
 
-/** The distinct buffers under a geometry's typed arrays. */
-export function buffersOf(geometry) {
+/** The distinct buffers under the typed arrays of `objects` (a geometry, its border). */
+export function buffersOf(...objects) {
   const seen = new Set();
-  for (const v of Object.values(geometry)) if (ArrayBuffer.isView(v)) seen.add(v.buffer);
+  for (const o of objects) for (const v of Object.values(o)) if (ArrayBuffer.isView(v)) seen.add(v.buffer);
   return [...seen];
 }
 

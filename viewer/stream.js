@@ -347,14 +347,14 @@ export class Streamer {
   /** Keep node i, decoded and checked. */
   keep(i, geometry) {
     if (this.cache.has(i)) return;
-    const size = recordBytes(this.skeleton, i);
+    const s = this.skeleton, size = recordBytes(s, i);
+    // The node's open border for the seams: made by the decoding worker, else here where the
+    // normals still are.
+    const edge = geometry.border ?? border(s.level[i], s.error[i], geometry);
+    delete geometry.border;
     const handle = this.onLoad(i, geometry);
-    // What picking needs stays on this side, with the node's open border for the seams (made
-    // here, where the normals still are); the rest lives in the renderer's buffers.
+    // What picking needs stays on this side, with the border; the rest lives in the renderer's buffers.
     const kept = { local: geometry.local, positions: geometry.local ? null : geometry.positions, indices: geometry.indices, materialRanges: geometry.materialRanges };
-    const s = this.skeleton;
-    // Matched on the positions strata matches on, drawn from the local ones.
-    const edge = border(s.level[i], s.error[i], geometry);
     this.cache.set(i, { geometry: kept, handle, bytes: size, border: edge });
     this.residentBytes += size;
     this.peakResidentBytes = Math.max(this.peakResidentBytes, this.residentBytes);
