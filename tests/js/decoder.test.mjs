@@ -75,6 +75,18 @@ async function stream(bytes, decoder, prefix = 16384, options = {}) {
   return { st, loaded };
 }
 
+/** The borders for the seams between levels (made by a worker or the page) equal on both sides. */
+function sameBorders(there, here) {
+  let borders = 0;
+  for (const [i, c] of here.st.cache) {
+    const w = there.st.cache.get(i);
+    if (!w) continue;
+    assert.deepEqual(w.border, c.border, `node ${i}'s border`);
+    borders += c.border.count > 0;
+  }
+  assert.ok(borders > 0, 'some resident nodes have a border');
+}
+
 const inputs = [['noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3']], ['noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '2']], ['colored_sphere', `${root}/fixtures/colored_sphere.ply`, []], ['textured_globe', `${root}/fixtures/textured_globe.glb`, []]];
 const ct = `${root}/../shared/meshes/large/cthead_skin_native.ply`;
 if (existsSync(ct)) inputs.push(['cthead', ct, []]);
@@ -92,15 +104,7 @@ for (const [name, mesh, args, prefix] of [...inputs, ['noisy_sphere_v3', `${root
     assert.deepEqual(there.st.drawn, here.st.drawn);
     assert.deepEqual([...there.loaded.keys()].sort((a, b) => a - b), [...here.loaded.keys()].sort((a, b) => a - b));
     for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
-    // The borders for the seams, made by the workers, as the page makes them.
-    let borders = 0;
-    for (const [i, c] of here.st.cache) {
-      const w = there.st.cache.get(i);
-      if (!w) continue;
-      assert.deepEqual(w.border, c.border, `node ${i}'s border`);
-      borders += c.border.count > 0;
-    }
-    assert.ok(borders > 0, 'some resident nodes have a border');
+    sameBorders(there, here);
     const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
     assert.equal(pool.decoded, here.loaded.size - (top[1] - top[0]), 'every node below the top level came from a worker');
     assert.ok(pool.decoded > 0);
@@ -189,15 +193,7 @@ for (const [what, pool] of [['without workers', () => null], ['after the pool fa
     const there = await stream(bytes, pool(), 16384, { sliceMs: 0, yieldTask });
     assert.equal(there.st.error, null);
     for (const [i, g] of here.loaded) assert.deepEqual(there.loaded.get(i), g, `node ${i}`);
-    // The borders for the seams, made by the workers, as the page makes them.
-    let borders = 0;
-    for (const [i, c] of here.st.cache) {
-      const w = there.st.cache.get(i);
-      if (!w) continue;
-      assert.deepEqual(w.border, c.border, `node ${i}'s border`);
-      borders += c.border.count > 0;
-    }
-    assert.ok(borders > 0, 'some resident nodes have a border');
+    sameBorders(there, here);
     const top = there.st.skeleton.levelNodes(there.st.skeleton.top());
     const opened = top[1] - top[0];
     const sliced = there.st.mainDecoded - opened;
