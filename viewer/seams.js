@@ -9,8 +9,8 @@
 // Plain typed arrays and open-addressing tables throughout: this runs on the page's thread, once
 // per kept node and again whenever the nodes taking part change.
 
-/** The bits of a position's coordinate as matched, −0 as +0. */
-const plus = (u) => (u === 0x80000000 ? 0 : u);
+/** The bits of a position's coordinate as matched: −0 as +0, a NaN quiet (as `x + 0` leaves them). */
+const plus = (u) => (u === 0x80000000 ? 0 : (u & 0x7f800000) === 0x7f800000 && u & 0x7fffff ? (u | 0x400000) >>> 0 : u);
 
 /** Spread the high bits of `h` over the low ones, which index the tables (grid positions' low bits are often zeros). */
 const mix = (h) => {
@@ -122,7 +122,9 @@ class Edges {
  * of its first end (3 each; `normals` null when the node has none).
  */
 export function border(level, error, geometry) {
-  const p = geometry.positions, local = geometry.local ?? geometry.positions, n = geometry.normals, t = geometry.indices;
+  const local = geometry.local ?? geometry.positions, n = geometry.normals, t = geometry.indices;
+  // Matched on the f32 bits of the positions, whatever array they come in.
+  const p = geometry.positions instanceof Float32Array ? geometry.positions : Float32Array.from(geometry.positions);
   const nv = p.length / 3;
   const raw = new Uint32Array(p.buffer, p.byteOffset, p.length);
   const bitsOf = new Uint32Array(3 * nv);
