@@ -216,22 +216,12 @@ impl GroupingArgs {
             leaf_faces: self.leaf_faces.max(1),
             leaf_angle: self.leaf_angle.to_radians(),
             angle_step: self.angle_step.to_radians(),
-            growth: self.growth.unwrap_or_else(|| growth_for(level_ratio)),
+            growth: self.growth.unwrap_or_else(|| HierarchyParams::growth_for(level_ratio)),
             kc: self.kc,
             ks: self.ks,
             kn: self.kn,
             top_groups: self.top_groups.max(1),
         }
-    }
-}
-
-/// The size cap growth that keeps nodes of one size when each level has `level_ratio` of the
-/// faces of the one below: groups merge about `1 / level_ratio` to one.
-fn growth_for(level_ratio: f32) -> u32 {
-    if level_ratio > 0.0 && level_ratio.is_finite() {
-        (1.0 / level_ratio).round().clamp(2.0, 64.0) as u32
-    } else {
-        HierarchyParams::default().growth
     }
 }
 

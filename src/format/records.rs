@@ -236,6 +236,19 @@ impl Default for HierarchyParams {
     }
 }
 
+impl HierarchyParams {
+    /// The size cap growth that keeps nodes of one size when each level has `level_ratio` of the
+    /// faces of the one below (groups then merge about `1 / level_ratio` to one): round(1 /
+    /// ratio), from 2 to 64; the default's for a ratio that is not a positive number.
+    pub fn growth_for(level_ratio: f32) -> u32 {
+        if level_ratio > 0.0 && level_ratio.is_finite() {
+            (1.0 / level_ratio).round().clamp(2.0, 64.0) as u32
+        } else {
+            HierarchyParams::default().growth
+        }
+    }
+}
+
 /// Which corner attributes every vertex of the file carries besides its position.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Attributes {
