@@ -6,7 +6,8 @@
 //! tree's level-0 groups; each coarser level gathers adjacent nodes of the level below into groups
 //! of about `PER_GROUP` (along their longest shared border; a node with no free neighbour takes its
 //! nearest free ones), simplifies the level to half with every vertex shared by two groups pinned
-//! and every face kept in its group, and cuts each group's result into nodes of about level 0's
+//! and every face kept in its group (topology changes on, away from the pins, as the tree's
+//! in-core build has them), and cuts each group's result into nodes of about level 0's
 //! median size (bisection at the median face centroid). A border pinned at one level lies inside a
 //! group at the next, where it simplifies.
 //!
@@ -201,7 +202,12 @@ fn dag(mut mesh: Mesh, level0: &[u32]) -> Vec<(Row, f64, usize)> {
         }
         let borders = group_borders(&mesh, &labels);
         let before = mesh.triangles.len();
-        let opts = SimplifyOptions { target_faces: before / 2, normal_seam_angle: 60f32.to_radians(), ..SimplifyOptions::default() };
+        let opts = SimplifyOptions {
+            target_faces: before / 2,
+            normal_seam_angle: 60f32.to_radians(),
+            topology: true,
+            ..SimplifyOptions::default()
+        };
         let s = simplify_pinned(&mesh, Some(&labels), &pinned, &opts);
         let kept = edges_of(&s.mesh);
         let lost = borders.iter().filter(|e| !kept.contains(e)).count();

@@ -179,7 +179,8 @@ pub fn simplify(mesh: &Mesh, groups: Option<&[u32]>, opts: &SimplifyOptions) -> 
 /// them), and no collapse joins two of them by a new edge. A piece of a larger mesh simplified
 /// alone, its vertices shared with other pieces pinned, then still meets them exactly: every edge
 /// between two pinned vertices stays, and none appears that another piece could make too. An
-/// empty `pinned` pins nothing; topology changes are off while anything is pinned.
+/// empty `pinned` pins nothing. Topology changes, when asked for, leave pinned vertices alone: no
+/// cut runs through one, no closed tetrahedron with one goes.
 ///
 /// # Panics
 /// If `groups` is given with a length other than the face count, or `pinned` is neither empty
@@ -189,7 +190,6 @@ pub fn simplify_pinned(mesh: &Mesh, groups: Option<&[u32]>, pinned: &[bool], opt
         assert_eq!(g.len(), mesh.triangles.len(), "simplify: one group label per face");
     }
     assert!(pinned.is_empty() || pinned.len() == mesh.positions.len(), "simplify: one pin flag per vertex");
-    let opts = &SimplifyOptions { topology: opts.topology && !pinned.contains(&true), ..opts.clone() };
     let mut s = State::new(mesh, groups);
     s.merge_normal_seams(opts.normal_seam_angle);
     s.pinned = pinned.to_vec();

@@ -468,7 +468,7 @@ impl State {
     }
 
     /// Whether `v` is pinned ([`super::simplify_pinned`]); vertices past the flags (copies made by
-    /// topology changes, which pins turn off) are not.
+    /// cuts, which never run through a pinned vertex) are not.
     pub(super) fn is_pinned(&self, v: u32) -> bool {
         self.pinned.get(v as usize).copied().unwrap_or(false)
     }

@@ -1,6 +1,6 @@
 //! Unit tests of the simplifier.
 
-use super::{simplify, Simplified, SimplifyOptions};
+use super::{simplify, simplify_pinned, Simplified, SimplifyOptions};
 use crate::fixtures;
 use crate::mesh::{Adjacency, Material, Mesh, VertexFaces, NO_FACE};
 use glam::{Vec2, Vec3};
@@ -583,4 +583,45 @@ fn cuts_pass_by_other_groups_at_a_vertex() {
     }
     // 72 when every face around a cut's vertices had to be of one group.
     assert!(out.mesh.face_count() <= 56, "{} faces", out.mesh.face_count());
+}
+
+#[test]
+fn topology_changes_leave_pinned_vertices_and_their_edges() {
+    // Every fifth ring of cross-sections pinned around each tube, as a cell or DAG level pins its
+    // borders: cuts and dropped tetrahedra still shrink the handles between them, but no cut
+    // runs through a pinned vertex (it would leave two vertices where the pin is), none goes, and
+    // every edge between pinned vertices stays.
+    // A closed tetrahedron beside them, one corner pinned: it stays whole.
+    let mut m = tori(3, 40);
+    let tori_vertices = m.positions.len();
+    let base = tori_vertices as u32;
+    m.positions.extend([Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.1, 0.0, 2.0), Vec3::new(0.0, 0.1, 2.0), Vec3::new(0.0, 0.0, 2.1)]);
+    m.triangles.extend([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]].map(|t| t.map(|i| base + i)));
+    m.face_materials.resize(m.triangles.len(), 0);
+    m.compute_face_geometry();
+    let pinned: Vec<bool> =
+        (0..m.positions.len()).map(|v| if v < tori_vertices { (v / 3) % 40 % 5 == 0 } else { v == tori_vertices }).collect();
+    let without = simplify_pinned(&m, None, &pinned, &opts(0));
+    let with = simplify_pinned(&m, None, &pinned, &SimplifyOptions { topology: true, ..opts(0) });
+    check_manifold(&m, &with);
+    assert!(
+        with.mesh.face_count() < without.mesh.face_count(),
+        "{} faces, {} without cuts",
+        with.mesh.face_count(),
+        without.mesh.face_count()
+    );
+    let key = |mesh: &Mesh, v: usize| mesh.positions[v].to_array().map(f32::to_bits);
+    let pins: std::collections::HashSet<[u32; 3]> = (0..m.positions.len()).filter(|&v| pinned[v]).map(|v| key(&m, v)).collect();
+    for k in &pins {
+        let copies = (0..with.mesh.positions.len()).filter(|&v| key(&with.mesh, v) == *k).count();
+        assert_eq!(copies, 1, "a pinned vertex is {copies} vertices");
+    }
+    let edges = |mesh: &Mesh| -> std::collections::HashSet<([u32; 3], [u32; 3])> {
+        let t = mesh.triangles.iter().flat_map(|t| (0..3).map(move |k| (t[k] as usize, t[(k + 1) % 3] as usize)));
+        t.map(|(a, b)| (key(mesh, a).min(key(mesh, b)), key(mesh, a).max(key(mesh, b)))).collect()
+    };
+    let kept = edges(&with.mesh);
+    let between: Vec<_> = edges(&m).into_iter().filter(|(a, b)| pins.contains(a) && pins.contains(b)).collect();
+    assert!(!between.is_empty());
+    assert!(between.iter().all(|e| kept.contains(e)), "an edge between pinned vertices is gone");
 }

@@ -13,7 +13,8 @@ impl State {
     /// shape checks. `out` gets the vertices whose edges must be ranked again.
     pub(super) fn unblock(&mut self, u: u32, v: u32, e: &EdgeFaces, limit: f64, out: &mut Vec<u32>) -> bool {
         out.clear();
-        if self.verts[u as usize].locked || self.verts[v as usize].locked || e.n != 2 {
+        // Pinned vertices keep their faces' edges: no cut through them, no tetrahedron dropped.
+        if self.verts[u as usize].locked || self.verts[v as usize].locked || self.is_pinned(u) || self.is_pinned(v) || e.n != 2 {
             return false;
         }
         if self.one_group(&[u, v]) && self.drop_tetrahedron(u, v, e, limit) {
@@ -37,7 +38,7 @@ impl State {
         // u's and v's, which are all four).
         let group = self.faces[e.f[0] as usize].group as usize;
         if (self.grouped && self.group_faces.get(group).is_none_or(|&n| n <= 4))
-            || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked)
+            || corners.iter().any(|&w| self.verts[w as usize].len != 3 || self.verts[w as usize].locked || self.is_pinned(w))
         {
             return false;
         }
@@ -116,7 +117,7 @@ impl State {
     /// right. Only where every fan around the cycle is closed and manifold. A handle through the
     /// cycle is removed, or the component split in two at a neck; the mesh stays manifold.
     fn cut(&mut self, cycle: [u32; 3], out: &mut Vec<u32>) -> bool {
-        if cycle.iter().any(|&w| self.verts[w as usize].locked) || !self.cycle_in_one_group(cycle) {
+        if cycle.iter().any(|&w| self.verts[w as usize].locked || self.is_pinned(w)) || !self.cycle_in_one_group(cycle) {
             return false;
         }
         let mut sides = Vec::with_capacity(3);
