@@ -15,17 +15,29 @@
 //! for both; for the DAG the share of vertices pinned, and the group borders of the level below
 //! that its result does not keep edge for edge (0: a displayed node meets the nodes it replaced
 //! the neighbours of without a crack). Then the top level, and the largest node of any level over
-//! level 0's median (issue 14's goal: at most 4).
+//! level 0's median (issue 14's goal: at most 4); and shape retention at 10 % and 25 % of the
+//! input's faces over the 8 views of `retention_views`: the tree as strata streams its converted
+//! file, the DAG's cut in memory (per view the least threshold whose cut of visible nodes fits;
+//! float positions, each level's smooth normals).
 //!
 //! `cargo bench --bench dag [-- mesh ...]`; without arguments the shipped noisy sphere and, when
 //! present, the bunny, the gargoyle and the CT head of ../shared/meshes.
 
+#[path = "common/retention_views.rs"]
+mod retention_views;
+
+use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::{Path, PathBuf};
+use strata::camera::Camera;
+use strata::cone::{facing_perspective, smallest_enclosing, Facing};
+use strata::format::Cone;
 use strata::hierarchy::{self, HierarchyParams};
 use strata::levels::{self, position_key, LevelParams};
 use strata::mesh::{Adjacency, Mesh};
+use strata::render::Image;
 use strata::simplify::{simplify_pinned, SimplifyOptions};
+use strata::stream::retention::retention;
 
 const PER_GROUP: usize = 4;
 const TOP_FACES: usize = 2048;
@@ -77,8 +89,8 @@ fn split(mesh: &Mesh, faces: &mut [u32], pieces: usize, out: &mut Vec<Vec<u32>>)
     split(mesh, b, pieces - left, out);
 }
 
-/// Groups of about PER_GROUP adjacent nodes: a group per node label of `node`, as labels per node.
-fn group_nodes(mesh: &Mesh, node: &[u32], nodes: usize) -> (Vec<u32>, u32) {
+/// Groups of about PER_GROUP adjacent nodes: per face and per node (labels of `node`), and how many.
+fn group_nodes(mesh: &Mesh, node: &[u32], nodes: usize) -> (Vec<u32>, Vec<u32>, u32) {
     let mut owner: FxHashMap<(u32, u32), u32> = FxHashMap::default();
     let mut shared: FxHashMap<(u32, u32), u32> = FxHashMap::default();
     let mut center = vec![glam::Vec3::ZERO; nodes];
@@ -143,7 +155,7 @@ fn group_nodes(mesh: &Mesh, node: &[u32], nodes: usize) -> (Vec<u32>, u32) {
         }
         groups += 1;
     }
-    (node.iter().map(|&n| group[n as usize]).collect(), groups)
+    (node.iter().map(|&n| group[n as usize]).collect(), group, groups)
 }
 
 /// The edges (as position keys, undirected) between faces of two groups.
@@ -179,16 +191,81 @@ fn edges_of(mesh: &Mesh) -> FxHashSet<([u32; 3], [u32; 3])> {
     out
 }
 
-/// The DAG's levels: rows, and per level above 0 the share pinned and the borders not kept.
-fn dag(mut mesh: Mesh, level0: &[u32]) -> Vec<(Row, f64, usize)> {
+/// A node of the DAG: its level, its faces there, bounds and cone, the group that made it (none at
+/// level 0) and the group it went into (none at the top).
+struct DagNode {
+    level: usize,
+    faces: Vec<u32>,
+    center: Vec3,
+    radius: f32,
+    cone: Cone,
+    source: Option<usize>,
+    consumer: Option<usize>,
+}
+
+/// A group: its error (its simplification's plus the largest of its children's sources') and a
+/// sphere holding its children's and their sources' spheres, so that a group's projected error is
+/// never below that of a group it was made from.
+struct DagGroup {
+    error: f32,
+    center: Vec3,
+    radius: f32,
+}
+
+/// The DAG's levels: rows (with the share pinned and the borders not kept), meshes, nodes, groups.
+struct Dag {
+    rows: Vec<(Row, f64, usize)>,
+    meshes: Vec<Mesh>,
+    nodes: Vec<DagNode>,
+    groups: Vec<DagGroup>,
+}
+
+/// Nodes of `level` from the face lists `pieces` of `mesh`, made by `source`.
+fn nodes_of(mesh: &Mesh, level: usize, pieces: Vec<Vec<u32>>, source: &[Option<usize>]) -> Vec<DagNode> {
+    pieces
+        .into_iter()
+        .zip(source)
+        .map(|(faces, &source)| {
+            let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+            for &f in &faces {
+                for &v in &mesh.triangles[f as usize] {
+                    lo = lo.min(mesh.positions[v as usize]);
+                    hi = hi.max(mesh.positions[v as usize]);
+                }
+            }
+            let center = (lo + hi) * 0.5;
+            let radius = faces
+                .iter()
+                .flat_map(|&f| mesh.triangles[f as usize])
+                .map(|v| mesh.positions[v as usize].distance(center))
+                .fold(0.0, f32::max);
+            let normals: Vec<Vec3> = faces.iter().map(|&f| face_normal(mesh, f)).filter(|n| *n != Vec3::ZERO).collect();
+            DagNode { level, faces, center, radius, cone: smallest_enclosing(&normals), source, consumer: None }
+        })
+        .collect()
+}
+
+fn face_normal(mesh: &Mesh, f: u32) -> Vec3 {
+    let t = mesh.triangles[f as usize].map(|v| mesh.positions[v as usize]);
+    (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero()
+}
+
+fn dag(mut mesh: Mesh, level0: &[u32]) -> Dag {
     let mut node = level0.to_vec();
     let mut s0 = sizes(&node);
     s0.sort_unstable();
     let median0 = s0[s0.len() / 2] as usize;
     let mut rows = vec![(Row { faces: mesh.triangles.len(), nodes: sizes(&node) }, 0.0, 0)];
+    let mut pieces0: Vec<Vec<u32>> = vec![Vec::new(); node.iter().copied().max().map_or(0, |m| m as usize + 1)];
+    for (f, &n) in node.iter().enumerate() {
+        pieces0[n as usize].push(f as u32);
+    }
+    let mut nodes = nodes_of(&mesh, 0, pieces0.clone(), &vec![None; pieces0.len()]);
+    let (mut groups, mut meshes): (Vec<DagGroup>, Vec<Mesh>) = (Vec::new(), Vec::new());
+    let mut level_first = 0usize;
     while mesh.triangles.len() > TOP_FACES {
-        let nodes = node.iter().copied().max().map_or(0, |m| m as usize + 1);
-        let (labels, groups) = group_nodes(&mesh, &node, nodes);
+        let count_here = node.iter().copied().max().map_or(0, |m| m as usize + 1);
+        let (labels, group_of, group_count) = group_nodes(&mesh, &node, count_here);
         let mut first = vec![u32::MAX; mesh.positions.len()];
         let mut pinned = vec![false; mesh.positions.len()];
         for (f, t) in mesh.triangles.iter().enumerate() {
@@ -211,33 +288,151 @@ fn dag(mut mesh: Mesh, level0: &[u32]) -> Vec<(Row, f64, usize)> {
         let s = simplify_pinned(&mesh, Some(&labels), &pinned, &opts);
         let kept = edges_of(&s.mesh);
         let lost = borders.iter().filter(|e| !kept.contains(e)).count();
-        let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); groups as usize];
+        // This step's groups: errors and spheres from their children.
+        let base = groups.len();
+        let mut g_err = vec![0.0f32; group_count as usize];
+        let mut g_spheres: Vec<Vec<(Vec3, f32)>> = vec![Vec::new(); group_count as usize];
+        for n in 0..count_here {
+            let g = group_of[n];
+            if g == u32::MAX {
+                continue;
+            }
+            let d = &mut nodes[level_first + n];
+            d.consumer = Some(base + g as usize);
+            g_spheres[g as usize].push((d.center, d.radius));
+            if let Some(src) = d.source {
+                g_err[g as usize] = g_err[g as usize].max(groups[src].error);
+                g_spheres[g as usize].push((groups[src].center, groups[src].radius));
+            }
+        }
+        for (g, spheres) in g_spheres.iter().enumerate() {
+            let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+            for &(c, r) in spheres {
+                lo = lo.min(c - r);
+                hi = hi.max(c + r);
+            }
+            let center = (lo + hi) * 0.5;
+            let radius = spheres.iter().map(|&(c, r)| c.distance(center) + r).fold(0.0, f32::max);
+            let error = g_err[g] + s.group_error.get(g).copied().unwrap_or(0.0);
+            groups.push(DagGroup { error, center, radius });
+        }
+        let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); group_count as usize];
         for (f, &g) in s.face_groups.iter().enumerate() {
             by_group[g as usize].push(f as u32);
         }
         let mut next = vec![0u32; s.mesh.triangles.len()];
-        let mut count = 0u32;
-        for mut faces in by_group.into_iter().filter(|f| !f.is_empty()) {
-            let pieces = ((faces.len() as f64 / median0 as f64).round() as usize).max(1);
+        let (mut pieces, mut sources) = (Vec::new(), Vec::new());
+        for (g, mut faces) in by_group.into_iter().enumerate().filter(|(_, f)| !f.is_empty()) {
+            let count = ((faces.len() as f64 / median0 as f64).round() as usize).max(1);
             let mut out = Vec::new();
-            split(&s.mesh, &mut faces, pieces, &mut out);
+            split(&s.mesh, &mut faces, count, &mut out);
             for piece in out {
                 for &f in &piece {
-                    next[f as usize] = count;
+                    next[f as usize] = pieces.len() as u32;
                 }
-                count += 1;
+                pieces.push(piece);
+                sources.push(Some(base + g));
             }
         }
         let share = pinned.iter().filter(|&&p| p).count() as f64 / mesh.positions.len().max(1) as f64;
         let stalled = s.mesh.triangles.len() as f64 > 0.95 * before as f64;
-        mesh = s.mesh;
+        let count = pieces.len();
+        level_first = nodes.len();
+        nodes.extend(nodes_of(&s.mesh, meshes.len() + 1, pieces, &sources));
+        meshes.push(std::mem::replace(&mut mesh, s.mesh));
         node = next;
         rows.push((Row { faces: mesh.triangles.len(), nodes: sizes(&node) }, share, lost));
         if stalled || count <= 1 {
             break;
         }
     }
-    rows
+    meshes.push(mesh);
+    Dag { rows, meshes, nodes, groups }
+}
+
+/// Smooth vertex normals of `mesh` (area-weighted face normals).
+fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; mesh.positions.len()];
+    for t in &mesh.triangles {
+        let p = t.map(|v| mesh.positions[v as usize]);
+        let c = (p[1] - p[0]).cross(p[2] - p[0]);
+        for &v in t {
+            n[v as usize] += c;
+        }
+    }
+    n.iter().map(|v| v.normalize_or_zero()).collect()
+}
+
+/// The 8 views of `retention_views` (same cameras), for a mesh in memory.
+fn cameras(mesh: &Mesh) -> Vec<Camera> {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &p in &mesh.positions {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    let (center, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+    (0..8)
+        .map(|k| {
+            let a = k as f32 * std::f32::consts::TAU / 8.0;
+            Camera::framing(center, radius, Vec3::new(a.sin(), 0.3, a.cos()), 0.8, retention_views::SIZE, retention_views::SIZE)
+        })
+        .collect()
+}
+
+/// Mean shaded retention over the 8 views of the DAG's cut under `budget` faces: per view the
+/// least threshold τ whose cut (a node shown iff its source group's projected error is at most τ
+/// and its consumer's above) has at most `budget` faces in nodes that face the camera and meet
+/// the frustum, drawn against level 0.
+fn dag_retention(d: &Dag, budget: usize) -> f64 {
+    let normals: Vec<Vec<Vec3>> = d.meshes.iter().map(smooth_normals).collect();
+    let indices = |level: usize, faces: &mut dyn Iterator<Item = u32>| -> Vec<u32> {
+        faces.flat_map(|f| d.meshes[level].triangles[f as usize]).collect()
+    };
+    let full = indices(0, &mut (0..d.meshes[0].triangles.len() as u32));
+    let mut total = 0.0;
+    let views = cameras(&d.meshes[0]);
+    for cam in &views {
+        let mut reference = Image::new(retention_views::SIZE, retention_views::SIZE);
+        reference.draw(cam, &d.meshes[0].positions, &normals[0], &full, [200, 200, 200, 255]);
+        let p: Vec<f32> = d.groups.iter().map(|g| cam.projected_error(g.error, g.center, g.radius)).collect();
+        let visible: Vec<bool> = d
+            .nodes
+            .iter()
+            .map(|n| facing_perspective(&n.cone, n.center, n.radius, cam.eye) != Facing::Back && cam.sees_sphere(n.center, n.radius))
+            .collect();
+        let shown = |tau: f32, n: &DagNode| n.source.is_none_or(|s| p[s] <= tau) && n.consumer.is_none_or(|c| p[c] > tau);
+        let faces =
+            |tau: f32| -> usize { d.nodes.iter().zip(&visible).filter(|&(n, &v)| v && shown(tau, n)).map(|(n, _)| n.faces.len()).sum() };
+        let mut candidates: Vec<f32> = p.iter().copied().filter(|x| x.is_finite()).collect();
+        candidates.push(0.0);
+        candidates.sort_unstable_by(f32::total_cmp);
+        // The least candidate whose cut fits (faces fall as τ grows), else the largest.
+        let (mut lo, mut hi) = (0usize, candidates.len() - 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if faces(candidates[mid]) <= budget {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        let tau = candidates[lo];
+        let mut img = Image::new(retention_views::SIZE, retention_views::SIZE);
+        for (n, _) in d.nodes.iter().zip(&visible).filter(|&(n, &v)| v && shown(tau, n)) {
+            let ix = indices(n.level, &mut n.faces.iter().copied());
+            img.draw(cam, &d.meshes[n.level].positions, &normals[n.level], &ix, [200, 200, 200, 255]);
+        }
+        total += retention(&img, &reference).shaded / views.len() as f64;
+    }
+    total
+}
+
+fn convert(input: &Path) -> PathBuf {
+    let out =
+        std::env::temp_dir().join(format!("strata-dag-{}-{}.strata", input.file_stem().unwrap().to_string_lossy(), std::process::id()));
+    let opts = strata::pipeline::ConvertOptions::default();
+    strata::pipeline::convert(input, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
+    out
 }
 
 fn main() {
@@ -261,7 +456,8 @@ fn main() {
         drop(adj);
         let level0 = h.levels[0].face_group.clone();
         let start = std::time::Instant::now();
-        let dag_rows = dag(mesh.clone(), &level0);
+        let built = dag(mesh.clone(), &level0);
+        let dag_rows = &built.rows;
         let dag_s = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
         let tree = levels::build(mesh, &mut h, &LevelParams::default(), &mut |_| {});
@@ -299,5 +495,19 @@ fn main() {
             largest(&mut tree_rows.iter()),
             largest(&mut dag_rows.iter().map(|r| &r.0)),
         );
+        // Shape retention at 10 % and 25 % of the input's faces: the tree as strata streams its
+        // file (benches/common/retention_views.rs), the DAG's cut in memory, same 8 views.
+        let file = convert(input);
+        let views = retention_views::Views::of(&file).expect("views");
+        let input_faces = tree_rows[0].faces;
+        let mut line = String::from("shape retention at 10 % / 25 % of the faces:");
+        for share in [10, 4] {
+            let tree =
+                views.retention(&file, (input_faces / share) as u64, Default::default()).expect("retention").map_or(f64::NAN, |r| r.0);
+            let dag = dag_retention(&built, input_faces / share);
+            line += &format!(" {}: tree {tree:.3}, DAG {dag:.3};", if share == 10 { "10 %" } else { "25 %" });
+        }
+        println!("{line}");
+        std::fs::remove_file(&file).ok();
     }
 }
