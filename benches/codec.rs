@@ -12,19 +12,15 @@
 //! `cargo bench --bench codec [-- file.strata ...]`; without arguments the bunny, the gargoyle and
 //! the CT head of ../shared/meshes, converted with defaults, when present.
 
+#[path = "common/convert.rs"]
+mod convert;
+use convert::convert;
+
 use flate2::{write::DeflateEncoder, Compression};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use strata::format::{octa, Reader};
-
-fn convert(input: &Path) -> PathBuf {
-    let name = input.file_stem().unwrap().to_string_lossy();
-    let out = std::env::temp_dir().join(format!("strata-codec-{name}-{}.strata", std::process::id()));
-    let opts = strata::pipeline::ConvertOptions::default();
-    strata::pipeline::convert(input, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
-    out
-}
 
 fn deflated(bytes: &[u8]) -> usize {
     let mut e = DeflateEncoder::new(Vec::new(), Compression::best());
@@ -76,7 +72,7 @@ fn main() {
         let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
         for m in ["scans/stanford_bun_zipper.ply", "scans/3dhop_gargo.ply", "large/cthead_skin_native.ply"] {
             if shared.join(m).exists() {
-                files.push(convert(&shared.join(m)));
+                files.push(convert(&shared.join(m), "codec"));
             } else {
                 println!("skipping {m}: ../shared/meshes not found");
             }

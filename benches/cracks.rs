@@ -11,6 +11,10 @@
 //! `cargo bench --bench cracks [-- file.strata ...]`; without arguments the shipped noisy sphere
 //! and, when present, the bunny and the CT head of ../shared/meshes, converted with defaults.
 
+#[path = "common/convert.rs"]
+mod convert;
+use convert::convert;
+
 use std::path::{Path, PathBuf};
 use strata::camera::Camera;
 use strata::format::Reader;
@@ -21,14 +25,6 @@ use strata::stream::{session, Budgets, Streamer};
 const W: u32 = 640;
 const H: u32 = 480;
 const FRAMES: usize = 32;
-
-fn convert(input: &Path) -> PathBuf {
-    let out =
-        std::env::temp_dir().join(format!("strata-cracks-{}-{}.strata", input.file_stem().unwrap().to_string_lossy(), std::process::id()));
-    let opts = strata::pipeline::ConvertOptions::default();
-    strata::pipeline::convert(input, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
-    out
-}
 
 fn draw(camera: &Camera, mesh: &strata::Mesh, seams: Option<&Seams>) -> Image {
     let mut img = Image::new(W, H);
@@ -45,11 +41,11 @@ fn main() {
     let mut files: Vec<PathBuf> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).map(PathBuf::from).collect();
     if files.is_empty() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        files.push(convert(&root.join("fixtures/noisy_sphere.ply")));
+        files.push(convert(&root.join("fixtures/noisy_sphere.ply"), "cracks"));
         for shared in ["scans/stanford_bun_zipper.ply", "large/cthead_skin_native.ply"] {
             let p = root.join("../shared/meshes").join(shared);
             if p.exists() {
-                files.push(convert(&p));
+                files.push(convert(&p, "cracks"));
             } else {
                 println!("skipping {}: not found", p.display());
             }

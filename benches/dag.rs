@@ -13,8 +13,8 @@
 //!
 //! Printed per mesh and level: faces and the ratio to the level below, nodes, the largest node,
 //! for both; for the DAG the share of vertices pinned, and the group borders of the level below
-//! that its result does not keep edge for edge (0: a displayed node meets the nodes it replaced
-//! the neighbours of without a crack). Then the top level, and the largest node of any level over
+//! that its result does not keep edge for edge (0: displayed nodes meet finer neighbours without a
+//! crack). Then the top level, and the largest node of any level over
 //! level 0's median (issue 14's goal: at most 4); and shape retention at 10 % and 25 % of the
 //! input's faces over the 8 views of `retention_views`: the tree as strata streams its converted
 //! file, the DAG's cut in memory (per view the least threshold whose cut of visible nodes fits;
@@ -23,13 +23,16 @@
 //! `cargo bench --bench dag [-- mesh ...]`; without arguments the shipped noisy sphere and, when
 //! present, the bunny, the gargoyle and the CT head of ../shared/meshes.
 
+#[path = "common/convert.rs"]
+mod convert;
+use convert::convert;
+
 #[path = "common/retention_views.rs"]
 mod retention_views;
 
 use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::{Path, PathBuf};
-use strata::camera::Camera;
 use strata::cone::{facing_perspective, smallest_enclosing, Facing};
 use strata::format::Cone;
 use strata::hierarchy::{self, HierarchyParams};
@@ -363,22 +366,6 @@ fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
     n.iter().map(|v| v.normalize_or_zero()).collect()
 }
 
-/// The 8 views of `retention_views` (same cameras), for a mesh in memory.
-fn cameras(mesh: &Mesh) -> Vec<Camera> {
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &p in &mesh.positions {
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    let (center, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
-    (0..8)
-        .map(|k| {
-            let a = k as f32 * std::f32::consts::TAU / 8.0;
-            Camera::framing(center, radius, Vec3::new(a.sin(), 0.3, a.cos()), 0.8, retention_views::SIZE, retention_views::SIZE)
-        })
-        .collect()
-}
-
 /// Mean shaded retention over the 8 views of the DAG's cut under `budget` faces: per view the
 /// least threshold τ whose cut (a node shown iff its source group's projected error is at most τ
 /// and its consumer's above) has at most `budget` faces in nodes that face the camera and meet
@@ -390,7 +377,12 @@ fn dag_retention(d: &Dag, budget: usize) -> f64 {
     };
     let full = indices(0, &mut (0..d.meshes[0].triangles.len() as u32));
     let mut total = 0.0;
-    let views = cameras(&d.meshes[0]);
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &p in &d.meshes[0].positions {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    let views = retention_views::cameras(lo, hi);
     for cam in &views {
         let mut reference = Image::new(retention_views::SIZE, retention_views::SIZE);
         reference.draw(cam, &d.meshes[0].positions, &normals[0], &full, [200, 200, 200, 255]);
@@ -425,14 +417,6 @@ fn dag_retention(d: &Dag, budget: usize) -> f64 {
         total += retention(&img, &reference).shaded / views.len() as f64;
     }
     total
-}
-
-fn convert(input: &Path) -> PathBuf {
-    let out =
-        std::env::temp_dir().join(format!("strata-dag-{}-{}.strata", input.file_stem().unwrap().to_string_lossy(), std::process::id()));
-    let opts = strata::pipeline::ConvertOptions::default();
-    strata::pipeline::convert(input, &Default::default(), &out, &opts, &mut strata::pipeline::Silent).expect("convert");
-    out
 }
 
 fn main() {
@@ -497,7 +481,7 @@ fn main() {
         );
         // Shape retention at 10 % and 25 % of the input's faces: the tree as strata streams its
         // file (benches/common/retention_views.rs), the DAG's cut in memory, same 8 views.
-        let file = convert(input);
+        let file = convert(input, "dag");
         let views = retention_views::Views::of(&file).expect("views");
         let input_faces = tree_rows[0].faces;
         let mut line = String::from("shape retention at 10 % / 25 % of the faces:");

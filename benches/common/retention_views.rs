@@ -12,6 +12,17 @@ use strata::stream::{Budgets, Priority, Streamer};
 pub const SIZE: u32 = 512;
 const FOV: f32 = 0.8;
 
+/// The 8 cameras around a model of bounds `min`..`max`, a little above it, each framing it.
+pub fn cameras(min: Vec3, max: Vec3) -> Vec<Camera> {
+    let (center, radius) = ((min + max) * 0.5, (max - min).length() * 0.5);
+    (0..8)
+        .map(|k| {
+            let a = k as f32 * std::f32::consts::TAU / 8.0;
+            Camera::framing(center, radius, Vec3::new(a.sin(), 0.3, a.cos()), FOV, SIZE, SIZE)
+        })
+        .collect()
+}
+
 /// The 8 cameras and the full-detail reference image of each.
 pub struct Views {
     cameras: Vec<Camera>,
@@ -22,14 +33,8 @@ impl Views {
     pub fn of(file: &Path) -> strata::error::Result<Views> {
         let rd = Reader::open_path(file)?;
         let h = rd.header().clone();
-        let (center, radius) = ((h.min + h.max) * 0.5, (h.max - h.min).length() * 0.5);
         let full: Vec<_> = rd.level_nodes(0).map(|i| rd.read_node(i)).collect::<strata::error::Result<_>>()?;
-        let cameras: Vec<Camera> = (0..8)
-            .map(|k| {
-                let a = k as f32 * std::f32::consts::TAU / 8.0;
-                Camera::framing(center, radius, Vec3::new(a.sin(), 0.3, a.cos()), FOV, SIZE, SIZE)
-            })
-            .collect();
+        let cameras = cameras(h.min, h.max);
         let references = cameras
             .iter()
             .map(|cam| {
