@@ -4,6 +4,7 @@
 // exactly (a grid point decodes to the same f32 in every node), compared by their bits.
 //
 //   border(level, error, geometry)  a node's open border, kept while the node is displayed
+//   takingPart(drawn, neighbors)    which drawn nodes' borders the seams need: { sealing, near }
 //   seams(sealing, shown)           the fill of a front's seams: { local, normals, indices }
 //
 // Plain typed arrays and open-addressing tables throughout: this runs on the page's thread, once
@@ -158,6 +159,20 @@ export function border(level, error, geometry) {
     }
   }
   return { level, error, count, keys, at, normals };
+}
+
+/**
+ * The nodes of the drawn front `drawn` whose borders the seams need: `sealing`, those with a
+ * neighbour of their level not drawn, ascending; `near`, their drawn neighbours, ascending (an
+ * edge of theirs can only meet theirs or those). `neighbors(i)` lists node i's same-level
+ * neighbours; only nodes for which `has(i)` holds (resident) are counted.
+ */
+export function takingPart(drawn, neighbors, has = () => true) {
+  const shown = new Set(drawn);
+  const sealing = drawn.filter((i) => has(i) && Array.from(neighbors(i)).some((m) => !shown.has(m))).sort((a, b) => a - b);
+  const near = new Set();
+  for (const i of sealing) for (const m of neighbors(i)) if (shown.has(m) && has(m)) near.add(m);
+  return { sealing, near: [...near].sort((a, b) => a - b) };
 }
 
 /**

@@ -25,7 +25,7 @@ import { Orderer } from './order.js';
 import { NodeDecodeError } from './decoder.js';
 import { Selector, recordBytes, sees } from './select.js';
 import { length, sub } from './camera.js';
-import { border, seams } from './seams.js';
+import { border, seams, takingPart } from './seams.js';
 
 const NO_PARENT = 0xffffffff;
 
@@ -785,16 +785,12 @@ export class Streamer {
    * change.
    */
   sealSeams(drawn) {
-    const s = this.skeleton;
-    const shown = new Set(drawn);
-    const sealing = drawn.filter((i) => this.cache.has(i) && Array.from(s.neighbors(i)).some((m) => !shown.has(m))).sort((a, b) => a - b);
-    // An edge of theirs can only meet theirs or their drawn neighbours'.
-    const near = new Set();
-    for (const i of sealing) for (const m of s.neighbors(i)) if (shown.has(m) && this.cache.has(m)) near.add(m);
-    const key = `${sealing.join(',')}|${[...near].sort((a, b) => a - b).join(',')}`;
+    const { sealing, near } = takingPart(drawn, (i) => this.skeleton.neighbors(i), (i) => this.cache.has(i));
+    const key = `${sealing.join(',')}|${near.join(',')}`;
     if (key === this.seamNodes) return;
     this.seamNodes = key;
-    this.seams = seams(sealing.map((i) => this.cache.get(i).border), [...near].map((i) => this.cache.get(i).border));
+    const borders = (nodes) => nodes.map((i) => this.cache.get(i).border);
+    this.seams = seams(borders(sealing), borders(near));
     this.seamsVersion++;
   }
 

@@ -12,7 +12,7 @@
 import { readFileSync } from 'node:fs';
 import { execFileSync } from 'node:child_process';
 import { decodeSkeleton, decodeNode } from '../../viewer/format.js';
-import { border, seams } from '../../viewer/seams.js';
+import { border, seams, takingPart } from '../../viewer/seams.js';
 import { strataBin } from '../../tests/js/helpers.mjs';
 
 const files = process.argv.slice(2);
@@ -44,9 +44,7 @@ for (const file of files) {
     if (pass > 0) borderMs = Math.min(borderMs, (performance.now() - t0) / geometry.size);
   }
   const fronts = frames.map((f) => {
-    const shown = new Set(f.front);
-    const sealing = f.front.filter((i) => Array.from(s.neighbors(i)).some((m) => !shown.has(m))).sort((a, b) => a - b);
-    const near = [...new Set(sealing.flatMap((i) => Array.from(s.neighbors(i)).filter((m) => shown.has(m))))];
+    const { sealing, near } = takingPart(f.front, (i) => s.neighbors(i));
     return { sealing: sealing.map((i) => borders.get(i)), near: near.map((i) => borders.get(i)), faces: f.seam_faces };
   });
   // Per front, the best of PASSES after a warm-up pass.

@@ -344,19 +344,19 @@ impl<S: ByteSource> Streamer<S> {
         let mut near: Vec<u32> = sealing.iter().flat_map(|&n| reader.neighbors(n).iter().copied().filter(|m| shown.contains(m))).collect();
         near.sort_unstable();
         near.dedup();
-        let nodes = reader.nodes();
+        if sealing == self.seam_nodes.0 && near == self.seam_nodes.1 {
+            return;
+        }
+        let records = reader.nodes();
         for &n in sealing.iter().chain(&near) {
             if !self.borders.contains_key(&n) {
                 if let Some(g) = self.cache.get(n) {
-                    let r = &nodes[n as usize];
+                    let r = &records[n as usize];
                     self.borders.insert(n, seams::Border::of(r.level, r.error, g));
                 }
             }
         }
         let nodes = (sealing, near);
-        if nodes == self.seam_nodes {
-            return;
-        }
         let borders = |nodes: &[u32]| -> Vec<&seams::Border> { nodes.iter().filter_map(|n| self.borders.get(n)).collect() };
         self.seams = seams::seams(&borders(&nodes.0), &borders(&nodes.1));
         self.seam_nodes = nodes;

@@ -7,7 +7,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
 import { decodeSkeleton, decodeNode } from '../../viewer/format.js';
-import { border, seams } from '../../viewer/seams.js';
+import { border, seams, takingPart } from '../../viewer/seams.js';
 import { root, strataBin, converted, run } from './helpers.mjs';
 
 const geometry = (positions, indices) => ({ positions: new Float32Array(positions.flat()), indices: new Uint32Array(indices), normals: null });
@@ -88,9 +88,7 @@ test('the seams of strata stream on a converted fixture', (t) => {
   };
   let filled = 0;
   for (const f of frames) {
-    const shown = new Set(f.front);
-    const sealing = f.front.filter((i) => Array.from(s.neighbors(i)).some((m) => !shown.has(m)));
-    const near = [...new Set(sealing.flatMap((i) => Array.from(s.neighbors(i)).filter((m) => shown.has(m))))];
+    const { sealing, near } = takingPart(f.front, (i) => s.neighbors(i));
     const fill = seams(sealing.map(borderOf), near.map(borderOf));
     assert.equal(fill.faces, f.seam_faces, `frame ${f.frame}: seam faces`);
     const a = area(fill);
