@@ -21,6 +21,7 @@ pub mod bounds;
 pub mod camera;
 pub mod cone;
 pub mod culling;
+pub mod dag;
 pub mod derived_normals;
 pub mod distance;
 pub mod error;

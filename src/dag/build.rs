@@ -1,0 +1,188 @@
+//! Building the DAG level by level: gather, simplify with group borders pinned, split.
+
+use super::gather::gather;
+use super::split::split;
+use super::{Dag, Group, Node, NONE};
+use crate::cone::smallest_enclosing;
+use crate::hierarchy::Lists;
+use crate::mesh::Mesh;
+use crate::simplify::{simplify_pinned, SimplifyOptions};
+use glam::Vec3;
+
+/// How the DAG's levels are made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DagParams {
+    /// Target ratio of faces between a level and the one below.
+    pub ratio: f32,
+    /// Levels are added while the top has more faces than this (and the last one shrank).
+    pub top_faces: usize,
+}
+
+impl Default for DagParams {
+    fn default() -> Self {
+        DagParams { ratio: 0.5, top_faces: 2048 }
+    }
+}
+
+/// A level that keeps more than this share of the faces below it ends the build: the simplifier
+/// has stopped (pins and group rules leave it nothing to collapse).
+const STALLED: f64 = 0.95;
+
+/// Corner normals of one vertex closer than this (degrees) are one normal at levels 1 and up, as
+/// in the tree's levels ([`crate::levels`]).
+const NORMAL_SEAM_ANGLE: f32 = 30.0;
+
+/// Build the DAG of `mesh` (cleaned, face geometry computed) whose level-0 nodes are the labels
+/// `level0` (one per face, `0..n`; the grouping's level 0). `on_level` is called after each level
+/// with its index and face count, for progress reports.
+pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut(usize, usize)) -> Dag {
+    assert_eq!(level0.len(), mesh.triangles.len(), "dag::build: one level-0 label per face");
+    let labels = level0.iter().copied().max().map_or(0, |m| m as usize + 1);
+    let mut pieces: Vec<Vec<u32>> = vec![Vec::new(); labels];
+    for (f, &n) in level0.iter().enumerate() {
+        pieces[n as usize].push(f as u32);
+    }
+    pieces.retain(|p| !p.is_empty());
+    let median = {
+        let mut sizes: Vec<usize> = pieces.iter().map(Vec::len).collect();
+        sizes.sort_unstable();
+        sizes.get(sizes.len() / 2).copied().unwrap_or(1).max(1)
+    };
+    let sources = vec![NONE; pieces.len()];
+    let mut dag = Dag::default();
+    let mut mesh = place(mesh, 0, pieces, &sources, &mut dag.nodes);
+    on_level(0, mesh.triangles.len());
+    let mut level = 0usize;
+    while mesh.triangles.len() > p.top_faces {
+        let here = dag.level_nodes(level);
+        let first = here.start as usize;
+        let count = here.len();
+        let mut node_of_face = vec![0u32; mesh.triangles.len()];
+        for (i, n) in dag.nodes[here.start as usize..here.end as usize].iter().enumerate() {
+            node_of_face[n.faces.start as usize..n.faces.end as usize].fill(i as u32);
+        }
+        let (group_of_node, group_count) = gather(&mesh, &node_of_face, count);
+        let labels: Vec<u32> = node_of_face.iter().map(|&n| group_of_node[n as usize]).collect();
+        let pinned = shared_vertices(&mesh, &labels);
+        let before = mesh.triangles.len();
+        let opts = SimplifyOptions {
+            target_faces: ((before as f64) * p.ratio.clamp(0.0, 1.0) as f64).round() as usize,
+            normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
+            topology: true,
+            ..SimplifyOptions::default()
+        };
+        let s = simplify_pinned(&mesh, Some(&labels), &pinned, &opts);
+
+        // The groups: errors and spheres from their children and the children's sources.
+        let base = dag.groups.len();
+        let mut error = vec![0.0f32; group_count];
+        let mut spheres: Vec<Vec<(Vec3, f32)>> = vec![Vec::new(); group_count];
+        for (i, &g) in group_of_node.iter().enumerate() {
+            let node = &mut dag.nodes[first + i];
+            node.consumer = (base + g as usize) as u32;
+            spheres[g as usize].push((node.center, node.radius));
+            if node.source != NONE {
+                let src = &dag.groups[node.source as usize];
+                error[g as usize] = error[g as usize].max(src.error);
+                spheres[g as usize].push((src.center, src.radius));
+            }
+        }
+        let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); group_count];
+        for (f, &g) in s.face_groups.iter().enumerate() {
+            by_group[g as usize].push(f as u32);
+        }
+        let (mut pieces, mut sources) = (Vec::new(), Vec::new());
+        let mut next_first = dag.nodes.len() as u32;
+        for (g, mut faces) in by_group.into_iter().enumerate() {
+            let (center, radius) = enclosing(&spheres[g]);
+            let made = ((faces.len() as f64 / median as f64).round() as usize).max(1);
+            let start = pieces.len();
+            if !faces.is_empty() {
+                split(&s.mesh, &mut faces, made, &mut pieces);
+            }
+            let outputs = next_first..next_first + (pieces.len() - start) as u32;
+            next_first = outputs.end;
+            sources.resize(pieces.len(), (base + g) as u32);
+            dag.groups.push(Group {
+                level: level as u32 + 1,
+                error: error[g] + s.group_error.get(g).copied().unwrap_or(0.0),
+                center,
+                radius,
+                outputs,
+            });
+        }
+        let made = pieces.len();
+        level += 1;
+        let below = std::mem::replace(&mut mesh, place(s.mesh, level, pieces, &sources, &mut dag.nodes));
+        dag.levels.push(below);
+        on_level(level, mesh.triangles.len());
+        if mesh.triangles.len() as f64 > STALLED * before as f64 || made <= 1 {
+            break;
+        }
+    }
+    dag.levels.push(mesh);
+    let consumers: Vec<(u32, u32)> =
+        dag.nodes.iter().enumerate().filter(|(_, n)| n.consumer != NONE).map(|(i, n)| (n.consumer, i as u32)).collect();
+    dag.children = lists(&consumers, dag.groups.len());
+    dag
+}
+
+/// The vertices of `mesh` used by faces of two groups (`labels` per face): pinned while the level
+/// simplifies, so that each group's result meets its neighbours' edge for edge.
+pub fn shared_vertices(mesh: &Mesh, labels: &[u32]) -> Vec<bool> {
+    let mut first = vec![u32::MAX; mesh.positions.len()];
+    let mut pinned = vec![false; mesh.positions.len()];
+    for (t, &g) in mesh.triangles.iter().zip(labels) {
+        for &v in t {
+            let f = &mut first[v as usize];
+            if *f == u32::MAX {
+                *f = g;
+            } else if *f != g {
+                pinned[v as usize] = true;
+            }
+        }
+    }
+    pinned
+}
+
+/// Reorder `mesh`'s faces so that each of `pieces` is a run, and append the pieces as nodes of
+/// `level` made by `sources`.
+fn place(mesh: Mesh, level: usize, pieces: Vec<Vec<u32>>, sources: &[u32], nodes: &mut Vec<Node>) -> Mesh {
+    let order: Vec<usize> = pieces.iter().flatten().map(|&f| f as usize).collect();
+    let mesh = mesh.subset(&order);
+    let mut start = 0u32;
+    for (piece, &source) in pieces.iter().zip(sources) {
+        let faces = start..start + piece.len() as u32;
+        start = faces.end;
+        let tris = &mesh.triangles[faces.start as usize..faces.end as usize];
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for &v in tris.iter().flatten() {
+            lo = lo.min(mesh.positions[v as usize]);
+            hi = hi.max(mesh.positions[v as usize]);
+        }
+        let center = (lo + hi) * 0.5;
+        let radius = tris.iter().flatten().map(|&v| mesh.positions[v as usize].distance(center)).fold(0.0, f32::max);
+        let normals: Vec<Vec3> =
+            mesh.face_normals[faces.start as usize..faces.end as usize].iter().copied().filter(|n| *n != Vec3::ZERO).collect();
+        nodes.push(Node { level: level as u32, faces, center, radius, cone: smallest_enclosing(&normals), source, consumer: NONE });
+    }
+    mesh
+}
+
+/// A sphere holding every sphere of `spheres`.
+fn enclosing(spheres: &[(Vec3, f32)]) -> (Vec3, f32) {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &(c, r) in spheres {
+        lo = lo.min(c - r);
+        hi = hi.max(c + r);
+    }
+    let center = (lo + hi) * 0.5;
+    (center, spheres.iter().map(|&(c, r)| c.distance(center) + r).fold(0.0, f32::max))
+}
+
+/// Lists `0..n` of the items of `(list, item)` pairs, items in increasing order within a list.
+fn lists(pairs: &[(u32, u32)], n: usize) -> Lists {
+    let labels: Vec<u32> = pairs.iter().map(|p| p.0).collect();
+    let by = Lists::from_labels(&labels, n);
+    Lists { offsets: by.offsets, items: by.items.iter().map(|&i| pairs[i as usize].1).collect() }
+}
