@@ -26,7 +26,7 @@ mod retention_views;
 use glam::Vec3;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::{Path, PathBuf};
-use strata::dag::{self, cut::cut_within, Dag, DagParams};
+use strata::dag::{self, cut::select, Dag, DagParams};
 use strata::hierarchy::{self, HierarchyParams};
 use strata::levels::{self, position_key, LevelParams};
 use strata::mesh::{Adjacency, Mesh};
@@ -134,7 +134,8 @@ fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
 }
 
 /// Mean shaded retention over the 8 views of the DAG's cut under `budget` faces
-/// ([`cut_within`]: the least threshold whose seen nodes fit), drawn against level 0.
+/// ([`select`] at 0 px: groups opened largest projected error first while the budget holds), drawn
+/// against level 0.
 fn dag_retention(d: &Dag, budget: usize) -> f64 {
     let normals: Vec<Vec<Vec3>> = d.levels.iter().map(smooth_normals).collect();
     let full: Vec<u32> = d.levels[0].triangles.iter().flatten().copied().collect();
@@ -145,7 +146,7 @@ fn dag_retention(d: &Dag, budget: usize) -> f64 {
         let mut reference = Image::new(retention_views::SIZE, retention_views::SIZE);
         reference.draw(cam, &d.levels[0].positions, &normals[0], &full, [200, 200, 200, 255]);
         let mut img = Image::new(retention_views::SIZE, retention_views::SIZE);
-        for n in cut_within(d, cam, budget).nodes {
+        for n in select(d, cam, 0.0, Some(budget), &|_| false).shown {
             let level = d.nodes[n as usize].level as usize;
             let ix: Vec<u32> = d.indices(n as usize).collect();
             img.draw(cam, &d.levels[level].positions, &normals[level], &ix, [200, 200, 200, 255]);

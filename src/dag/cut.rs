@@ -53,27 +53,64 @@ pub fn cut(dag: &Dag, camera: &Camera, tau: f32) -> Cut {
     Cut { tau, nodes: nodes.collect() }
 }
 
-/// The cut at the least threshold whose seen nodes hold at most `budget` faces (faces fall as τ
-/// grows); the coarsest cut when none does. Thresholds are searched among the groups' projected
-/// errors, where the cut changes.
-pub fn cut_within(dag: &Dag, camera: &Camera, budget: usize) -> Cut {
+/// A selection under budgets: the nodes of the cut the camera sees (`shown`, ascending), those it
+/// does not (`culled`, ascending), and the faces shown.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Selection {
+    pub shown: Vec<u32>,
+    pub culled: Vec<u32>,
+    pub faces: usize,
+}
+
+/// The cut a viewer refines to under a face budget (selection.md §9): from the top level down,
+/// groups are opened (their outputs replaced by their children) largest projected error first,
+/// equal errors by group number, while their error is above `tau`, the faces shown stay within
+/// `face_budget` and `held` does not hold them (a viewer holds a group whose children it has not
+/// loaded). A group is opened only once all its outputs are in the cut, so every cut this returns
+/// is one of the DAG's cuts, crack-free; without a budget or held groups it is [`cut`]'s at `tau`.
+pub fn select(dag: &Dag, camera: &Camera, tau: f32, face_budget: Option<usize>, held: &dyn Fn(u32) -> bool) -> Selection {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
     let p = projected_errors(dag, camera);
-    let seen: Vec<u32> = (0..dag.nodes.len() as u32).filter(|&n| sees(&dag.nodes[n as usize], camera)).collect();
-    let faces =
-        |tau: f32| -> usize { seen.iter().map(|&n| &dag.nodes[n as usize]).filter(|n| shown(n, &p, tau)).map(|n| n.faces.len()).sum() };
-    let mut candidates: Vec<f32> = p.iter().copied().filter(|x| x.is_finite()).collect();
-    candidates.push(0.0);
-    candidates.sort_unstable_by(f32::total_cmp);
-    candidates.dedup();
-    let (mut lo, mut hi) = (0usize, candidates.len() - 1);
-    while lo < hi {
-        let mid = (lo + hi) / 2;
-        if faces(candidates[mid]) <= budget {
-            hi = mid;
-        } else {
-            lo = mid + 1;
+    let seen: Vec<bool> = dag.nodes.iter().map(|n| sees(n, camera)).collect();
+    let cost = |n: u32| if seen[n as usize] { dag.nodes[n as usize].faces.len() } else { 0 };
+    let mut in_cut = vec![false; dag.nodes.len()];
+    // Outputs of each group not yet in the cut; a group becomes a candidate at 0.
+    let mut waiting: Vec<u32> = dag.groups.iter().map(|g| g.outputs.len() as u32).collect();
+    let mut heap: BinaryHeap<(u32, Reverse<u32>)> = BinaryHeap::new();
+    let mut enter = |n: u32, heap: &mut BinaryHeap<(u32, Reverse<u32>)>, in_cut: &mut Vec<bool>| {
+        in_cut[n as usize] = true;
+        let s = dag.nodes[n as usize].source;
+        if s != NONE {
+            waiting[s as usize] -= 1;
+            if waiting[s as usize] == 0 && p[s as usize] > tau && !held(s) {
+                // Projected errors are not negative, so their bits order as they do.
+                heap.push((p[s as usize].to_bits(), Reverse(s)));
+            }
+        }
+    };
+    let mut faces = 0usize;
+    let top = dag.levels.len().saturating_sub(1);
+    for n in dag.level_nodes(top) {
+        faces += cost(n);
+        enter(n, &mut heap, &mut in_cut);
+    }
+    while let Some((_, Reverse(g))) = heap.pop() {
+        let outputs = dag.groups[g as usize].outputs.clone();
+        let children = dag.children.get(g as usize);
+        let after = faces - outputs.clone().map(cost).sum::<usize>() + children.iter().map(|&c| cost(c)).sum::<usize>();
+        if face_budget.is_some_and(|b| after > b) {
+            continue;
+        }
+        faces = after;
+        for o in outputs {
+            in_cut[o as usize] = false;
+        }
+        for &c in children {
+            enter(c, &mut heap, &mut in_cut);
         }
     }
-    let tau = candidates[lo];
-    Cut { tau, nodes: seen.into_iter().filter(|&n| shown(&dag.nodes[n as usize], &p, tau)).collect() }
+    let (shown, culled): (Vec<u32>, Vec<u32>) =
+        (0..dag.nodes.len() as u32).filter(|&n| in_cut[n as usize]).partition(|&n| seen[n as usize]);
+    Selection { shown, culled, faces }
 }

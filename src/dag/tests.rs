@@ -1,4 +1,4 @@
-use super::cut::{cut, projected_errors, shown};
+use super::cut::{cut, projected_errors, select, shown};
 use super::*;
 use crate::camera::Camera;
 use crate::hierarchy::{self, HierarchyParams};
@@ -107,4 +107,40 @@ fn every_cut_is_closed_and_a_wrong_one_is_not() {
     let mut wrong: Vec<u32> = dag.level_nodes(0).filter(|n| !inside.contains(n)).collect();
     wrong.extend(dag.groups[g].outputs.clone());
     assert!(open_edges(&dag, &wrong) > 0, "level 2 beside level 0 without the DAG's rule should crack");
+}
+
+#[test]
+fn selection_under_budgets_gives_cuts_of_the_dag() {
+    let dag = sphere();
+    let mut rng = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    let total = dag.levels[0].triangles.len();
+    let mut limited = 0;
+    for (i, dir) in crate::culling::sphere_directions(4).into_iter().enumerate() {
+        let mut camera = Camera::framing(glam::Vec3::ZERO, 1.1, dir, 50f32.to_radians(), 640, 480);
+        camera.eye = dir * (1.2 + 0.8 * i as f32);
+        camera.near = 0.01;
+        for tau in [0.5f32, 2.0, 8.0] {
+            // No budget, nothing held: the threshold's cut.
+            let free = select(&dag, &camera, tau, None, &|_| false);
+            assert_eq!(free.shown, cut(&dag, &camera, tau).nodes, "view {i}, τ {tau}");
+            for _ in 0..6 {
+                let budget = (next() % total as u64) as usize;
+                let held: rustc_hash::FxHashSet<u32> = (0..dag.groups.len() as u32).filter(|_| next() % 8 == 0).collect();
+                let s = select(&dag, &camera, tau, Some(budget), &|g| held.contains(&g));
+                let all: Vec<u32> = s.shown.iter().chain(&s.culled).copied().collect();
+                assert_eq!(open_edges(&dag, &all), 0, "view {i}, τ {tau}, budget {budget}");
+                let top = dag.level_nodes(dag.levels.len() - 1);
+                assert!(s.faces <= budget || all.iter().all(|n| top.contains(n)), "{} faces over {budget}", s.faces);
+                assert_eq!(s.faces, s.shown.iter().map(|&n| dag.nodes[n as usize].faces.len()).sum::<usize>());
+                limited += (s.shown != free.shown) as usize;
+            }
+        }
+    }
+    assert!(limited > 20, "{limited} selections changed by budgets or held groups");
 }
