@@ -1,7 +1,8 @@
 //! The conversion, top-down in one place: import → normals (if missing) → texture levels → group →
 //! simplify per level → write.
 
-use crate::error::Result;
+use crate::dag::{self, DagParams};
+use crate::error::{Error, Result};
 use crate::format::WriteSummary;
 use crate::hierarchy::{self, HierarchyParams};
 use crate::import::{import_with, ImportOptions};
@@ -28,6 +29,8 @@ pub struct ConvertOptions {
     pub memory: u64,
     /// Folder for the partitioned build's cell files (the system's temporary folder if none).
     pub temp: Option<std::path::PathBuf>,
+    /// Build a DAG of nodes ([`crate::dag`]) and write format 4 (strata-v4.md), in memory.
+    pub dag: bool,
 }
 
 /// Which build makes the levels.
@@ -55,6 +58,7 @@ impl Default for ConvertOptions {
             build: Build::Auto,
             memory: 0,
             temp: None,
+            dag: false,
         }
     }
 }
@@ -202,6 +206,11 @@ pub fn convert(
     };
 
     let mut choice_warnings = Vec::new();
+    if opts.dag && opts.build == Build::Partitioned {
+        return Err(Error::invalid(input, None, "a DAG (format 4) is built in memory; the partitioned build makes trees"));
+    }
+    let in_core = ConvertOptions { build: Build::InCore, ..opts.clone() };
+    let opts = if opts.dag { &in_core } else { opts };
     if let Some((budget, reader, declared)) = partitioned(input, import, opts, &mut choice_warnings)? {
         let input = crate::partition::Input { path: input, import, reader, declared };
         return crate::partition::convert(input, output, opts, &budget, progress);
@@ -236,7 +245,13 @@ pub fn convert(
 
     progress.stage("simplify", levels::expected_levels(mesh.face_count(), h.levels.len(), &opts.levels) as u64);
     let (metres_per_unit, georef) = (imported.metres_per_unit, imported.georef.take());
-    let lv = levels::build(imported.mesh, &mut h, &opts.levels, &mut |_| progress.step());
+    let built = if opts.dag {
+        let params = DagParams { ratio: opts.levels.ratio, top_faces: opts.levels.top_faces };
+        let level0 = h.levels[0].face_group.clone();
+        Err(dag::build(imported.mesh, &level0, &params, &mut |_, _| progress.step()))
+    } else {
+        Ok(levels::build(imported.mesh, &mut h, &opts.levels, &mut |_| progress.step()))
+    };
     lap(&mut times.simplify_ms);
 
     progress.stage("write", 0);
@@ -250,7 +265,11 @@ pub fn convert(
         images: images.into(),
         ..WriteOptions::default()
     };
-    let summary = write::write(output, &h, &lv, &write_opts)?;
+    // The tree's levels, or the DAG.
+    let summary = match &built {
+        Ok(lv) => write::write(output, &h, lv, &write_opts)?,
+        Err(d) => dag::write::write(output, d, &h.clusters, &write_opts)?,
+    };
     lap(&mut times.write_ms);
 
     choice_warnings.extend(imported.warnings);

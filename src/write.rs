@@ -279,6 +279,7 @@ impl Piece {
                     level: file_level as u32,
                     key: (place.key)(l, g as u32),
                     parent: if top { NO_PARENT } else { (place.key)(l + 1, hl.parent[g]) },
+                    source: NO_PARENT,
                     neighbors: hl.neighbors.get(g).iter().map(|&n| (place.key)(l, n)).collect(),
                     codes: b.codes,
                     error: b.error,
@@ -291,7 +292,7 @@ impl Piece {
     }
 }
 
-fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
+pub(crate) fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
     let valid = (0..=MAX_GRID_BITS).contains(&p.grid_bits)
         && (2..=16).contains(&p.normal_bits)
         && (1..=24).contains(&p.uv_bits)
@@ -307,7 +308,7 @@ fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
 }
 
 /// The median edge length of `faces` of `mesh` (each face's three edges), infinite for none.
-fn median_edge(mesh: &Mesh, faces: &[u32]) -> f32 {
+pub(crate) fn median_edge(mesh: &Mesh, faces: &[u32]) -> f32 {
     let mut lengths: Vec<f32> = faces
         .iter()
         .flat_map(|&f| {
@@ -326,7 +327,7 @@ fn median_edge(mesh: &Mesh, faces: &[u32]) -> f32 {
 /// edges if smaller, is `error`: the largest `s` with `2^s` grid steps at most `fraction · error`,
 /// below the grid's bits. The edges bound it where a level's error outgrows its faces (a handle
 /// cut at a coarse level): a lattice a quarter of the error would fold most of those faces flat.
-fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
+pub(crate) fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
     let steps = (fraction as f64 * error as f64) / grid.step;
     if steps.is_nan() || steps < 2.0 {
         return 0;
@@ -338,7 +339,7 @@ fn lattice_shift(error: f32, fraction: f32, grid: &Grid) -> u32 {
 /// root of their UV area over their area; 0 when there are none (or no UVs). Mapped faces whose
 /// UVs have no extent (a palette texture: a texel per face) give the smallest density, so that they
 /// get the full image, where each texel keeps its color.
-fn uv_density(mesh: &Mesh, faces: &[u32]) -> f32 {
+pub(crate) fn uv_density(mesh: &Mesh, faces: &[u32]) -> f32 {
     if mesh.uvs.is_empty() {
         return 0.0;
     }
@@ -363,7 +364,7 @@ fn uv_density(mesh: &Mesh, faces: &[u32]) -> f32 {
 }
 
 /// The material table: level 0's, or one default material if it has none.
-fn material_table(mesh: &Mesh) -> Vec<Material> {
+pub(crate) fn material_table(mesh: &Mesh) -> Vec<Material> {
     if mesh.materials.is_empty() {
         vec![Material::default()]
     } else {
@@ -485,7 +486,7 @@ fn uv_bits(mesh: &Mesh, order: &[u32], bits: u32) -> u32 {
 /// order of first use. Cluster records start from the hierarchy's cones and spheres
 /// ([`bounds::cluster`]). With `derived`, format 3's normals are those of the level's geometry.
 #[allow(clippy::too_many_arguments)]
-fn node_geometry(
+pub(crate) fn node_geometry(
     mesh: &Mesh,
     q: &Quantized,
     grid: &Grid,

@@ -60,6 +60,11 @@ pub struct Args {
     /// Build in memory whatever the input's size.
     #[arg(long)]
     pub in_core: bool,
+    /// Build a DAG of nodes and write format 4 (format-spec/strata-v4.md): displayed nodes meet
+    /// edge for edge at any level difference. In memory; `strata verify`, `inspect` and `extract`
+    /// read it, the streamers and the web viewer not yet.
+    #[arg(long, conflicts_with_all = ["partitioned", "format_version"])]
+    pub dag: bool,
     /// Format version to write: 3 compresses node geometry (positions quantized as --grid-bits,
     /// --lattice and --normal-bits say); 2 stores fixed-width arrays on a 20-bit grid.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u16).range(2..=3))]
@@ -113,6 +118,7 @@ pub fn run(a: Args) -> Result<()> {
         },
         memory: a.memory.unwrap_or(0),
         temp: a.temp.clone(),
+        dag: a.dag,
         encoding: match a.format_version {
             3 => Encoding::V3(Precision {
                 grid_bits: a.grid_bits,

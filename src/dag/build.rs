@@ -49,7 +49,7 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
         sizes.get(sizes.len() / 2).copied().unwrap_or(1).max(1)
     };
     let sources = vec![NONE; pieces.len()];
-    let mut dag = Dag::default();
+    let mut dag = Dag { input_faces: pieces.iter().flatten().copied().collect(), ..Dag::default() };
     let mut mesh = place(mesh, 0, pieces, &sources, &mut dag.nodes);
     on_level(0, mesh.triangles.len());
     let mut level = 0usize;

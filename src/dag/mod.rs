@@ -19,6 +19,7 @@ mod build;
 pub mod cut;
 mod gather;
 mod split;
+pub mod write;
 
 pub use build::{build, shared_vertices, DagParams};
 
@@ -73,6 +74,8 @@ pub struct Dag {
     pub groups: Vec<Group>,
     /// Per group, its children (the nodes whose consumer it is), in increasing order.
     pub children: Lists,
+    /// The input face of each face of level 0 (its faces are reordered by node).
+    pub input_faces: Vec<u32>,
 }
 
 impl Dag {

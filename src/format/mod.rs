@@ -46,19 +46,19 @@ pub use codes::{angle_code, angle_decode, pack, radius_code, radius_decode, unpa
 pub use georef::{GeoFrame, Georef};
 pub use read::Reader;
 pub use records::{
-    Attributes, Cluster, Cone, Header, HierarchyParams, ImageCodec, ImageLevel, ImageRecord, LevelRecord, MapKind, Material, MaterialRange,
-    NodeGeometry, NodeRecord, TextureSlot, Textures, Wrap, MAP_KINDS,
+    Attributes, Cluster, Cone, DagTable, GroupRecord, Header, HierarchyParams, ImageCodec, ImageLevel, ImageRecord, LevelRecord, MapKind,
+    Material, MaterialRange, NodeGeometry, NodeRecord, TextureSlot, Textures, Wrap, MAP_KINDS,
 };
 pub use source::ByteSource;
 pub use verify::{verify, verify_path, Verification};
-pub use write::{LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
+pub use write::{GroupIn, LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
 
 /// Major format version writers write by default: 2. Readers read 2 and 3 ([`NEWEST_MAJOR`]) and
 /// refuse larger ones.
 pub const MAJOR: u16 = 2;
-/// The newest major version this reader reads: 3, whose node geometry is compressed
-/// (format-spec/strata-v3.md).
-pub const NEWEST_MAJOR: u16 = 3;
+/// The newest major version this reader reads: 4, whose node table is a DAG
+/// (format-spec/strata-v4.md).
+pub const NEWEST_MAJOR: u16 = 4;
 /// Minor format version this reader knows: a newer minor only adds chunk kinds, which older readers
 /// skip. Writers write the lowest minor that holds what a file carries: 3 with separating planes
 /// (`ORDR`), 2 with images (`TEXR`, `TEXL`) or UVs, 1 with a `GEOR` chunk, else 0.
@@ -70,6 +70,12 @@ pub const VERSION: &str = "2.3";
 pub const MINOR3: u16 = 1;
 /// Format 3's version as its spec writes it.
 pub const VERSION3: &str = "3.1";
+/// Format 4: format 3.1 with the node table as a DAG of nodes and groups (strata-v4.md).
+pub const MAJOR4: u16 = 4;
+/// Minor version of format 4 this reader knows, and writers write.
+pub const MINOR4: u16 = 0;
+/// Format 4's version as its spec writes it.
+pub const VERSION4: &str = "4.0";
 
 /// Whether a file of this version keeps its node table in `NODL` pages, one per level (3.1 on),
 /// rather than in `NODE` and `NBRS`.
@@ -80,10 +86,10 @@ pub fn paged(major: u16, minor: u16) -> bool {
 /// The newest minor version of `major` this reader knows: a file of a newer minor may carry
 /// fields and chunks it skips.
 pub fn known_minor(major: u16) -> u16 {
-    if major >= 3 {
-        MINOR3
-    } else {
-        MINOR
+    match major {
+        MAJOR4 => MINOR4,
+        3 => MINOR3,
+        _ => MINOR,
     }
 }
 
@@ -97,6 +103,8 @@ pub const NO_PARENT: u32 = u32::MAX;
 
 /// Bytes of one node record in the `NODE` chunk.
 pub const NODE_RECORD_BYTES: u64 = 56;
+/// Bytes of a group record in a format-4 page (strata-v4.md §1).
+pub const GROUP_RECORD_BYTES: u64 = 24;
 /// Bytes of one level record in the `LEVL` chunk.
 pub const LEVEL_RECORD_BYTES: u64 = 32;
 /// Bytes of the fixed part of the `HEAD` payload (the tool string follows).

@@ -145,6 +145,7 @@ impl<S: ByteSource> Reader<S> {
                 boxes: Vec::new(),
                 textures: Default::default(),
                 code: None,
+                dag: None,
             },
             skeleton_chunks: Vec::new(),
             skeleton_end: 0,
@@ -250,6 +251,12 @@ impl<S: ByteSource> Reader<S> {
         self.skeleton.children(i)
     }
 
+    /// Format 4: the DAG's groups and how nodes refer to them (strata-v4.md); `None` in formats 2
+    /// and 3, whose nodes form a tree.
+    pub fn dag(&self) -> Option<&super::DagTable> {
+        self.skeleton.dag.as_ref()
+    }
+
     /// Same-level neighbours of node `i`.
     pub fn neighbors(&self, i: u32) -> &[u32] {
         self.skeleton.neighbors(i)
@@ -315,6 +322,13 @@ impl<S: ByteSource> Reader<S> {
         }
         let at = self.planes_offset();
         if at >= self.len {
+            return Ok(Planes::default());
+        }
+        if self.header().is_dag() {
+            // Format 4: separating planes are between a tree's siblings; a file has none (strata-v4.md §0).
+            if self.read_at(at, 4.min(self.len - at))?[..] == id::ORDR {
+                return Err(Error::at_byte(&self.path, at, "an ORDR chunk in a format-4 file, which has no separating planes"));
+            }
             return Ok(Planes::default());
         }
         if !self.header().has_planes_version() {

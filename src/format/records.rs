@@ -305,9 +305,15 @@ impl Header {
         self.minor <= super::known_minor(self.major)
     }
 
-    /// Whether the file's version carries separating planes (`ORDR`): 2.3 and format 3.
+    /// Whether the file's version carries separating planes (`ORDR`): 2.3 and format 3; format 4,
+    /// whose nodes are not a tree, has none.
     pub fn has_planes_version(&self) -> bool {
-        self.major >= 3 || self.minor >= 3
+        self.major == 3 || (self.major == 2 && self.minor >= 3)
+    }
+
+    /// Whether the file's node table is a DAG of nodes and groups (format 4).
+    pub fn is_dag(&self) -> bool {
+        self.major == super::MAJOR4
     }
 }
 
@@ -355,6 +361,56 @@ pub struct NodeRecord {
     pub offset: u64,
     pub size: u32,
     pub crc: u32,
+}
+
+/// Format 4: a group of the DAG, which made a run of nodes of its level (its outputs) from nodes
+/// of the level below (its children) whose outer border it kept (strata-v4.md §1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupRecord {
+    /// The level of its outputs, at least 1.
+    pub level: u32,
+    /// Its outputs are nodes `first_output .. first_output + outputs`.
+    pub first_output: u32,
+    pub outputs: u32,
+    /// How many nodes of the level below name it as their consumer.
+    pub children: u32,
+    /// Geometric error in model units, never below its children's.
+    pub error: f32,
+    /// A sphere holding its children's spheres and their source groups' spheres.
+    pub center: Vec3,
+    pub radius: f32,
+}
+
+/// Format 4: the DAG's groups and how nodes refer to them. Groups are numbered in file order (the
+/// top level's first); [`NO_PARENT`] marks "none".
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DagTable {
+    pub groups: Vec<GroupRecord>,
+    /// Per level (finest first), its groups.
+    pub level_groups: Vec<std::ops::Range<u32>>,
+    /// Per node: the group it is a child of (none at the top), and the group that made it (none at
+    /// level 0).
+    pub consumer: Vec<u32>,
+    pub source: Vec<u32>,
+    /// Group `g`'s children are `child_items[child_offsets[g] .. child_offsets[g + 1]]`, in node
+    /// order.
+    pub child_offsets: Vec<u32>,
+    pub child_items: Vec<u32>,
+}
+
+impl DagTable {
+    /// The children of group `g` (nodes of the level below its outputs).
+    pub fn children(&self, g: u32) -> &[u32] {
+        match (self.child_offsets.get(g as usize), self.child_offsets.get(g as usize + 1)) {
+            (Some(&a), Some(&b)) => &self.child_items[a as usize..b as usize],
+            _ => &[],
+        }
+    }
+
+    /// The outputs of group `g`.
+    pub fn outputs(&self, g: u32) -> std::ops::Range<u32> {
+        self.groups.get(g as usize).map_or(0..0, |r| r.first_output..r.first_output + r.outputs)
+    }
 }
 
 /// A run of indices drawn with one material.

@@ -126,8 +126,49 @@ pub(crate) fn relations(path: &Path, s: &Skeleton, i: u32, sink: &mut Sink) {
             sink.push(problem(format!("neighbour {j} is not a different node of level {} listing it back", n.level)));
         }
     }
-    if n.parent == NO_PARENT && !(s.header.min.cmple(min).all() && max.cmple(s.header.max).all()) {
+    if n.level == s.top() && !(s.header.min.cmple(min).all() && max.cmple(s.header.max).all()) {
         sink.push(problem("box lies outside the HEAD bounds".into()));
+    }
+}
+
+/// Format 4's rules on the DAG (strata-v4.md §2): a node above level 0 has its source group's
+/// error; a group's error is at least each child's, and its sphere holds each child's sphere and
+/// the sphere of each child's source group. Every group and node of `s` (a whole skeleton).
+pub(crate) fn dag(path: &Path, s: &Skeleton, sink: &mut Sink) {
+    let Some(d) = &s.dag else { return };
+    let holds = |c: Vec3, r: f32, ci: Vec3, ri: f32| {
+        c.as_dvec3().distance(ci.as_dvec3()) + ri as f64 <= r as f64 * (1.0 + RADIUS_TOLERANCE as f64) + 1e-30
+    };
+    for (i, n) in s.nodes.iter().enumerate() {
+        match d.source.get(i) {
+            Some(&g) if g != NO_PARENT && d.groups[g as usize].error != n.error => sink.push(Error::at_element(
+                path,
+                format!("node {i}"),
+                format!("error {} is not its source group {g}'s {}", n.error, d.groups[g as usize].error),
+            )),
+            _ => {}
+        }
+    }
+    for (g, group) in d.groups.iter().enumerate() {
+        let problem = |msg: String| Error::at_element(path, format!("group {g}"), msg);
+        for &c in d.children(g as u32) {
+            let Some(child) = s.nodes.get(c as usize) else { continue };
+            if child.error > group.error {
+                sink.push(problem(format!("error {} is smaller than child {c}'s {}", group.error, child.error)));
+            }
+            if !holds(group.center, group.radius, child.center, child.radius) {
+                sink.push(problem(format!("sphere does not contain child {c}'s")));
+            }
+            if let Some(&src) = d.source.get(c as usize).filter(|&&x| x != NO_PARENT) {
+                let source = &d.groups[src as usize];
+                if !holds(group.center, group.radius, source.center, source.radius) {
+                    sink.push(problem(format!("sphere does not contain the sphere of child {c}'s source group {src}")));
+                }
+            }
+            if sink.full() {
+                return;
+            }
+        }
     }
 }
 

@@ -5,8 +5,9 @@ use super::chunk::{self, Fields, Frame, Sub, HEADER_BYTES, TRAILER_BYTES};
 use super::geom::v3;
 use super::texture;
 use super::{
-    angle_decode, id, octa, pack, radius_decode, unpack, Attributes, Cone, Grid, Header, HierarchyParams, LevelRecord, Material,
-    NodeRecord, Textures, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES, NODE_RECORD_BYTES, NO_PARENT,
+    angle_decode, id, octa, pack, radius_decode, unpack, Attributes, Cone, DagTable, Grid, GroupRecord, Header, HierarchyParams,
+    LevelRecord, Material, NodeRecord, Textures, GROUP_RECORD_BYTES, HEAD_FIXED_BYTES, LEVEL_RECORD_BYTES, MAX_GRID_BITS, MAX_TOOL_BYTES,
+    NODE_RECORD_BYTES, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use byteorder::{ByteOrder, LittleEndian as LE};
@@ -51,6 +52,9 @@ pub struct Skeleton {
     pub textures: Textures,
     /// Format 3: the coding tables of node geometry (`CODE`).
     pub code: Option<std::sync::Arc<v3::Code>>,
+    /// Format 4: the DAG's groups, and each node's consumer and source (strata-v4.md). Its node
+    /// records have no children and no neighbours.
+    pub dag: Option<DagTable>,
 }
 
 impl Skeleton {
@@ -303,6 +307,9 @@ pub fn decode_skel(
     let mut neighbor_first = 0u64;
     let mut offset = geometry_layout(ctx.major, ctx.geometry_start, 0).0;
     let v3 = ctx.major >= 3;
+    let dag_file = h.is_dag();
+    // Format 4: each decoded node's consumer as stored (relative to the level above's groups).
+    let mut consumers: Vec<u32> = Vec::new();
     // Children of the levels above are consecutive: node i's are those after its predecessors'.
     let mut next_child = 0u64;
     // Per level: faces, vertices and bytes (to check LEVL against) and its neighbour entries.
@@ -311,7 +318,7 @@ pub fn decode_skel(
     for (page, (l, lev)) in pages.iter().zip(levels.iter().enumerate().rev()) {
         let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.records_at);
         let end = lev.first_node as u64 + lev.nodes as u64;
-        if l + 1 < levels.len() && next_child != end {
+        if l + 1 < levels.len() && next_child != end && !dag_file {
             return Err(f.error(format!("the children of level {} cover nodes up to {next_child}, level {l} ends at {end}", l + 1)));
         }
         next_child = end;
@@ -321,7 +328,11 @@ pub fn decode_skel(
             let at = page.records_at + k as u64 * NODE_RECORD_BYTES;
             let u16_at = |k: usize| LE::read_u16(&r[k..]);
             let u32_at = |k: usize| LE::read_u32(&r[k..]);
-            let (child_count, neighbor_count) = (u16_at(0) as u32, u16_at(2) as u32);
+            // Format 4: the consumer group; no children, no neighbours (strata-v4.md §1).
+            let (child_count, neighbor_count) = if dag_file { (0, 0) } else { (u16_at(0) as u32, u16_at(2) as u32) };
+            if dag_file {
+                consumers.push(u32_at(0));
+            }
             let axis = octa::decode([u16_at(4) as i16, u16_at(6) as i16]);
             let (half, radius_code) = (u16_at(8), u16_at(10));
             let (lo_bits, hi_bits) = (LE::read_u64(&r[12..]), LE::read_u64(&r[20..]));
@@ -448,6 +459,7 @@ pub fn decode_skel(
             nodes[c as usize].parent = i as u32;
         }
     }
+    let dag = if dag_file { Some(decode_dag(ctx, h.grid, &pages, &levels, &consumers, nodes.len())?) } else { None };
 
     // MATL
     let mut f = fields(matl);
@@ -494,7 +506,7 @@ pub fn decode_skel(
         (_, None, false) => None,
     };
 
-    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures, code }, infos))
+    Ok((Skeleton { header: header.clone(), levels, nodes, neighbors, materials, boxes, textures, code, dag }, infos))
 }
 
 /// One level's node records and neighbour entries, where they lie in the file.
@@ -511,6 +523,9 @@ struct Page<'a> {
     width: u64,
     entry_count: u64,
     entry_base: u64,
+    /// Format 4: the page's group records, and where they start.
+    groups: &'a [u8],
+    groups_at: u64,
 }
 
 impl Page<'_> {
@@ -558,6 +573,8 @@ fn pages_whole<'a>(ctx: &Context, payload: &'a [u8], node: &Sub, nbrs: &Sub, h: 
                 width,
                 entry_count: nbrs.frame.size / width,
                 entry_base: 0,
+                groups: &[],
+                groups_at: 0,
             }
         })
         .collect())
@@ -594,6 +611,10 @@ fn pages_paged<'a>(
     let mut out = Vec::with_capacity(count);
     for (s, lev) in subs[first..].iter().zip(levels.iter().rev()) {
         let f = Fields::new(ctx.path, &s.frame.id, s.offset, &[], s.payload_offset());
+        if ctx.major == super::MAJOR4 {
+            out.push(dag_page(&f, s, payload, lev)?);
+            continue;
+        }
         let width = s.frame.flags as u64;
         if width != 2 && width != 4 {
             return Err(f.error_at(s.offset + 4, format!("entry width {width}; must be 2 or 4")));
@@ -615,10 +636,183 @@ fn pages_paged<'a>(
             width,
             entry_count,
             entry_base: base,
+            groups: &[],
+            groups_at: 0,
         });
         base += entry_count;
     }
     Ok(out)
+}
+
+/// A format-4 page (strata-v4.md §1): the group count, the group records, the node records; no
+/// neighbour entries.
+fn dag_page<'a>(f: &Fields, s: &Sub, payload: &'a [u8], lev: &LevelRecord) -> Result<Page<'a>> {
+    if s.frame.flags != 0 {
+        return Err(f.error_at(s.offset + 4, format!("flags {}; a format-4 page has 0", s.frame.flags)));
+    }
+    let bytes = &payload[s.start..s.end];
+    if bytes.len() < 4 {
+        return Err(f.error(format!("holds {} bytes, too few for its group count", bytes.len())));
+    }
+    let groups = LE::read_u32(bytes) as u64;
+    let want = 4 + GROUP_RECORD_BYTES * groups + NODE_RECORD_BYTES * lev.nodes as u64;
+    if s.frame.size != want {
+        return Err(f.error(format!("holds {} bytes; {groups} group records and {} node records need {want}", s.frame.size, lev.nodes)));
+    }
+    let records_at = 4 + (GROUP_RECORD_BYTES * groups) as usize;
+    Ok(Page {
+        id: id::NODL,
+        chunk_at: s.offset,
+        records: &bytes[records_at..],
+        records_at: s.payload_offset() + records_at as u64,
+        entries: &[],
+        entries_at: s.payload_offset() + bytes.len() as u64,
+        width: 2,
+        entry_count: 0,
+        entry_base: 0,
+        groups: &bytes[4..records_at],
+        groups_at: s.payload_offset() + 4,
+    })
+}
+
+/// The DAG of a format-4 file from its decoded pages (top first) and each decoded node's stored
+/// consumer: its groups and how nodes refer to them, checked (strata-v4.md §1). Nodes past `kept`
+/// are checked but not kept.
+fn decode_dag(ctx: &Context, grid: Grid, pages: &[Page], levels: &[LevelRecord], consumers: &[u32], kept: usize) -> Result<DagTable> {
+    let top = levels.len() - 1;
+    let mut dag = DagTable { level_groups: vec![0..0; levels.len()], ..DagTable::default() };
+    // Groups in file order, and the node each run of outputs starts at.
+    for (page, (l, lev)) in pages.iter().zip(levels.iter().enumerate().rev()) {
+        let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.groups_at);
+        let count = page.groups.len() / GROUP_RECORD_BYTES as usize;
+        if (l == 0) != (count == 0) {
+            return Err(
+                f.error_at(page.groups_at - 4, format!("level {l} has {count} groups; level 0 has none and every other level some"))
+            );
+        }
+        let first = dag.groups.len() as u32;
+        let mut next = lev.first_node as u64;
+        for (k, r) in page.groups.chunks_exact(GROUP_RECORD_BYTES as usize).enumerate() {
+            let at = page.groups_at + k as u64 * GROUP_RECORD_BYTES;
+            let bad = |msg: String| f.error_at(at, format!("group {k} of level {l}: {msg}"));
+            let (outputs, children, error) = (LE::read_u32(r), LE::read_u32(&r[4..]), LE::read_f32(&r[8..]));
+            let (radius_code, reserved, center) = (LE::read_u16(&r[12..]), LE::read_u16(&r[14..]), unpack(LE::read_u64(&r[16..])));
+            if outputs == 0 || children == 0 || reserved != 0 {
+                return Err(bad(format!(
+                    "{outputs} outputs, {children} children, reserved {reserved}: outputs and children must be at least 1, reserved 0"
+                )));
+            }
+            let Some(center) = center.filter(|g| g.iter().all(|&x| x <= grid.last())) else {
+                return Err(bad(format!("sphere center off the {}-bit grid", grid.bits)));
+            };
+            let radius = grid.length(radius_decode(radius_code));
+            if !((0.0..=f32::MAX).contains(&error) && radius <= f32::MAX) {
+                return Err(bad(format!("geometric error {error} and radius {radius} must be finite, the error not negative")));
+            }
+            if next + outputs as u64 > lev.first_node as u64 + lev.nodes as u64 {
+                return Err(bad(format!("outputs {next}..+{outputs} run past the level's {} nodes", lev.nodes)));
+            }
+            dag.groups.push(GroupRecord {
+                level: l as u32,
+                first_output: next as u32,
+                outputs,
+                children,
+                error,
+                center: grid.decode(center),
+                radius,
+            });
+            next += outputs as u64;
+        }
+        if next != lev.first_node as u64 + lev.nodes as u64 && l > 0 {
+            return Err(f.error(format!(
+                "the outputs of level {l}'s groups cover nodes up to {next}; the level ends at {}",
+                lev.first_node + lev.nodes
+            )));
+        }
+        dag.level_groups[l] = first..dag.groups.len() as u32;
+    }
+    // Consumers, as global group numbers; sources from the output runs.
+    let decoded: u32 = levels.iter().rev().take(pages.len()).map(|l| l.nodes).sum();
+    let mut consumer = vec![NO_PARENT; decoded as usize];
+    let mut named = vec![0u32; dag.groups.len()];
+    for (page, (l, lev)) in pages.iter().zip(levels.iter().enumerate().rev()) {
+        let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.records_at);
+        let above = if l == top { 0..0 } else { dag.level_groups[l + 1].clone() };
+        for k in 0..lev.nodes {
+            let i = lev.first_node + k;
+            let stored = consumers[i as usize];
+            let at = page.records_at + k as u64 * NODE_RECORD_BYTES;
+            let ok = if l == top { stored == NO_PARENT } else { (stored as u64) < above.len() as u64 };
+            if !ok {
+                return Err(f.error_at(
+                    at,
+                    if l == top {
+                        format!("node {i}: consumer {stored}; a top-level node has none (0xFFFFFFFF)")
+                    } else {
+                        format!("node {i}: consumer {stored}; level {} has {} groups", l + 1, above.len())
+                    },
+                ));
+            }
+            if l != top {
+                consumer[i as usize] = above.start + stored;
+                named[(above.start + stored) as usize] += 1;
+            }
+        }
+    }
+    // Children counts, for every level whose page below was read.
+    for (g, r) in dag.groups.iter().enumerate() {
+        if (r.level as usize) + pages.len() > levels.len() && named[g] != r.children {
+            let page = &pages[levels.len() - 1 - r.level as usize];
+            let k = g as u32 - dag.level_groups[r.level as usize].start;
+            let f = Fields::new(ctx.path, &page.id, page.chunk_at, &[], page.groups_at);
+            return Err(f.error_at(
+                page.groups_at + k as u64 * GROUP_RECORD_BYTES,
+                format!("group {k} of level {}: {} children stored, {} nodes name it", r.level, r.children, named[g]),
+            ));
+        }
+    }
+    let mut source = vec![NO_PARENT; decoded as usize];
+    for (g, r) in dag.groups.iter().enumerate() {
+        source[r.first_output as usize..(r.first_output + r.outputs) as usize].fill(g as u32);
+    }
+    let mut offsets = vec![0u32; dag.groups.len() + 1];
+    for &c in consumer.iter().filter(|&&c| c != NO_PARENT) {
+        offsets[c as usize + 1] += 1;
+    }
+    for g in 0..dag.groups.len() {
+        offsets[g + 1] += offsets[g];
+    }
+    let mut fill = offsets.clone();
+    let mut items = vec![0u32; offsets[dag.groups.len()] as usize];
+    for (i, &c) in consumer.iter().enumerate().filter(|(_, &c)| c != NO_PARENT) {
+        items[fill[c as usize] as usize] = i as u32;
+        fill[c as usize] += 1;
+    }
+    consumer.truncate(kept);
+    source.truncate(kept);
+    dag.consumer = consumer;
+    dag.source = source;
+    dag.child_offsets = offsets;
+    dag.child_items = items;
+    Ok(dag)
+}
+
+/// Format 4's group records as stored, per level (finest first, in group order), and each node's
+/// consumer as stored: the group's number within the level above, `NO_PARENT` at the top.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DagCodes {
+    pub groups: Vec<Vec<GroupCodes>>,
+    pub consumer: Vec<u32>,
+}
+
+/// One group record of a format-4 page (strata-v4.md §1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupCodes {
+    pub outputs: u32,
+    pub children: u32,
+    pub error: f32,
+    pub radius: u16,
+    pub center: [u32; 3],
 }
 
 /// The `HEAD` chunk.
@@ -672,6 +866,7 @@ pub fn encode_skel(
     texr: Option<&[u8]>,
     code: Option<&[u8]>,
     paged: bool,
+    dag: Option<&DagCodes>,
 ) -> Vec<u8> {
     let mut payload = Vec::new();
     let mut p = Vec::with_capacity(levels.len() * 32);
@@ -684,9 +879,14 @@ pub fn encode_skel(
     }
     chunk::put(&mut payload, id::LEVL, 0, &p);
 
-    let record = |p: &mut Vec<u8>, r: &NodeRecord, c: &NodeCodes| {
-        p.extend_from_slice(&(r.child_count as u16).to_le_bytes());
-        p.extend_from_slice(&(r.neighbor_count as u16).to_le_bytes());
+    let record = |p: &mut Vec<u8>, i: usize, r: &NodeRecord, c: &NodeCodes| {
+        match dag {
+            Some(d) => p.extend_from_slice(&d.consumer[i].to_le_bytes()),
+            None => {
+                p.extend_from_slice(&(r.child_count as u16).to_le_bytes());
+                p.extend_from_slice(&(r.neighbor_count as u16).to_le_bytes());
+            }
+        }
         p.extend(c.axis.iter().flat_map(|x| x.to_le_bytes()));
         p.extend_from_slice(&c.half_angle.to_le_bytes());
         p.extend_from_slice(&c.radius.to_le_bytes());
@@ -728,8 +928,8 @@ pub fn encode_skel(
     match code.filter(|_| paged) {
         None => {
             p.clear();
-            for (r, c) in records.iter().zip(codes) {
-                record(&mut p, r, c);
+            for (i, (r, c)) in records.iter().zip(codes).enumerate() {
+                record(&mut p, i, r, c);
             }
             chunk::put(&mut payload, id::NODE, 0, &p);
             p.clear();
@@ -744,14 +944,31 @@ pub fn encode_skel(
         Some(c) => {
             payload.extend_from_slice(&materials_and_tables);
             chunk::put(&mut payload, id::CODE, 0, c);
-            for l in levels.iter().rev() {
+            for (level, l) in levels.iter().enumerate().rev() {
                 let nodes = l.first_node as usize..(l.first_node + l.nodes) as usize;
                 p.clear();
-                for (r, c) in records[nodes.clone()].iter().zip(&codes[nodes.clone()]) {
-                    record(&mut p, r, c);
+                if let Some(d) = dag {
+                    let groups = &d.groups[level];
+                    p.extend_from_slice(&(groups.len() as u32).to_le_bytes());
+                    for g in groups {
+                        p.extend_from_slice(&g.outputs.to_le_bytes());
+                        p.extend_from_slice(&g.children.to_le_bytes());
+                        p.extend_from_slice(&g.error.to_le_bytes());
+                        p.extend_from_slice(&g.radius.to_le_bytes());
+                        p.extend_from_slice(&0u16.to_le_bytes());
+                        p.extend_from_slice(&pack(g.center).to_le_bytes());
+                    }
                 }
-                let width = if l.nodes <= 1 << 16 { 2 } else { 4 };
-                lists(&mut p, nodes, &mut next, width);
+                for (i, (r, c)) in records[nodes.clone()].iter().zip(&codes[nodes.clone()]).enumerate() {
+                    record(&mut p, nodes.start + i, r, c);
+                }
+                let width = if dag.is_some() {
+                    0
+                } else {
+                    let width = if l.nodes <= 1 << 16 { 2 } else { 4 };
+                    lists(&mut p, nodes, &mut next, width);
+                    width
+                };
                 chunk::put(&mut payload, id::NODL, width as u32, &p);
             }
         }

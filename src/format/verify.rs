@@ -230,6 +230,9 @@ fn geometry<S: ByteSource>(rd: &Reader<S>, v: &mut Verification) {
     let mut clusters = 0u64;
     let mut seen: HashSet<u128> = HashSet::new();
     let mut duplicates = 0u64;
+    let mut sink = Sink::new(MAX_PROBLEMS);
+    rules::dag(&path, rd.skeleton(), &mut sink);
+    sink.problems.into_iter().for_each(|e| v.push(e));
     for i in 0..rd.nodes().len() as u32 {
         let n = rd.nodes()[i as usize];
         let g = match rd.read_node(i) {

@@ -15,11 +15,11 @@ use super::geom::v2::{self, GeometryCodes};
 use super::geom::v3;
 use super::georef::{self, Georef};
 use super::planes::{self, PlaneEntry, Planes, Support};
-use super::skeleton::{encode_head, encode_skel, geometry_layout, NodeCodes};
+use super::skeleton::{encode_head, encode_skel, geometry_layout, DagCodes, GroupCodes, NodeCodes};
 use super::texture::{self, ImageIn};
 use super::{
-    angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC,
-    MAX_TOOL_BYTES, MINOR, MINOR3, NO_PARENT,
+    angle_decode, id, Attributes, ByteSource, Cone, Grid, Header, HierarchyParams, LevelRecord, Material, NodeRecord, MAGIC, MAJOR4,
+    MAX_TOOL_BYTES, MINOR, MINOR3, MINOR4, NO_PARENT,
 };
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -65,8 +65,12 @@ pub struct NodeIn {
     /// The node's id among its level's nodes, as the build numbers them; unique per level. Nodes
     /// with the same parent are stored in the order of their keys.
     pub key: u32,
-    /// The parent's key in level `level + 1`, or [`NO_PARENT`] at the top level.
+    /// The parent's key in level `level + 1`, or [`NO_PARENT`] at the top level. Format 4: the key
+    /// of its consumer group among level `level + 1`'s groups ([`Writer::add_group`]).
     pub parent: u32,
+    /// Format 4: the key of the group of its level that made it; [`NO_PARENT`] at level 0 and in
+    /// other formats. A group's outputs are stored in the order of their keys.
+    pub source: u32,
     /// Keys of same-level neighbours, in any order (duplicates and the node's own key are dropped).
     pub neighbors: Vec<u32>,
     /// Stored bounds and cone, containing its geometry's and its children's.
@@ -76,6 +80,22 @@ pub struct NodeIn {
     /// UV units per model unit over its textured faces, 0 without (spec §7.5).
     pub uv_density: f32,
     pub geometry: GeometryCodes,
+}
+
+/// Format 4: a group of the DAG (strata-v4.md §1), which made the nodes of `level` that name it
+/// as their source from nodes of `level − 1` that name it as their consumer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupIn {
+    /// The level of its outputs, at least 1.
+    pub level: u32,
+    /// Its id among its level's groups; groups are stored in the order of their keys.
+    pub key: u32,
+    /// Geometric error, model units, not below any child's.
+    pub error: f32,
+    /// Sphere center (a grid point) and radius code, holding its children's spheres and their
+    /// sources' spheres.
+    pub center: [u32; 3],
+    pub radius: u16,
 }
 
 /// What one level of the written file holds.
@@ -162,6 +182,7 @@ impl Spill {
 struct Pending {
     key: u32,
     parent: u32,
+    source: u32,
     neighbors: Vec<u32>,
     codes: NodeCodes,
     error: f32,
@@ -195,6 +216,8 @@ pub struct Writer<W> {
     color_bits: Option<u32>,
     /// Neighbour pairs `(level, key, key)` added after their nodes ([`Writer::link`]).
     links: Vec<(u32, u32, u32)>,
+    /// Format 4: the groups of each level.
+    groups: Vec<Vec<GroupIn>>,
     spill_dir: Option<PathBuf>,
 }
 
@@ -207,8 +230,8 @@ impl<W: Write> Writer<W> {
         if opts.tool.len() as u64 > MAX_TOOL_BYTES {
             return Err(bad(format!("tool string of {} bytes exceeds {MAX_TOOL_BYTES}", opts.tool.len())));
         }
-        if !(opts.major == 2 || opts.major == 3) {
-            return Err(bad(format!("format version {}: this writer writes 2 and 3", opts.major)));
+        if !(2..=MAJOR4).contains(&opts.major) {
+            return Err(bad(format!("format version {}: this writer writes 2, 3 and 4", opts.major)));
         }
         if opts.levels == 0 || opts.levels == u32::MAX {
             return Err(bad(format!("{} levels", opts.levels)));
@@ -216,6 +239,7 @@ impl<W: Write> Writer<W> {
         check_images(&opts).map_err(bad)?;
         let spills = (0..opts.levels).map(|_| Spill::new(spill_dir)).collect::<Result<_>>()?;
         let levels = (0..opts.levels).map(|_| Vec::new()).collect();
+        let groups = vec![Vec::new(); opts.levels as usize];
         Ok(Writer {
             out,
             path: path.to_path_buf(),
@@ -229,6 +253,7 @@ impl<W: Write> Writer<W> {
             normal_bits: None,
             color_bits: None,
             links: Vec::new(),
+            groups,
             spill_dir: spill_dir.map(Path::to_path_buf),
         })
     }
@@ -259,7 +284,7 @@ impl<W: Write> Writer<W> {
         }
         let mut vertices = vertices;
         self.buf.clear();
-        if self.opts.major == 3 {
+        if self.opts.major >= 3 {
             // Modelled now, coded at `finish` once every node's symbols are counted.
             let normal_bits = if a.normals { g.lattice.normal_bits } else { 0 };
             if *self.normal_bits.get_or_insert(normal_bits) != normal_bits {
@@ -300,6 +325,7 @@ impl<W: Write> Writer<W> {
         self.levels[l].push(Pending {
             key: node.key,
             parent: node.parent,
+            source: node.source,
             neighbors: node.neighbors,
             codes: node.codes,
             error: node.error,
@@ -371,6 +397,63 @@ impl<W: Write> Writer<W> {
         Ok((tables, bits))
     }
 
+    /// Format 4: the group records and each node's consumer as stored, for nodes in file order
+    /// (`order`: per level, the pending nodes in node order).
+    fn dag_codes(&self, order: &[Vec<usize>]) -> std::result::Result<DagCodes, String> {
+        let nl = self.levels.len();
+        let index = |l: usize, key: u32| self.groups[l].binary_search_by_key(&key, |g| g.key).ok();
+        let mut out = DagCodes { groups: vec![Vec::new(); nl], consumer: Vec::new() };
+        let mut outputs: Vec<Vec<u32>> = self.groups.iter().map(|g| vec![0; g.len()]).collect();
+        let mut children = outputs.clone();
+        for l in (0..nl).rev() {
+            for &k in &order[l] {
+                let p = &self.levels[l][k];
+                if l > 0 {
+                    outputs[l][index(l, p.source).ok_or("a source group vanished")?] += 1;
+                }
+                out.consumer.push(if l + 1 == nl {
+                    NO_PARENT
+                } else {
+                    let g = index(l + 1, p.parent).ok_or("a consumer group vanished")?;
+                    children[l + 1][g] += 1;
+                    g as u32
+                });
+            }
+        }
+        for l in 0..nl {
+            if (l == 0) != self.groups[l].is_empty() {
+                return Err(format!("level {l} has {} groups; level 0 has none, every other level some", self.groups[l].len()));
+            }
+            for (i, g) in self.groups[l].iter().enumerate() {
+                if outputs[l][i] == 0 || children[l][i] == 0 {
+                    return Err(format!("group {} of level {l} has {} outputs and {} children", g.key, outputs[l][i], children[l][i]));
+                }
+                out.groups[l].push(GroupCodes {
+                    outputs: outputs[l][i],
+                    children: children[l][i],
+                    error: g.error,
+                    radius: g.radius,
+                    center: g.center,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// Format 4: add a group of the DAG.
+    pub fn add_group(&mut self, group: GroupIn) -> Result<()> {
+        let l = group.level as usize;
+        if self.opts.major != MAJOR4 || l == 0 || l >= self.groups.len() {
+            return Err(Error::invalid(
+                &self.path,
+                None,
+                format!("group {} of level {l}: groups are format 4's, of levels 1 to {}", group.key, self.groups.len().saturating_sub(1)),
+            ));
+        }
+        self.groups[l].push(group);
+        Ok(())
+    }
+
     /// Set the input's vertex count the summary reports (the partitioned build knows it last).
     pub fn set_input_vertices(&mut self, n: u64) {
         self.opts.input_vertices = n;
@@ -385,6 +468,7 @@ impl<W: Write> Writer<W> {
         while self.levels.len() < levels as usize {
             self.spills.push(Spill::new(self.spill_dir.as_deref())?);
             self.levels.push(Vec::new());
+            self.groups.push(Vec::new());
         }
         self.opts.levels = levels;
         Ok(())
@@ -426,7 +510,19 @@ impl<W: Write> Writer<W> {
             }
         }
 
-        // Breadth-first numbering (spec §6): the top level by key, then each level by parent, then key.
+        // Format 4: each level's groups by key (strata-v4.md §1).
+        let dag = self.opts.major == MAJOR4;
+        let mut group_of: Vec<FxHashMap<u32, u32>> = vec![FxHashMap::default(); nl];
+        for (l, (groups, index)) in self.groups.iter_mut().zip(&mut group_of).enumerate() {
+            groups.sort_by_key(|g| g.key);
+            for (i, g) in groups.iter().enumerate() {
+                if index.insert(g.key, i as u32).is_some() {
+                    return Err(bad(format!("level {l}: two groups with key {}", g.key)));
+                }
+            }
+        }
+        // Breadth-first numbering (spec §6): the top level by key, then each level by parent, then
+        // key. Format 4: each level by source group, then key.
         let mut order: Vec<Vec<usize>> = vec![Vec::new(); nl];
         let mut node_of: Vec<FxHashMap<u32, u32>> = vec![FxHashMap::default(); nl];
         let mut level_first = vec![0u32; nl];
@@ -435,10 +531,18 @@ impl<W: Write> Writer<W> {
             let pending = &self.levels[l];
             let mut parent_node = Vec::with_capacity(pending.len());
             for p in pending {
-                let parent = if l + 1 == nl {
-                    if p.parent != NO_PARENT {
-                        return Err(bad(format!("top-level node {} has parent {}", p.key, p.parent)));
+                let parent = if l + 1 == nl && p.parent != NO_PARENT {
+                    return Err(bad(format!("top-level node {} has parent {}", p.key, p.parent)));
+                } else if dag {
+                    if l + 1 < nl && !group_of[l + 1].contains_key(&p.parent) {
+                        return Err(bad(format!("level {l} node {}: no consumer group {} in level {}", p.key, p.parent, l + 1)));
                     }
+                    match (l, group_of[l].get(&p.source)) {
+                        (0, _) if p.source == NO_PARENT => 0,
+                        (1.., Some(&g)) => g,
+                        _ => return Err(bad(format!("level {l} node {}: no source group {} in its level", p.key, p.source))),
+                    }
+                } else if l + 1 == nl {
                     0
                 } else {
                     *node_of[l + 1]
@@ -492,7 +596,7 @@ impl<W: Write> Writer<W> {
                     }
                 }
                 neighbors.truncate(kept);
-                let parent = if l + 1 == nl { NO_PARENT } else { node_of[l + 1][&p.parent] };
+                let parent = if l + 1 == nl || dag { NO_PARENT } else { node_of[l + 1][&p.parent] };
                 let grid = self.opts.grid;
                 records.push(NodeRecord {
                     level: l as u32,
@@ -552,7 +656,7 @@ impl<W: Write> Writer<W> {
             .collect::<std::io::Result<Vec<Support>>>()
             .map_err(|e| Error::io(&self.path, e))?;
         self.supports = Spill::Memory(Vec::new());
-        let planes = order_planes(&records, &codes, supports, levels[nl - 1].nodes);
+        let planes = if dag { Planes::default() } else { order_planes(&records, &codes, supports, levels[nl - 1].nodes) };
         let minor =
             match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some())
             {
@@ -560,6 +664,7 @@ impl<W: Write> Writer<W> {
                 (2, false, true, _) => 2,
                 (2, false, false, true) => 1,
                 (3, ..) => MINOR3,
+                (MAJOR4, ..) => MINOR4,
                 _ => 0,
             };
         let mut header = Header {
@@ -585,8 +690,18 @@ impl<W: Write> Writer<W> {
         let texr = (!images.is_empty()).then(|| texture::encode_texr(images, &image_order, &self.opts.materials, &density));
         let code_payload = code.as_ref().map(|(t, _)| t.encode());
         let paged = super::paged(header.major, header.minor);
-        let skel =
-            encode_skel(&levels, &records, &codes, &neighbors, &self.opts.materials, texr.as_deref(), code_payload.as_deref(), paged);
+        let dag_codes = if dag { Some(self.dag_codes(&order).map_err(bad)?) } else { None };
+        let skel = encode_skel(
+            &levels,
+            &records,
+            &codes,
+            &neighbors,
+            &self.opts.materials,
+            texr.as_deref(),
+            code_payload.as_deref(),
+            paged,
+            dag_codes.as_ref(),
+        );
         let geor = self.opts.georef.as_ref().map(georef::encode).unwrap_or_default();
         let skeleton_bytes = super::PROLOGUE_BYTES + encode_head(&header).len() as u64 + geor.len() as u64 + skel.len() as u64;
         let image_bytes: u64 = image_order

@@ -151,6 +151,13 @@ impl<S: ByteSource> Streamer<S> {
     /// reader opened with [`Reader::open_top`] shows the top level in the first frame and is
     /// completed by the second update.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
+        if reader.header().is_dag() {
+            return Err(Error::invalid(
+                reader.path(),
+                None,
+                "format 4 (a DAG of nodes, strata convert --dag) is not streamed yet: its selection rule (selection.md §9) is in strata::dag::cut",
+            ));
+        }
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
         let top_nodes = &reader.nodes()[reader.level_nodes(top).start as usize..reader.level_nodes(top).end as usize];
