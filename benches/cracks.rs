@@ -9,11 +9,12 @@
 //! (`strata::stream::seams`, selection.md §8), which close those slivers.
 //!
 //! `cargo bench --bench cracks [-- file.strata ...]`; without arguments the shipped noisy sphere
-//! and, when present, the bunny and the CT head of ../shared/meshes, converted with defaults.
+//! and, when present, the bunny and the CT head of ../shared/meshes, converted with defaults as a
+//! tree (format 3) and as a DAG (format 4, `strata convert --dag`: `-dag-` in the name).
 
 #[path = "common/convert.rs"]
 mod convert;
-use convert::convert;
+use convert::convert_with;
 
 use std::path::{Path, PathBuf};
 use strata::camera::Camera;
@@ -41,13 +42,19 @@ fn main() {
     let mut files: Vec<PathBuf> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).map(PathBuf::from).collect();
     if files.is_empty() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        files.push(convert(&root.join("fixtures/noisy_sphere.ply"), "cracks"));
+        let mut inputs = vec![root.join("fixtures/noisy_sphere.ply")];
         for shared in ["scans/stanford_bun_zipper.ply", "large/cthead_skin_native.ply"] {
             let p = root.join("../shared/meshes").join(shared);
             if p.exists() {
-                files.push(convert(&p, "cracks"));
+                inputs.push(p);
             } else {
                 println!("skipping {}: not found", p.display());
+            }
+        }
+        // Each as a tree (format 3) and as a DAG (format 4, `--dag`), which should need no seams.
+        for p in &inputs {
+            for dag in [false, true] {
+                files.push(convert_with(p, "cracks", &strata::pipeline::ConvertOptions { dag, ..Default::default() }));
             }
         }
     }

@@ -11,20 +11,45 @@ use std::path::Path;
 use strata::camera::Camera;
 use strata::format::{NodeGeometry, Reader, NO_PARENT};
 use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::render::{crack_pixels, Image};
+use strata::stream::{session, Budgets, Streamer};
+
+/// §9.1 and §9.2 from the file alone: the groups' projected errors raised along the DAG, and the
+/// nodes whose source's is at most `tau` and whose consumer's is above.
+fn threshold_cut(rd: &Reader<std::fs::File>, camera: &Camera, tau: f32) -> Vec<usize> {
+    let dag = rd.dag().expect("a DAG");
+    // Groups in file order are the top level's first, so a group's children's sources come
+    // after it; raise from the last group back.
+    let mut p: Vec<f32> = dag.groups.iter().map(|g| camera.projected_error(g.error, g.center, g.radius)).collect();
+    for g in (0..dag.groups.len()).rev() {
+        let below = dag.children(g as u32).iter().map(|&c| dag.source[c as usize]).filter(|&s| s != NO_PARENT);
+        p[g] = below.map(|s| p[s as usize]).fold(p[g], f32::max);
+    }
+    (0..rd.nodes().len())
+        .filter(|&n| {
+            let (s, c) = (dag.source[n], dag.consumer[n]);
+            (s == NO_PARENT || p[s as usize] <= tau) && (c == NO_PARENT || p[c as usize] > tau)
+        })
+        .collect()
+}
+
+fn converted(name: &str) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = std::env::temp_dir().join(format!("strata-format4-{name}-{}.strata", std::process::id()));
+    let opts = ConvertOptions { dag: true, ..ConvertOptions::default() };
+    convert(&root.join("fixtures/noisy_sphere.ply"), &Default::default(), &out, &opts, &mut Silent).expect("convert");
+    out
+}
 
 #[test]
 fn dag_files_verify_and_every_cut_of_them_is_closed() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let out = std::env::temp_dir().join(format!("strata-format4-{}.strata", std::process::id()));
-    let opts = ConvertOptions { dag: true, ..ConvertOptions::default() };
-    let done = convert(&root.join("fixtures/noisy_sphere.ply"), &Default::default(), &out, &opts, &mut Silent).expect("convert");
+    let out = converted("cuts");
     let v = strata::format::verify_path(&out);
     assert!(v.problems.is_empty(), "{:?}", v.problems);
     let rd = Reader::open_path(&out).expect("open");
     std::fs::remove_file(&out).ok();
     assert_eq!(rd.header().major, 4);
-    assert_eq!(done.summary.input_faces, 99_372);
-    let dag = rd.dag().expect("a DAG").clone();
+    assert_eq!(rd.header().input_faces, 99_372);
     let nodes = rd.nodes().to_vec();
     let geometry: Vec<NodeGeometry> = (0..nodes.len() as u32).map(|i| rd.read_node(i).expect("node")).collect();
 
@@ -33,20 +58,8 @@ fn dag_files_verify_and_every_cut_of_them_is_closed() {
         let mut camera = Camera::framing(Vec3::ZERO, 1.1, dir, 50f32.to_radians(), 640, 480);
         camera.eye = dir.normalize() * (1.15 + 0.5 * i as f32);
         camera.near = 0.01;
-        // §9.1: groups in file order are the top level's first, so a group's children's sources
-        // come after it; raise from the last group back.
-        let mut p: Vec<f32> = dag.groups.iter().map(|g| camera.projected_error(g.error, g.center, g.radius)).collect();
-        for g in (0..dag.groups.len()).rev() {
-            let below = dag.children(g as u32).iter().map(|&c| dag.source[c as usize]).filter(|&s| s != NO_PARENT);
-            p[g] = below.map(|s| p[s as usize]).fold(p[g], f32::max);
-        }
         for tau in (0..12).map(|k| 0.25 * 1.6f32.powi(k)) {
-            let cut: Vec<usize> = (0..nodes.len())
-                .filter(|&n| {
-                    let (s, c) = (dag.source[n], dag.consumer[n]);
-                    (s == NO_PARENT || p[s as usize] <= tau) && (c == NO_PARENT || p[c as usize] > tau)
-                })
-                .collect();
+            let cut = threshold_cut(&rd, &camera, tau);
             let levels: std::collections::BTreeSet<u32> = cut.iter().map(|&n| nodes[n].level).collect();
             assert!(!cut.is_empty(), "view {i}, τ {tau}: an empty cut");
             mixed += (levels.len() > 2) as usize;
@@ -70,4 +83,47 @@ fn dag_files_verify_and_every_cut_of_them_is_closed() {
         }
     }
     assert!(mixed >= 3, "{mixed} cuts span three levels or more");
+}
+
+/// The streamer selects from a format-4 file by selection.md §9: without budgets its front is the
+/// threshold cut's nodes it sees; and the fronts of the orbit the seams test uses, drawn from the
+/// file with no seams, leave no crack pixel though most mix levels.
+#[test]
+fn the_streamer_shows_dag_cuts_without_cracks() {
+    const W: u32 = 640;
+    const H: u32 = 480;
+    const FRAMES: usize = 32;
+    let out = converted("stream");
+    let rd = Reader::open_path(&out).expect("open");
+    let full = strata::assemble::to_mesh(&rd, 0).expect("level 0");
+    let full_indices: Vec<u32> = full.triangles.iter().flatten().copied().collect();
+    let h = rd.header().clone();
+    let (center, radius) = (0.5 * (h.min + h.max), 0.5 * (h.max - h.min).length());
+    let mut s = Streamer::new(Reader::open_path(&out).expect("open"), Budgets::default()).expect("streamer");
+    std::fs::remove_file(&out).ok();
+    let (mut cracks, mut mixed) = (0, 0);
+    for i in 0..FRAMES {
+        let camera = session::orbit(center, radius, i, FRAMES, W, H);
+        let report = s.update(&camera, None).expect("frame");
+        let mut expected: Vec<u32> = threshold_cut(&rd, &camera, 1.0)
+            .into_iter()
+            .map(|n| n as u32)
+            .filter(|&n| strata::stream::refine::sees(&rd.nodes()[n as usize], &camera))
+            .collect();
+        expected.sort_unstable();
+        assert_eq!(report.front, expected, "frame {i}");
+        mixed += (report.stats.levels.iter().filter(|&&n| n > 0).count() > 1) as usize;
+        let mut img = Image::new(W, H);
+        for &n in &report.front {
+            let g = s.geometry(n).expect("resident");
+            img.draw(&camera, &g.positions, &[], &g.indices, [200, 200, 200, 255]);
+        }
+        let mut reference = Image::new(W, H);
+        reference.draw(&camera, &full.positions, &[], &full_indices, [200, 200, 200, 255]);
+        cracks += crack_pixels(&img, &reference);
+        assert_eq!(report.stats.seam_faces, 0);
+    }
+    eprintln!("format 4 noisy sphere: {mixed} of {FRAMES} fronts mix levels, {cracks} crack pixels");
+    assert!(mixed >= FRAMES / 2, "{mixed} mixed fronts");
+    assert_eq!(cracks, 0);
 }

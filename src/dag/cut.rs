@@ -1,27 +1,56 @@
-//! The DAG's selection rule: which nodes a viewer shows at a threshold τ of projected error.
+//! The DAG's selection rule (selection.md §9) on the build's structure: which nodes a viewer shows
+//! at a threshold τ of projected error, and under budgets. The rule itself is
+//! [`crate::stream::dag`]'s, which the streamer runs on a file's skeleton.
 //!
 //! A node is shown iff its source group's projected error is at most τ (or it is at level 0) and
 //! its consumer's is above τ (or it is at the top). The outputs of one group pass the first test
 //! together and the children of one group the second, so a group is either wholly replaced by its
 //! outputs or not at all; and since a group's projected error is never below that of a group it
-//! was made from, two shown nodes that border each other share their border edge for edge
-//! (notes/dag.md has the argument).
+//! was made from, two shown nodes that border each other share their border edge for edge.
 
 use super::{Dag, Node, NONE};
 use crate::camera::{Camera, Projection};
 use crate::cone::{facing_orthographic, facing_perspective, Facing};
+use crate::stream::dag::{self as rule, Graph};
+use crate::stream::refine::{Limits, Priority};
+use glam::Vec3;
+use std::ops::Range;
+
+impl Graph for Dag {
+    fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+    fn group_count(&self) -> usize {
+        self.groups.len()
+    }
+    fn top(&self) -> Range<u32> {
+        self.level_nodes(self.levels.len().saturating_sub(1))
+    }
+    fn source(&self, n: u32) -> u32 {
+        self.nodes[n as usize].source
+    }
+    fn consumer(&self, n: u32) -> u32 {
+        self.nodes[n as usize].consumer
+    }
+    fn outputs(&self, g: u32) -> Range<u32> {
+        self.groups[g as usize].outputs.clone()
+    }
+    fn children(&self, g: u32) -> &[u32] {
+        self.children.get(g as usize)
+    }
+    fn group_bounds(&self, g: u32) -> (f32, Vec3, f32) {
+        let r = &self.groups[g as usize];
+        (r.error, r.center, r.radius)
+    }
+    fn numbered_up(&self) -> bool {
+        true
+    }
+}
 
 /// Projected error in pixels of each group from `camera`, raised where needed to the largest of
-/// the groups its children came from, so that it never decreases from a group to one made from
-/// its outputs, whatever rounding did to the stored spheres.
+/// the groups its children came from (selection.md §9.1).
 pub fn projected_errors(dag: &Dag, camera: &Camera) -> Vec<f32> {
-    let mut p: Vec<f32> = Vec::with_capacity(dag.groups.len());
-    for (g, group) in dag.groups.iter().enumerate() {
-        let own = camera.projected_error(group.error, group.center, group.radius);
-        let below = dag.children.get(g).iter().map(|&c| dag.nodes[c as usize].source).filter(|&s| s != NONE).map(|s| p[s as usize]);
-        p.push(below.fold(own, f32::max));
-    }
-    p
+    rule::projected_errors(dag, camera)
 }
 
 /// Whether `node` is shown at threshold `tau`, given the groups' projected errors `p`.
@@ -46,7 +75,7 @@ pub struct Cut {
     pub nodes: Vec<u32>,
 }
 
-/// The nodes shown at `tau` that `camera` sees.
+/// The nodes shown at `tau` that `camera` sees (selection.md §9.2).
 pub fn cut(dag: &Dag, camera: &Camera, tau: f32) -> Cut {
     let p = projected_errors(dag, camera);
     let nodes = (0..dag.nodes.len() as u32).filter(|&n| shown(&dag.nodes[n as usize], &p, tau) && sees(&dag.nodes[n as usize], camera));
@@ -62,55 +91,17 @@ pub struct Selection {
     pub faces: usize,
 }
 
-/// The cut a viewer refines to under a face budget (selection.md §9): from the top level down,
+/// The cut a viewer refines to under a face budget (selection.md §9.3): from the top level down,
 /// groups are opened (their outputs replaced by their children) largest projected error first,
 /// equal errors by group number, while their error is above `tau`, the faces shown stay within
 /// `face_budget` and `held` does not hold them (a viewer holds a group whose children it has not
 /// loaded). A group is opened only once all its outputs are in the cut, so every cut this returns
 /// is one of the DAG's cuts, crack-free; without a budget or held groups it is [`cut`]'s at `tau`.
 pub fn select(dag: &Dag, camera: &Camera, tau: f32, face_budget: Option<usize>, held: &dyn Fn(u32) -> bool) -> Selection {
-    use std::cmp::Reverse;
-    use std::collections::BinaryHeap;
     let p = projected_errors(dag, camera);
-    let seen: Vec<bool> = dag.nodes.iter().map(|n| sees(n, camera)).collect();
-    let cost = |n: u32| if seen[n as usize] { dag.nodes[n as usize].faces.len() } else { 0 };
-    let mut in_cut = vec![false; dag.nodes.len()];
-    // Outputs of each group not yet in the cut; a group becomes a candidate at 0.
-    let mut waiting: Vec<u32> = dag.groups.iter().map(|g| g.outputs.len() as u32).collect();
-    let mut heap: BinaryHeap<(u32, Reverse<u32>)> = BinaryHeap::new();
-    let mut enter = |n: u32, heap: &mut BinaryHeap<(u32, Reverse<u32>)>, in_cut: &mut Vec<bool>| {
-        in_cut[n as usize] = true;
-        let s = dag.nodes[n as usize].source;
-        if s != NONE {
-            waiting[s as usize] -= 1;
-            if waiting[s as usize] == 0 && p[s as usize] > tau && !held(s) {
-                // Projected errors are not negative, so their bits order as they do.
-                heap.push((p[s as usize].to_bits(), Reverse(s)));
-            }
-        }
-    };
-    let mut faces = 0usize;
-    let top = dag.levels.len().saturating_sub(1);
-    for n in dag.level_nodes(top) {
-        faces += cost(n);
-        enter(n, &mut heap, &mut in_cut);
-    }
-    while let Some((_, Reverse(g))) = heap.pop() {
-        let outputs = dag.groups[g as usize].outputs.clone();
-        let children = dag.children.get(g as usize);
-        let after = faces - outputs.clone().map(cost).sum::<usize>() + children.iter().map(|&c| cost(c)).sum::<usize>();
-        if face_budget.is_some_and(|b| after > b) {
-            continue;
-        }
-        faces = after;
-        for o in outputs {
-            in_cut[o as usize] = false;
-        }
-        for &c in children {
-            enter(c, &mut heap, &mut in_cut);
-        }
-    }
-    let (shown, culled): (Vec<u32>, Vec<u32>) =
-        (0..dag.nodes.len() as u32).filter(|&n| in_cut[n as usize]).partition(|&n| seen[n as usize]);
-    Selection { shown, culled, faces }
+    let limits = Limits { pixel_error: tau, max_faces: face_budget.map(|b| b as u64), max_bytes: None, priority: Priority::Error };
+    let seen = |n: u32| sees(&dag.nodes[n as usize], camera);
+    let cost = |n: u32| (dag.nodes[n as usize].faces.len() as u64, 0);
+    let c = rule::select(dag, &p, &seen, &cost, &limits, held);
+    Selection { shown: c.shown, culled: c.culled, faces: c.faces as usize }
 }

@@ -16,6 +16,7 @@
 
 pub mod budget;
 pub mod cache;
+pub mod dag;
 pub mod face_order;
 pub mod images;
 pub mod order;
@@ -151,13 +152,6 @@ impl<S: ByteSource> Streamer<S> {
     /// reader opened with [`Reader::open_top`] shows the top level in the first frame and is
     /// completed by the second update.
     pub fn new(reader: Reader<S>, budgets: Budgets) -> Result<Streamer<S>> {
-        if reader.header().is_dag() {
-            return Err(Error::invalid(
-                reader.path(),
-                None,
-                "format 4 (a DAG of nodes, strata convert --dag) is not streamed yet: its selection rule (selection.md §9) is in strata::dag::cut",
-            ));
-        }
         let attrs = reader.header().attributes;
         let top = reader.levels().len().saturating_sub(1) as u32;
         let top_nodes = &reader.nodes()[reader.level_nodes(top).start as usize..reader.level_nodes(top).end as usize];
@@ -257,7 +251,16 @@ impl<S: ByteSource> Streamer<S> {
             held.dedup();
         }
         let held = &held[..];
-        let mut cut = self.refiner.select(self.reader.skeleton(), camera, &limits, held, &bytes);
+        // Format 4: selection.md §9 over the DAG, else §3 over the tree.
+        let dag = self.reader.header().is_dag();
+        let select = |refiner: &mut Refiner, s: &crate::format::skeleton::Skeleton, limits: &Limits| {
+            if dag {
+                dag::select_skeleton(s, camera, limits, held, &bytes)
+            } else {
+                refiner.select(s, camera, limits, held, &bytes)
+            }
+        };
+        let mut cut = select(&mut self.refiner, self.reader.skeleton(), &limits);
         let (mut added, mut removed) = diff(&self.front, &cut.shown);
         if let Some(c) = self.controller.as_mut().filter(|_| predictive) {
             let nodes = self.reader.nodes();
@@ -265,7 +268,7 @@ impl<S: ByteSource> Streamer<S> {
             c.predict(cut.faces, new_faces);
             if c.threshold() != limits.pixel_error {
                 limits.pixel_error = c.threshold();
-                cut = self.refiner.select(self.reader.skeleton(), camera, &limits, held, &bytes);
+                cut = select(&mut self.refiner, self.reader.skeleton(), &limits);
                 (added, removed) = diff(&self.front, &cut.shown);
             }
         }
@@ -285,7 +288,8 @@ impl<S: ByteSource> Streamer<S> {
 
         let top = self.reader.levels().len().saturating_sub(1) as u32;
         let nodes = self.reader.nodes();
-        if self.orderer.is_none() && (self.frame > 0 || cut.shown.iter().any(|&i| nodes[i as usize].level != top)) {
+        // Format 4 has no separating planes: nearest box first.
+        if !dag && self.orderer.is_none() && (self.frame > 0 || cut.shown.iter().any(|&i| nodes[i as usize].level != top)) {
             let planes = self.reader.read_planes().unwrap_or_else(|e| {
                 self.warnings.push(format!("{e}; fronts are drawn nearest box first, without the separating planes"));
                 Planes::default()
