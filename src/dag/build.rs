@@ -5,9 +5,12 @@ use super::split::split;
 use super::{Dag, Group, Node, NONE};
 use crate::cone::smallest_enclosing;
 use crate::hierarchy::Lists;
+use crate::levels::position_key;
 use crate::mesh::Mesh;
 use crate::simplify::{simplify_pinned, SimplifyOptions};
 use glam::Vec3;
+use rayon::prelude::*;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 /// How the DAG's levels are made.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,13 +68,7 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
         let labels: Vec<u32> = node_of_face.iter().map(|&n| group_of_node[n as usize]).collect();
         let pinned = shared_vertices(&mesh, &labels);
         let before = mesh.triangles.len();
-        let opts = SimplifyOptions {
-            target_faces: ((before as f64) * p.ratio.clamp(0.0, 1.0) as f64).round() as usize,
-            normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
-            topology: true,
-            ..SimplifyOptions::default()
-        };
-        let s = simplify_pinned(&mesh, Some(&labels), &pinned, &opts);
+        let s = simplify_each(&mesh, &labels, group_count, &pinned, p.ratio.clamp(0.0, 1.0));
 
         // The groups: errors and spheres from their children and the children's sources.
         let base = dag.groups.len();
@@ -125,6 +122,93 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
         dag.nodes.iter().enumerate().filter(|(_, n)| n.consumer != NONE).map(|(i, n)| (n.consumer, i as u32)).collect();
     dag.children = lists(&consumers, dag.groups.len());
     dag
+}
+
+/// A level simplified group by group: its mesh, each face's group, each group's error.
+struct Simplified {
+    mesh: Mesh,
+    face_groups: Vec<u32>,
+    group_error: Vec<f32>,
+}
+
+/// Simplify each group of `mesh` (`labels` per face, `groups` of them) on its own, on every core,
+/// to `ratio` of its faces, the `pinned` vertices kept; then join the results, welding the pinned
+/// vertices (they never move, so each keeps its position in every group that has it). A group
+/// meets its neighbours only at pinned vertices, so simplifying it alone changes nothing of theirs.
+fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ratio: f32) -> Simplified {
+    let faces = Lists::from_labels(labels, groups);
+    let results: Vec<(Mesh, f32)> = (0..groups)
+        .into_par_iter()
+        .map(|g| {
+            let (sub, sub_pinned) = part(mesh, faces.get(g), pinned);
+            let opts = SimplifyOptions {
+                target_faces: ((sub.triangles.len() as f64) * ratio as f64).round() as usize,
+                normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
+                topology: true,
+                ..SimplifyOptions::default()
+            };
+            let s = simplify_pinned(&sub, Some(&vec![0; sub.triangles.len()]), &sub_pinned, &opts);
+            let error = s.group_error.first().copied().unwrap_or(0.0);
+            (s.mesh, error)
+        })
+        .collect();
+    let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
+    let mut out = Mesh { materials: mesh.materials.clone(), images: mesh.images.clone(), ..Mesh::default() };
+    let mut welded: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    let (mut face_groups, mut group_error) = (Vec::new(), Vec::with_capacity(groups));
+    for (g, (m, error)) in results.into_iter().enumerate() {
+        let index: Vec<u32> = m
+            .positions
+            .iter()
+            .map(|&x| {
+                let key = position_key(x);
+                let new = out.positions.len() as u32;
+                let i = if kept.contains(&key) { *welded.entry(key).or_insert(new) } else { new };
+                if i == new {
+                    out.positions.push(x);
+                }
+                i
+            })
+            .collect();
+        out.triangles.extend(m.triangles.iter().map(|t| t.map(|v| index[v as usize])));
+        out.normals.extend_from_slice(&m.normals);
+        out.uvs.extend_from_slice(&m.uvs);
+        out.colors.extend_from_slice(&m.colors);
+        out.face_materials.extend_from_slice(&m.face_materials);
+        out.face_normals.extend_from_slice(&m.face_normals);
+        out.face_areas.extend_from_slice(&m.face_areas);
+        face_groups.extend(std::iter::repeat_n(g as u32, m.triangles.len()));
+        group_error.push(error);
+    }
+    Simplified { mesh: out, face_groups, group_error }
+}
+
+/// The faces `faces` of `mesh` as a mesh of their own (images left out), and which of its vertices
+/// are `pinned`.
+fn part(mesh: &Mesh, faces: &[u32], pinned: &[bool]) -> (Mesh, Vec<bool>) {
+    let mut remap = FxHashMap::default();
+    let mut out = Mesh { materials: mesh.materials.clone(), ..Mesh::default() };
+    let mut flags = Vec::new();
+    let corners = |present: bool, f: u32| if present { 3 * f as usize..3 * f as usize + 3 } else { 0..0 };
+    for &f in faces {
+        let t = mesh.triangles[f as usize].map(|v| {
+            *remap.entry(v).or_insert_with(|| {
+                out.positions.push(mesh.positions[v as usize]);
+                flags.push(pinned[v as usize]);
+                out.positions.len() as u32 - 1
+            })
+        });
+        out.triangles.push(t);
+        out.normals.extend_from_slice(&mesh.normals[corners(!mesh.normals.is_empty(), f)]);
+        out.uvs.extend_from_slice(&mesh.uvs[corners(!mesh.uvs.is_empty(), f)]);
+        out.colors.extend_from_slice(&mesh.colors[corners(!mesh.colors.is_empty(), f)]);
+        if !mesh.face_materials.is_empty() {
+            out.face_materials.push(mesh.face_materials[f as usize]);
+        }
+        out.face_normals.push(mesh.face_normals[f as usize]);
+        out.face_areas.push(mesh.face_areas[f as usize]);
+    }
+    (out, flags)
 }
 
 /// The vertices of `mesh` used by faces of two groups (`labels` per face): pinned while the level

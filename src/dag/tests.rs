@@ -85,11 +85,11 @@ fn every_cut_is_closed_and_a_wrong_one_is_not() {
     let dag = sphere();
     // Any threshold, from any side: the shown nodes form a closed surface.
     let mut mixed = 0;
-    for (i, dir) in crate::culling::sphere_directions(6).into_iter().enumerate() {
+    for (i, dir) in crate::culling::sphere_directions(10).into_iter().enumerate() {
         // From close by (the near side much finer than the far side) to far away.
         let mut camera = Camera::framing(glam::Vec3::ZERO, 1.1, dir, 50f32.to_radians(), 640, 480);
-        camera.eye = dir * (1.15 + 0.6 * i as f32);
-        camera.near = 0.01;
+        camera.eye = dir * (1.12 + 0.1 * i as f32);
+        (camera.near, camera.far) = (0.01, 100.0);
         let p = projected_errors(&dag, &camera);
         for tau in (0..15).map(|k| 0.25 * 1.5f32.powi(k)) {
             let all: Vec<u32> = (0..dag.nodes.len() as u32).filter(|&n| shown(&dag.nodes[n as usize], &p, tau)).collect();
@@ -124,7 +124,7 @@ fn selection_under_budgets_gives_cuts_of_the_dag() {
     for (i, dir) in crate::culling::sphere_directions(4).into_iter().enumerate() {
         let mut camera = Camera::framing(glam::Vec3::ZERO, 1.1, dir, 50f32.to_radians(), 640, 480);
         camera.eye = dir * (1.2 + 0.8 * i as f32);
-        camera.near = 0.01;
+        (camera.near, camera.far) = (0.01, 100.0);
         for tau in [0.5f32, 2.0, 8.0] {
             // No budget, nothing held: the threshold's cut.
             let free = select(&dag, &camera, tau, None, &|_| false);
