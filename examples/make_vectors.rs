@@ -72,6 +72,31 @@ fn sphere(major: u16) -> Vec<u8> {
     convert(mesh, params, 0.0, major)
 }
 
+/// The sphere of [`sphere`] as a DAG of nodes (format 4): level-0 nodes of about 4 faces, levels
+/// to 10 faces, so that cuts mix up to four levels.
+fn sphere_dag() -> Vec<u8> {
+    let mut mesh = strata::fixtures::colored_sphere(1);
+    mesh.uvs = mesh.normals.iter().map(|n| Vec2::new(0.5 + 0.5 * n.x, 0.5 + 0.5 * n.y)).collect();
+    let params = HierarchyParams { cluster_faces: 2, leaf_faces: 4, growth: 2, top_groups: 2, ..HierarchyParams::default() };
+    let adjacency = Adjacency::build(&mesh);
+    let h = strata::hierarchy::build(&mesh, &adjacency, &params);
+    let level0 = h.levels[0].face_group.clone();
+    let dag = strata::dag::build(mesh, &level0, &strata::dag::DagParams { ratio: 0.5, top_faces: 16 }, &mut |_, _| {});
+    let mut out = Cursor::new(Vec::new());
+    let opts = WriteOptions {
+        metres_per_unit: 1.0,
+        params,
+        level_ratio: 0.5,
+        tool: "strata vectors".into(),
+        georef: None,
+        encoding: encoding(3),
+        derive_normals: false,
+        images: Default::default(),
+    };
+    strata::dag::write::write_to(&mut out, &dag, &h.clusters, &opts).expect("the DAG vector writes");
+    out.into_inner()
+}
+
 /// A textured globe of 96 faces with a 128 × 64 base color image of two levels: format 2.2 with
 /// `TEXR` and `TEXL` chunks.
 fn textured(major: u16) -> Vec<u8> {
@@ -188,10 +213,15 @@ fn damaged_payload(good: &[u8]) -> Vec<u8> {
     bytes
 }
 
-/// The front of `skeleton` for `camera` and `limits`: shown and culled nodes.
+/// The front of `skeleton` for `camera` and `limits`: shown and culled nodes (selection.md §3, or
+/// §9 for a DAG).
 fn front(skeleton: &Skeleton, camera: &Camera, limits: &Limits) -> (Vec<u32>, Vec<u32>) {
     let attrs = skeleton.header.attributes;
-    let cut = Refiner::default().select(skeleton, camera, limits, &[], &|n| record_bytes(n, attrs));
+    let cut = if skeleton.header.is_dag() {
+        strata::stream::dag::select_skeleton(skeleton, camera, limits, &[], &|n| record_bytes(n, attrs))
+    } else {
+        Refiner::default().select(skeleton, camera, limits, &[], &|n| record_bytes(n, attrs))
+    };
     (cut.shown, cut.culled)
 }
 
@@ -222,22 +252,34 @@ fn fronts(file: &str, bytes: &[u8]) -> Vec<serde_json::Value> {
     ortho.projection = Projection::Orthographic { height: 2.5 * radius };
     cameras.push(ortho);
     let mut orderer = strata::stream::order::Orderer::new(skeleton, rd.read_planes().expect("planes"));
+    let dag = h.is_dag();
     let mut out = Vec::new();
+    // Format 4's rule has one order (selection.md §9): thresholds through its levels, and budgets.
+    let dag_limits = [0.5, 1.0, 2.0, 4.0, 8.0]
+        .map(|t| (t, None, Priority::Error))
+        .into_iter()
+        .chain([2, 3, 4].map(|k| (0.25, Some(k * top_faces), Priority::Error)));
     for camera in &cameras {
-        for (pixel_error, max_faces, priority) in [
+        let tree_limits = [
             (1.0, None, Priority::Error),
             (8.0, None, Priority::Error),
             (0.5, Some(2 * top_faces), Priority::Error),
             (0.5, Some(2 * top_faces), Priority::Silhouette),
             (0.5, Some(2 * top_faces), Priority::Breadth),
-        ] {
+        ];
+        let limits: Vec<_> = if dag { dag_limits.clone().collect() } else { tree_limits.to_vec() };
+        for (pixel_error, max_faces, priority) in limits {
             let limits = Limits { pixel_error, max_faces, max_bytes: None, priority };
             if !stable(skeleton, camera, &limits) {
                 continue;
             }
             let (shown, culled) = front(skeleton, camera, &limits);
             let mut order = Vec::new();
-            orderer.order(skeleton, &shown, camera, &mut order);
+            if dag {
+                strata::stream::order::nearest_box_first(skeleton, &shown, camera, &mut order);
+            } else {
+                orderer.order(skeleton, &shown, camera, &mut order);
+            }
             let priority = match priority {
                 Priority::Error => "error",
                 Priority::Silhouette => "silhouette",
@@ -270,6 +312,7 @@ fn main() -> anyhow::Result<()> {
         ("plane-v3", plane(3)),
         ("sphere-v3", sphere3.clone()),
         ("textured-v3", textured(3)),
+        ("sphere-v4", sphere_dag()),
     ];
     let refused = [
         ("refused-nan-error", nan, vec![format!("node {nan_node}"), "error".to_string()]),
@@ -287,6 +330,10 @@ fn main() -> anyhow::Result<()> {
     let distinct: std::collections::HashSet<String> = golden.iter().map(|f| f["front"].to_string()).collect();
     std::fs::write(dir.join("fronts.json"), serde_json::to_string_pretty(&golden)? + "\n")?;
     println!("fronts: {} of sphere.strata ({} distinct)", golden.len(), distinct.len());
+    let golden = fronts("sphere-v4.strata", &sphere_dag());
+    let distinct: std::collections::HashSet<String> = golden.iter().map(|f| f["front"].to_string()).collect();
+    std::fs::write(dir.join("fronts-v4.json"), serde_json::to_string_pretty(&golden)? + "\n")?;
+    println!("fronts: {} of sphere-v4.strata ({} distinct)", golden.len(), distinct.len());
     for (name, bytes, words) in refused {
         let refusal =
             Reader::open(Cursor::new(&bytes)).and_then(|rd| (0..rd.nodes().len() as u32).try_for_each(|i| rd.read_node(i).map(|_| ())));

@@ -79,3 +79,40 @@ fn front_selection_agrees_with_every_golden_front() {
     }
     assert!(levels_seen.len() >= 3, "the golden fronts reach several levels: {levels_seen:?}");
 }
+
+/// The golden fronts of `format-spec/vectors/fronts-v4.json` are what selection.md §9 gives on the
+/// format-4 vector for their cameras and limits, drawn nearest box first; several mix levels.
+#[test]
+fn dag_selection_agrees_with_every_golden_front() {
+    use strata::camera::Camera;
+    use strata::stream::cache::record_bytes;
+    use strata::stream::refine::{Limits, Priority};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
+    let fronts: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(dir.join("fronts-v4.json")).unwrap()).unwrap();
+    assert!(fronts.len() >= 8);
+    let mut mixed = 0;
+    for (k, f) in fronts.iter().enumerate() {
+        let bytes = std::fs::read(dir.join(f["file"].as_str().unwrap())).unwrap();
+        let rd = Reader::open(Cursor::new(&bytes)).unwrap();
+        assert!(rd.header().is_dag());
+        let camera = Camera::from_json(&f["camera"]).expect("a camera");
+        let l = &f["limits"];
+        let limits = Limits {
+            pixel_error: l["pixel_error"].as_f64().unwrap() as f32,
+            max_faces: l["max_faces"].as_u64(),
+            max_bytes: l["max_bytes"].as_u64(),
+            priority: Priority::Error,
+        };
+        let attrs = rd.header().attributes;
+        let cut = strata::stream::dag::select_skeleton(rd.skeleton(), &camera, &limits, &[], &|n| record_bytes(n, attrs));
+        let ids = |v: &serde_json::Value| v.as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect::<Vec<u32>>();
+        assert_eq!(cut.shown, ids(&f["front"]), "front {k}");
+        assert_eq!(cut.culled, ids(&f["culled"]), "culled {k}");
+        let mut order = Vec::new();
+        strata::stream::order::nearest_box_first(rd.skeleton(), &cut.shown, &camera, &mut order);
+        assert_eq!(order, ids(&f["order"]), "drawing order {k}");
+        let levels: std::collections::HashSet<u32> = cut.shown.iter().map(|&i| rd.nodes()[i as usize].level).collect();
+        mixed += (levels.len() > 1) as usize;
+    }
+    assert!(mixed >= 2, "{mixed} golden fronts mix levels");
+}

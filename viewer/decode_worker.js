@@ -5,7 +5,8 @@
 // Messages in: {op: 'open', bytes, length, localOrigin} (the bytes decodeSkeleton read, top pages
 // first), {op: 'complete', bytes} (the skeleton's bytes once the main thread completed its own),
 // {op: 'decode', id, node, bytes}. Out: {id, geometry} (with the node's open border for the seams
-// between levels, `geometry.border`, made here too) or {id, error: {message, name, offset, node}}.
+// between levels, `geometry.border`, made here too, but for a format-4 file) or {id, error:
+// {message, name, offset, node}}.
 
 import { FormatError, completeSkeleton, decodeNode, decodeSkeleton } from './format.js';
 import { border } from './seams.js';
@@ -35,8 +36,9 @@ export function decodeHandler() {
       if (broken) throw broken;
       if (!skeleton) throw new Error('the decoder has no skeleton (no open message)');
       const geometry = decodeNode(skeleton, msg.node, msg.bytes, { localOrigin });
-      geometry.border = border(skeleton.level[msg.node], skeleton.error[msg.node], geometry);
-      return { reply: { id: msg.id, geometry }, transfer: buffersOf(geometry, geometry.border) };
+      // A DAG's nodes meet edge for edge: no seams, no borders (selection.md §9).
+      if (!skeleton.dag) geometry.border = border(skeleton.level[msg.node], skeleton.error[msg.node], geometry);
+      return { reply: { id: msg.id, geometry }, transfer: buffersOf(geometry, geometry.border ?? {}) };
     } catch (e) {
       const error = { message: e?.message ?? String(e), name: e?.name ?? 'Error', format: e instanceof FormatError, offset: e?.offset, node: e?.node };
       return { reply: { id: msg.id, error }, transfer: [] };

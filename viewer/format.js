@@ -1,6 +1,7 @@
-// The web viewer's reader of the strata chunk file, formats 2.x (format-spec/strata-v2.md) and 3.x
+// The web viewer's reader of the strata chunk file, formats 2.x (format-spec/strata-v2.md), 3.x
 // (format-spec/strata-v3.md: node geometry compressed, one GEOS chunk, coding tables in CODE, the
-// node table in pages from 3.1).
+// node table in pages from 3.1) and 4.x (format-spec/strata-v4.md: format 3.1 with the node table
+// a DAG of nodes and groups, `skeleton.dag`).
 //
 // A plain ES module without dependencies, for browsers and Node 20. It is written from the spec and
 // agrees with strata's Rust reader (src/format/) value for value: every decoded float is the f32 the
@@ -11,12 +12,13 @@
 // only such field Rust accepts). A viewer opens a file in two steps, then reads nodes on demand:
 //
 //   openingRange(prefix, fileLength)  how many bytes the skeleton needs (a few short reads);
-//   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours and materials
-//                                     (with { topFirst: true } the top two levels' records only,
-//                                     from a prefix of SKEL in format 3; completeSkeleton(skeleton,
-//                                     bytes) the rest, isComplete(skeleton), skeletonNeeds(skeleton));
+//   decodeSkeleton(bytes, fileLength) the header, levels, node table, neighbours, materials and, in
+//                                     format 4, the DAG's groups (skeleton.dag); with { topFirst:
+//                                     true } the top two levels' records only, from a prefix of SKEL
+//                                     from format 3.1 on (completeSkeleton(skeleton, bytes) the rest,
+//                                     isComplete(skeleton), skeletonNeeds(skeleton));
 //   decodeNode(skeleton, i, bytes)    one node's geometry, checked and decoded: its GEOM chunk
-//                                     (format 2) or its payload in GEOS (format 3);
+//                                     (format 2) or its payload in GEOS (formats 3 and 4);
 //   decodeImageLevel(skeleton, e, b)  one image level's TEXL chunk (2.2), checked: the PNG or JPEG
 //                                     file inside, for the browser to decode.
 //
@@ -26,13 +28,13 @@
 // is bounded by its bytes (strata-v3.md §5.1), and its decoder stops at the first byte or bit read
 // past the payload's end (strata's reader reads zeros there and refuses the node at its end).
 
-/** The format 2 version this reader knows (2.3); it also reads format 3 up to NEWEST_MAJOR.MINOR3. */
+/** The format 2 version this reader knows (2.3); it also reads format 3 up to 3.MINOR3 and 4 up to NEWEST_MAJOR.MINOR4. */
 export const MAJOR = 2, MINOR = 3;
-/** The newest major version this reader reads (format 3, strata-v3.md) and the minor of it it knows. */
-export const NEWEST_MAJOR = 3, MINOR3 = 1;
+/** The newest major version this reader reads (format 4, strata-v4.md), the minor of it it knows, and the minor of format 3 it knows. */
+export const NEWEST_MAJOR = 4, MINOR4 = 0, MINOR3 = 1;
 
 /** The newest minor of `major` this reader knows: a newer minor only adds what older readers skip. */
-export const knownMinor = (major) => (major >= 3 ? MINOR3 : MINOR);
+export const knownMinor = (major) => (major >= 4 ? MINOR4 : major === 3 ? MINOR3 : MINOR);
 
 /** A file that breaks the format; `offset` is the byte offset the message names, `node` the node. */
 export class FormatError extends Error {
@@ -53,6 +55,7 @@ const HEAD_FIXED = 160;
 const MAX_TOOL = 1024;
 const MAX_GRID_BITS = 21;
 const NODE_BYTES = 56;
+const GROUP_BYTES = 24;
 const LEVEL_BYTES = 32;
 const CLUSTER_BYTES = 16;
 const RANGE_BYTES = 12;
@@ -289,9 +292,9 @@ function checkPrologue(b, fileLength) {
   }
   const major = u16(b, 8), minor = u16(b, 10);
   if (major > NEWEST_MAJOR) {
-    throw fail(8, `format version ${major}.${minor} is newer than this reader's ${NEWEST_MAJOR}.${MINOR3}: a newer strata viewer is needed`);
+    throw fail(8, `format version ${major}.${minor} is newer than this reader's ${NEWEST_MAJOR}.${MINOR4}: a newer strata viewer is needed`);
   }
-  if (major < MAJOR) throw fail(8, `format version ${major}.${minor} is not supported (this reader reads ${MAJOR}.x and ${NEWEST_MAJOR}.x)`);
+  if (major < MAJOR) throw fail(8, `format version ${major}.${minor} is not supported (this reader reads ${MAJOR}.x to ${NEWEST_MAJOR}.x)`);
   const stored = u32(b, 12), actual = crc32(b, 0, 12);
   if (stored !== actual) throw fail(12, `prologue CRC ${hex(actual)} != stored ${hex(stored)}`);
   return { major, minor };
@@ -333,7 +336,7 @@ function checkHeadFrame(b, fileLength) {
  * short to tell (the prefix length needed to learn more), else `{ skeletonEnd, topEnd, pagesEnd }`:
  * topEnd, where the top level's geometry ends, is undefined unless SKEL's LEVL sub-chunk lies in
  * the prefix; pagesEnd, the bytes `decodeSkeleton(…, { topFirst: true })` needs, is skeletonEnd in
- * format 2, and in format 3 the end of the top two levels' NODL pages (strata-v3.md §1.1),
+ * format 2, and from format 3.1 on the end of the top two levels' NODL pages (strata-v3.md §1.1),
  * undefined unless the frames up to them lie in the prefix; then nextFrame, where it is known, is
  * the offset of the next sub-chunk's frame, beyond the prefix (read on from there).
  */
@@ -371,7 +374,7 @@ export function openingRange(prefix, fileLength) {
   const skelSize = u64(b, pos + 8);
   const skeletonEnd = chunkEnd(pos, 'SKEL', skelSize, fileLength);
   // Hints, which decodeSkeleton checks: the top level's bytes from LEVL, if its record lies in the
-  // prefix; in format 3, the end of the top two levels' NODL pages, if their frames do.
+  // prefix; from format 3.1 on, the end of the top two levels' NODL pages, if their frames do.
   let topEnd, pagesEnd = paged && levels !== undefined && levels <= 2 ? skeletonEnd : undefined;
   const se = pos + FRAME + skelSize, payloadEnd = Math.min(se, n);
   let s = pos + FRAME, pages = 0;
@@ -462,6 +465,44 @@ class Skeleton {
     if (!(i >= 0 && i < this.nodeCount)) return this.neighborList.subarray(0, 0);
     const f = this.neighborFirst[i];
     return this.neighborList.subarray(f, f + this.neighborCount[i]);
+  }
+}
+
+/**
+ * Format 4's DAG (strata-v4.md §1): groups numbered in file order (the top level's first), each
+ * with the level of its outputs, its run of outputs, its children count, error and sphere; per
+ * node its consumer and source group (0xFFFFFFFF: none); per group its children, in node order.
+ * Of a skeleton decoded in part, the groups of the pages decoded and those pages' nodes.
+ */
+class Dag {
+  constructor(N, G, L) {
+    this.groupCount = G;
+    /** Per level (finest first), its groups as [start, end). */
+    this.levelGroups = Array.from({ length: L }, () => [0, 0]);
+    this.groups = {
+      level: new Uint32Array(G),
+      firstOutput: new Uint32Array(G),
+      outputs: new Uint32Array(G),
+      children: new Uint32Array(G),
+      error: new Float32Array(G),
+      center: new Float32Array(3 * G),
+      radius: new Float32Array(G),
+    };
+    this.consumer = new Uint32Array(N).fill(NO_PARENT);
+    this.source = new Uint32Array(N).fill(NO_PARENT);
+    this.childOffsets = new Uint32Array(G + 1);
+    this.childItems = new Uint32Array(0);
+  }
+
+  /** The outputs of group g as [first, end). */
+  outputsOf(g) {
+    const first = this.groups.firstOutput[g];
+    return [first, first + this.groups.outputs[g]];
+  }
+
+  /** The children of group g (nodes of the level below its outputs), ascending. */
+  childrenOf(g) {
+    return this.childItems.subarray(this.childOffsets[g], this.childOffsets[g + 1]);
   }
 }
 
@@ -571,8 +612,9 @@ function decodeGeoref(b, dv, pos, size, major, minor) {
 
 /**
  * Decode and check the skeleton from `bytes`, which hold at least [0, skeletonEnd) of a file of
- * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL (in format 3 with its coding
- * tables, `sk.code`), every check of spec §10 "To open".
+ * `fileLength` bytes: the prologue, HEAD, skipped chunks and SKEL (from format 3 on with its coding
+ * tables, `sk.code`; in format 4 with the DAG's groups, `sk.dag`, else null), every check of spec
+ * §10 "To open" and of strata-v4.md §1.
  * With `opts.topFirst`, only the top two levels' node records are checked and decoded (nodes
  * [0, sk.decoded)); `completeSkeleton` does the rest before any other node is used, so a first
  * frame of the top level waits for none of it (selection.md §6).
@@ -637,8 +679,8 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   const sp = pos + FRAME, se = sp + skelSize;
   const h = header;
   const L = h.levels, N = h.nodes;
-  const v3 = major >= 3, paged = isPaged(major, minor);
-  // Format 3.1 opened top first from a prefix (strata-v3.md §1.1): SKEL's sub-chunks up to the top
+  const v3 = major >= 3, paged = isPaged(major, minor), dagFile = major === 4;
+  // Format 3.1 on, opened top first from a prefix (strata-v3.md §1.1): SKEL's sub-chunks up to the top
   // two levels' pages, each checked by its own CRC; SKEL's CRC and the rest by completeSkeleton.
   const partial = !!opts.topFirst && paged && L > 2 && b.length < skeletonEnd;
   const wholeSkel = () => {
@@ -688,7 +730,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
   // The node records and neighbour lists as pages, one per level from the top: format 2's NODE
   // and NBRS hold every level (format 2 and 3.0), 3.1 has one NODL per level (of which a prefix
   // holds the first).
-  let pages = paged ? pagesPaged(subs, levels, skelAt, partial) : pagesWhole(find('NODE'), find('NBRS'), levels);
+  let pages = paged ? pagesPaged(b, subs, levels, skelAt, partial, dagFile) : pagesWhole(find('NODE'), find('NBRS'), levels);
   const pageOf = (l) => pages[L - 1 - l];
   const { origin, step, bits: gbits } = h.grid;
   const last = 2 ** gbits - 1;
@@ -723,13 +765,14 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
     const lev = levels[l], pg = pageOf(l);
     const nerr = (at, msg, i) => chunkFail(at, pg.id, pg.at, i === undefined ? msg : `node ${i}: ${msg}`, i);
     const end = lev.firstNode + lev.nodes;
-    if (l + 1 < L && nextChild !== end) {
+    if (l + 1 < L && nextChild !== end && !dagFile) {
       throw nerr(pg.recordsAt, `the children of level ${l + 1} cover nodes up to ${nextChild}, level ${l} ends at ${end}`);
     }
     nextChild = end;
     for (let i = lev.firstNode; i < end; i++) {
       const at = pg.recordsAt + NODE_BYTES * (i - lev.firstNode);
-      const cc = u16(b, at), nc = u16(b, at + 2);
+      // Format 4: bytes 0–3 name the consumer (decodeDag); no children, no neighbours.
+      const cc = dagFile ? 0 : u16(b, at), nc = dagFile ? 0 : u16(b, at + 2);
       const first = cc > 0 ? nextChild : 0;
       if (l === 0 && cc > 0) throw nerr(at, `a level-0 node with ${cc} children`, i);
       nextChild += cc;
@@ -813,14 +856,91 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
       }
     }
   };
-  // The records of every level, the totals, then the neighbour entries (the order of the checks,
-  // as in strata's reader); top first, the top level and the level below that its nodes' rules
-  // are checked against, with their entries.
+  // Format 4 (strata-v4.md §1): the groups of the pages whose records are decoded (levels above
+  // l, top first, numbered in file order), checked; each of those nodes' consumer and source; each
+  // group's children, and their count checked where the page below is decoded too.
+  const decodeDag = () => {
+    const P = L - 1 - l;
+    let G = 0;
+    for (let k = 0; k < P; k++) G += pages[k].groupCount;
+    const d = new Dag(N, G, L), gr = d.groups;
+    let g = 0;
+    for (let k = 0; k < P; k++) {
+      const m = L - 1 - k, lev = levels[m], pg = pages[k], count = pg.groupCount;
+      if ((m === 0) !== (count === 0)) {
+        throw chunkFail(pg.groupsAt - 4, pg.id, pg.at, `level ${m} has ${count} groups; level 0 has none and every other level some`);
+      }
+      const first = g, end = lev.firstNode + lev.nodes;
+      let next = lev.firstNode;
+      for (let q = 0; q < count; q++, g++) {
+        const at = pg.groupsAt + GROUP_BYTES * q;
+        const bad = (msg) => chunkFail(at, pg.id, pg.at, `group ${q} of level ${m}: ${msg}`);
+        const outputs = u32(b, at), children = u32(b, at + 4), e = dv.getFloat32(at + 8, true), reserved = u16(b, at + 14);
+        if (outputs === 0 || children === 0 || reserved !== 0) {
+          throw bad(`${outputs} outputs, ${children} children, reserved ${reserved}: outputs and children must be at least 1, reserved 0`);
+        }
+        if (!(unpack(b, at + 16, gc) && onGrid(gc, last))) throw bad(`sphere center off the ${gbits}-bit grid`);
+        const r = fr(radiusSteps(u16(b, at + 12)) * step);
+        if (!(e >= 0 && e <= F32_MAX && r <= F32_MAX)) throw bad(`geometric error ${e} and radius ${r} must be finite, the error not negative`);
+        if (next + outputs > end) throw bad(`outputs ${next}..+${outputs} run past the level's ${lev.nodes} nodes`);
+        gr.level[g] = m;
+        gr.firstOutput[g] = next;
+        gr.outputs[g] = outputs;
+        gr.children[g] = children;
+        gr.error[g] = e;
+        gr.radius[g] = r;
+        for (let c = 0; c < 3; c++) gr.center[3 * g + c] = gridDecode(origin[c], step, gc[c]);
+        next += outputs;
+      }
+      if (next !== end && m > 0) {
+        throw chunkFail(pg.groupsAt, pg.id, pg.at, `the outputs of level ${m}'s groups cover nodes up to ${next}; the level ends at ${end}`);
+      }
+      d.levelGroups[m] = [first, g];
+    }
+    const named = new Uint32Array(G + 1);
+    for (let k = 0; k < P; k++) {
+      const m = L - 1 - k, lev = levels[m], pg = pages[k];
+      const [a0, a1] = m === L - 1 ? [0, 0] : d.levelGroups[m + 1];
+      for (let i = lev.firstNode, end = lev.firstNode + lev.nodes; i < end; i++) {
+        const at = pg.recordsAt + NODE_BYTES * (i - lev.firstNode);
+        const stored = u32(b, at);
+        if (m === L - 1 ? stored !== NO_PARENT : stored >= a1 - a0) {
+          const why = m === L - 1 ? 'a top-level node has none (0xFFFFFFFF)' : `level ${m + 1} has ${a1 - a0} groups`;
+          throw chunkFail(at, pg.id, pg.at, `node ${i}: consumer ${stored}; ${why}`, i);
+        }
+        if (m !== L - 1) {
+          d.consumer[i] = a0 + stored;
+          named[a0 + stored + 1]++;
+        }
+      }
+    }
+    for (let q = 0; q < G; q++) {
+      const m = gr.level[q];
+      if (m > L - P && named[q + 1] !== gr.children[q]) {
+        const pg = pages[L - 1 - m], k = q - d.levelGroups[m][0];
+        throw chunkFail(pg.groupsAt + GROUP_BYTES * k, pg.id, pg.at, `group ${k} of level ${m}: ${gr.children[q]} children stored, ${named[q + 1]} nodes name it`);
+      }
+      d.source.fill(q, gr.firstOutput[q], gr.firstOutput[q] + gr.outputs[q]);
+    }
+    for (let q = 0; q < G; q++) named[q + 1] += named[q];
+    d.childOffsets = named;
+    d.childItems = new Uint32Array(named[G]);
+    const fill = named.slice(0, G);
+    for (let i = 0, n = levels[L - P].firstNode + levels[L - P].nodes; i < n; i++) {
+      const c = d.consumer[i];
+      if (c !== NO_PARENT) d.childItems[fill[c]++] = i;
+    }
+    return d;
+  };
+  // The records of every level, the totals, then the neighbour entries, then format 4's groups
+  // (the order of the checks, as in strata's reader); top first, the top level and the level below
+  // that its nodes' rules are checked against, with their entries.
   const kept = opts.topFirst ? Math.min(L, 2) : L;
   for (let k = kept; k > 0; k--) decodeLevel();
   if (l < 0) finish();
   else if (paged) for (let m = L - 1; m > l; m--) levelTotals(m);
   for (let m = L - 1; m >= L - kept; m--) decodeEntries(m);
+  sk.dag = dagFile ? decodeDag() : null;
   // Where the image levels start (§2): checked against the node table by finish().
   const levelsStart = geometryEnd(major, skeletonEnd, levels.reduce((sum, rec) => sum + rec.bytes, 0));
 
@@ -909,7 +1029,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
               throw chunkFail(prefix[k].at, 'SKEL', skelAt, 'its sub-chunks differ from the ones read before (the file changed between reads)');
             }
           }
-          pages = pagesPaged(subs, levels, skelAt, false);
+          pages = pagesPaged(b, subs, levels, skelAt, false, dagFile);
           const list = new Uint32Array(entriesOf(pages));
           list.set(neighborList);
           sk.neighborList = neighborList = list;
@@ -917,6 +1037,7 @@ export function decodeSkeleton(bytes, fileLength, opts = {}) {
         while (l >= 0) decodeLevel();
         finish();
         for (let m = L - kept - 1; m >= 0; m--) decodeEntries(m);
+        if (dagFile) sk.dag = decodeDag();
         // The closures kept with the skeleton (_recordAt) share this scope: let the bytes go.
         b = dv = prefixBytes = null;
       },
@@ -965,9 +1086,11 @@ function pagesWhole(node, nbrs, levels) {
 
 /**
  * The pages of format 3.1 on (strata-v3.md §1.1): one NODL per level from the top, after every other
- * sub-chunk; all of them, or with `prefix` the first ones read (the top two levels').
+ * sub-chunk; all of them, or with `prefix` the first ones read (the top two levels'). In format 4
+ * (`dag`, strata-v4.md §1) a page holds its level's group records before its node records and no
+ * neighbour entries.
  */
-function pagesPaged(subs, levels, skelAt, prefix) {
+function pagesPaged(b, subs, levels, skelAt, prefix, dag) {
   const old = subs.find((s) => s.id === 'NODE' || s.id === 'NBRS');
   if (old) throw chunkFail(old.at, 'SKEL', skelAt, `holds a ${old.id} chunk: format 3 keeps nodes in NODL pages`);
   let first = subs.findIndex((s) => s.id === 'NODL');
@@ -980,6 +1103,10 @@ function pagesPaged(subs, levels, skelAt, prefix) {
   let base = 0;
   for (let k = 0; k < count; k++) {
     const s = subs[first + k], lev = levels[L - 1 - k];
+    if (dag) {
+      out.push(dagPage(b, s, lev));
+      continue;
+    }
     const width = s.flags;
     if (width !== 2 && width !== 4) throw chunkFail(s.at + 4, 'NODL', s.at, `entry width ${width}; must be 2 or 4`);
     const records = NODE_BYTES * lev.nodes;
@@ -991,6 +1118,17 @@ function pagesPaged(subs, levels, skelAt, prefix) {
     base += entryCount;
   }
   return out;
+}
+
+/** A format-4 page (strata-v4.md §1): the group count G, G group records, the level's node records. */
+function dagPage(b, s, lev) {
+  if (s.flags !== 0) throw chunkFail(s.at + 4, 'NODL', s.at, `flags ${s.flags}; a format-4 page has 0`);
+  if (s.size < 4) throw chunkFail(s.ps, 'NODL', s.at, `holds ${s.size} bytes, too few for its group count`);
+  const groupCount = u32(b, s.ps);
+  const want = 4 + GROUP_BYTES * groupCount + NODE_BYTES * lev.nodes;
+  if (s.size !== want) throw chunkFail(s.ps, 'NODL', s.at, `holds ${s.size} bytes; ${groupCount} group records and ${lev.nodes} node records need ${want}`);
+  const groupsAt = s.ps + 4;
+  return { id: 'NODL', at: s.at, recordsAt: groupsAt + GROUP_BYTES * groupCount, entriesId: 'NODL', entriesChunkAt: s.at, entriesAt: s.pe, width: 2, entryCount: 0, entryBase: 0, groupsAt, groupCount };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1015,6 +1153,7 @@ export function decodePlanes(sk, bytes) {
   const err = (o, msg) => chunkFail(at + o, 'ORDR', at, msg);
   if (bytes.length < FRAME + 4) throw err(0, `${bytes.length} bytes after the geometry, too few for a chunk`);
   const id = String.fromCharCode(...bytes.subarray(0, 4));
+  if (id === 'ORDR' && sk.dag) throw err(0, 'an ORDR chunk in a format-4 file, which has no separating planes (strata-v4.md §0)');
   if (id !== 'ORDR') throw err(0, `${id} follows the geometry and images; only ORDR may`);
   const width = dv.getUint32(4, true);
   const size = Number(dv.getBigUint64(8, true));
@@ -1300,7 +1439,7 @@ function relations(s, i) {
       throw problem(`neighbour ${j} is not a different node of level ${l} listing it back`);
     }
   }
-  if (s.parent[i] === NO_PARENT) {
+  if (l === s.top()) {
     const { min, max } = s.header;
     for (let k = 0; k < 3; k++) {
       if (!(min[k] <= bmin[i3 + k] && bmax[i3 + k] <= max[k])) throw problem('box lies outside the HEAD bounds');

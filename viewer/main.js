@@ -507,7 +507,8 @@ window.strata = {
     dirty = true;
   },
   /** The front `strata stream --print-front` would print for this camera and limits (no loading);
-   * `held`: node ids not refined (its first frame holds the top level, selection.md §6). */
+   * `held`: node ids not refined (its first frame holds the top level, selection.md §6), or in a
+   * format-4 file group numbers not opened (selection.md §9). */
   async select(json, limits, held = []) {
     await streamer.loadSkeleton();
     const cut = new Selector(streamer.skeleton).select(new Camera(json), limits, new Set(held));

@@ -1,6 +1,7 @@
 // A front from front to back by the file's separating planes (format-spec/selection.md §5), as
 // strata's stream::order computes it: a depth-first walk from the virtual root, each parent's
 // children in the order its planes decide for the eye, the nearest box first where none does.
+// Format 4's nodes have no parents and no planes: its fronts go nearest box first.
 // Numbers are f64 as in the spec; the camera's eye and view direction are first rounded to f32,
 // as strata's camera holds them.
 
@@ -70,6 +71,11 @@ export class Orderer {
   /** `front` (node ids, any order) from front to back for `camera` (camera.js). */
   order(front, camera) {
     const s = this.skeleton, state = this.state, touched = [];
+    if (s.dag) {
+      const view = this.view(camera);
+      const keyed = front.filter((n) => n < s.nodeCount).map((n) => [this.key(view, n), n]);
+      return keyed.sort((a, b) => a[0] - b[0] || a[1] - b[1]).map((k) => k[1]);
+    }
     for (const n of front) {
       if (n < s.nodeCount) {
         state[n] = SHOWN;
@@ -82,15 +88,7 @@ export class Orderer {
         touched.push(p);
       }
     }
-    const eye = camera.eye.map(fr);
-    const ortho = camera.projection.orthographic !== undefined;
-    const grid = s.header.grid;
-    const view = {
-      ortho,
-      eye,
-      gridEye: eye.map((e, k) => (e - grid.origin[k]) / grid.step),
-      dir: ortho ? forwardF32(camera) : null,
-    };
+    const view = this.view(camera);
     const out = [];
     // An explicit stack (a file may have any number of levels): per parent with two or more live
     // children on the way down, its children in order and the next one to take.
@@ -127,6 +125,14 @@ export class Orderer {
     }
     for (const n of touched) state[n] = OFF;
     return out;
+  }
+
+  /** What the keys and planes need of `camera`: the eye in f32, in grid units, and the view direction (orthographic). */
+  view(camera) {
+    const eye = camera.eye.map(fr);
+    const ortho = camera.projection.orthographic !== undefined;
+    const grid = this.skeleton.header.grid;
+    return { ortho, eye, gridEye: eye.map((e, k) => (e - grid.origin[k]) / grid.step), dir: ortho ? forwardF32(camera) : null };
   }
 
   key(view, c) {

@@ -1,5 +1,6 @@
 // Front selection: which nodes of a strata file to display for one camera, by the rule of
-// format-spec/selection.md (strata's twin: src/stream/refine.rs). It needs the skeleton only.
+// format-spec/selection.md (strata's twin: src/stream/refine.rs), §3 for a tree of nodes and §9
+// for format 4's DAG (strata's: src/dag/cut.rs). It needs the skeleton only.
 // Computed in f64; the golden fronts and `strata stream --print-front` are the same rule in f32,
 // which agree wherever no decision lies within f32 rounding of its threshold.
 
@@ -55,6 +56,43 @@ export function projectedError(skeleton, i, camera) {
 }
 
 /**
+ * The projected error p(G) of every group of a format-4 skeleton (selection.md §9.1): §2's measure
+ * on the group's error and sphere, raised to the largest p of the sources of its children. Groups
+ * are numbered top level first, so level 1's, whose children have no source, come last.
+ */
+export function groupErrors(skeleton, camera, out = new Float64Array(skeleton.dag.groupCount)) {
+  const d = skeleton.dag, g = d.groups;
+  const [ex, ey, ez] = camera.eye;
+  for (let q = d.groupCount - 1; q >= 0; q--) {
+    const dx = ex - g.center[3 * q], dy = ey - g.center[3 * q + 1], dz = ez - g.center[3 * q + 2];
+    let p = g.error[q] * camera.pixelsPerUnit(Math.max(Math.sqrt(dx * dx + dy * dy + dz * dz) - g.radius[q], 0));
+    for (let k = d.childOffsets[q], e = d.childOffsets[q + 1]; k < e; k++) {
+      const src = d.source[d.childItems[k]];
+      if (src !== NO_PARENT && out[src] > p) p = out[src];
+    }
+    out[q] = p;
+  }
+  return out;
+}
+
+/**
+ * The cut of a format-4 skeleton at threshold `tau` (selection.md §9.2): node n is in it iff its
+ * source's p ≤ τ (or it is at level 0) and its consumer's p > τ (or it is at the top). Returns
+ * `{shown, culled}`, the nodes of the cut the camera sees and those it does not, ascending.
+ */
+export function dagCut(skeleton, camera, tau) {
+  const s = skeleton, d = s.dag;
+  const p = groupErrors(s, camera);
+  const planes = camera.frustum();
+  const shown = [], culled = [];
+  for (let n = 0; n < s.nodeCount; n++) {
+    const src = d.source[n], con = d.consumer[n];
+    if ((src === NO_PARENT || p[src] <= tau) && (con === NO_PARENT || p[con] > tau)) (sees(s, n, camera, planes) ? shown : culled).push(n);
+  }
+  return { shown, culled };
+}
+
+/**
  * Selection with its per-node marks kept between frames (each frame resets only what the last
  * one touched), so a frame costs what its front costs, not what the file holds.
  */
@@ -63,6 +101,8 @@ export class Selector {
     this.skeleton = skeleton;
     this.marks = new Uint8Array(skeleton.nodeCount);
     this.touched = [];
+    /** Format 4: per-group and per-node state, sized once the DAG is whole. */
+    this.dag = null;
   }
 
   set(i, m) {
@@ -90,6 +130,7 @@ export class Selector {
    */
   select(camera, limits, held = new Set()) {
     const s = this.skeleton;
+    if (s.dag) return this.selectDag(camera, limits, held);
     for (const t of this.touched) this.marks[t] = OFF;
     this.touched = [];
     const planes = camera.frustum();
@@ -161,5 +202,118 @@ export class Selector {
     front.sort((a, b) => a - b);
     culled.sort((a, b) => a - b);
     return { shown: front, culled, faces, bytes };
+  }
+
+  /**
+   * The front of a format-4 skeleton under budgets (selection.md §9.3): the top level's nodes in
+   * the cut; a group becomes a candidate once all its outputs are in the cut, if its p exceeds
+   * `limits.pixelError` and `held` (a Set of group numbers) does not hold it; the candidate of
+   * largest p (f32, equal ones by smallest group number) is opened, its outputs replaced by its
+   * children, unless the faces or bytes shown would then exceed `maxFaces` or `maxBytes`. The
+   * priority is always the error. Shown nodes meet edge for edge: no neighbour rule, no seams.
+   * Returns `{shown, culled, faces, bytes, opened}`, shown and culled ascending, opened the groups
+   * opened in order. A frame costs every group's p (§9.1) besides the cut's nodes.
+   */
+  selectDag(camera, limits, held) {
+    const s = this.skeleton, d = s.dag;
+    const complete = isComplete(s);
+    if (this.dag !== d) {
+      this.dag = d;
+      this.inCut = new Uint8Array(s.nodeCount);
+      this.seen = new Uint8Array(s.nodeCount);
+      this.waiting = new Uint32Array(d.groupCount);
+      this.p = new Float64Array(d.groupCount);
+      this.key = new Float32Array(d.groupCount);
+    }
+    const { inCut, seen, waiting, p, key } = this;
+    seen.fill(0);
+    waiting.set(d.groups.outputs);
+    const planes = camera.frustum();
+    const maxFaces = limits.maxFaces ?? Infinity, maxBytes = limits.maxBytes ?? Infinity, tau = limits.pixelError;
+    // A skeleton decoded in part (decodeSkeleton's topFirst) shows its top level alone.
+    if (complete) {
+      groupErrors(s, camera, p);
+      key.set(p);
+    }
+    const visible = (n) => {
+      if (seen[n] === 0) seen[n] = sees(s, n, camera, planes) ? 1 : 2;
+      return seen[n] === 1;
+    };
+    const heap = [];
+    const before = (a, b) => key[a] > key[b] || (key[a] === key[b] && a < b);
+    const push = (g) => {
+      heap.push(g);
+      for (let i = heap.length - 1; i > 0; ) {
+        const up = (i - 1) >> 1;
+        if (!before(heap[i], heap[up])) break;
+        [heap[i], heap[up]] = [heap[up], heap[i]];
+        i = up;
+      }
+    };
+    const pop = () => {
+      const top = heap[0], last = heap.pop();
+      if (heap.length > 0) {
+        heap[0] = last;
+        for (let i = 0; ; ) {
+          const l = 2 * i + 1, r = l + 1;
+          let m = i;
+          if (l < heap.length && before(heap[l], heap[m])) m = l;
+          if (r < heap.length && before(heap[r], heap[m])) m = r;
+          if (m === i) break;
+          [heap[i], heap[m]] = [heap[m], heap[i]];
+          i = m;
+        }
+      }
+      return top;
+    };
+    const entered = [];
+    const enter = (n) => {
+      inCut[n] = 1;
+      entered.push(n);
+      const g = d.source[n];
+      if (complete && g !== NO_PARENT && --waiting[g] === 0 && p[g] > tau && !held.has(g)) push(g);
+    };
+    let faces = 0, bytes = 0;
+    const [top0, top1] = s.levelNodes(s.top());
+    for (let n = top0; n < top1; n++) {
+      if (visible(n)) {
+        faces += s.faces[n];
+        bytes += recordBytes(s, n);
+      }
+      enter(n);
+    }
+    const opened = [];
+    while (heap.length > 0) {
+      const g = pop();
+      const [o0, o1] = d.outputsOf(g);
+      const children = d.childrenOf(g);
+      let f = faces, b = bytes;
+      for (let o = o0; o < o1; o++) {
+        if (visible(o)) {
+          f -= s.faces[o];
+          b -= recordBytes(s, o);
+        }
+      }
+      for (const c of children) {
+        if (visible(c)) {
+          f += s.faces[c];
+          b += recordBytes(s, c);
+        }
+      }
+      if (f > maxFaces || b > maxBytes) continue;
+      faces = f;
+      bytes = b;
+      opened.push(g);
+      for (let o = o0; o < o1; o++) inCut[o] = 0;
+      for (const c of children) enter(c);
+    }
+    const shown = [], culled = [];
+    for (const n of entered) {
+      if (inCut[n]) (seen[n] === 1 ? shown : culled).push(n);
+      inCut[n] = 0;
+    }
+    shown.sort((a, b) => a - b);
+    culled.sort((a, b) => a - b);
+    return { shown, culled, faces, bytes, opened };
   }
 }

@@ -7,10 +7,12 @@
 // of both. So the first frame needs two round trips (one when the file is smaller than the prefix).
 //
 // What is drawn is always a front by the rule: the same selection, with every node held whose
-// visible children are not all resident yet. So a view refines level by level as data arrives,
-// coarse before fine, never with a hole; the top level stays resident to stand in for anything.
-// Drawn nodes and their ancestors are the most recently used, so moving away finds coarser nodes
-// still resident.
+// visible children are not all resident yet (format 4: every group, selection.md §9). So a view
+// refines level by level as data arrives, coarse before fine, never with a hole; the top level
+// stays resident to stand in for anything. Drawn nodes and their ancestors (format 4: the
+// outputs of the groups above them) are the most recently used, so moving away finds coarser
+// nodes still resident. A tree's fronts are sealed between levels (selection.md §8); a DAG's
+// shown nodes meet edge for edge and need no seams.
 //
 // Images (format 2.2, selection.md §4): once the drawn nodes' geometry is resident, their material
 // ranges tell which images they sample; each image gets the level its most demanding drawn node
@@ -251,9 +253,13 @@ export class Streamer {
     this.skeletonBytes = null;
   }
 
-  /** Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only leaves the order without them (planesError says why). */
+  /**
+   * Read the separating planes (ORDR, the file's last chunk) in the background; a bad chunk only
+   * leaves the order without them (planesError says why). Format 4 has none: one there is refused.
+   */
   async readPlanes() {
     const at = planesOffset(this.skeleton), end = this.source.length;
+    if (this.skeleton.dag) return this.refusePlanes(at, end);
     // Planes came with format 2.3; every format-3 file may have them.
     if (!(end >= at + 16) || (this.skeleton.major < 3 && this.skeleton.minor < 3)) {
       this.planes = 'none';
@@ -279,6 +285,28 @@ export class Streamer {
     } catch (e) {
       this.planes = 'failed';
       this.planesError = `${this.source.name}: the drawing order's planes: ${e.message}`;
+    } finally {
+      this.inFlight--;
+    }
+    if (!this.closed) this.onChange();
+  }
+
+  /**
+   * Format 4 (strata-v4.md §0): an ORDR chunk after the geometry makes the file refused; anything
+   * else there is no planes. A failed read only leaves that unchecked (planesError says why).
+   */
+  async refusePlanes(at, end) {
+    this.planes = 'none';
+    if (!(end >= at + 4)) return;
+    this.inFlight++;
+    try {
+      const id = await this.source.read(at, at + 4);
+      if (!this.closed && String.fromCharCode(...id.subarray(0, 4)) === 'ORDR') {
+        this.error = new FormatError(`${this.source.name}: byte offset ${at}: an ORDR chunk in a format-4 file, which has no separating planes (strata-v4.md §0)`, { offset: at });
+      }
+    } catch (e) {
+      this.planes = 'failed';
+      this.planesError = `${this.source.name}: the bytes after the geometry: ${e.message}`;
     } finally {
       this.inFlight--;
     }
@@ -349,8 +377,8 @@ export class Streamer {
     if (this.cache.has(i)) return;
     const s = this.skeleton, size = recordBytes(s, i);
     // The node's open border for the seams: made by the decoding worker, else here where the
-    // normals still are.
-    const edge = geometry.border ?? border(s.level[i], s.error[i], geometry);
+    // normals still are. A DAG has no seams.
+    const edge = s.dag ? null : geometry.border ?? border(s.level[i], s.error[i], geometry);
     delete geometry.border;
     const handle = this.onLoad(i, geometry);
     // What picking needs stays on this side, with the border; the rest lives in the renderer's buffers.
@@ -396,20 +424,24 @@ export class Streamer {
     this.missing = cut.shown.filter((i) => !this.cache.has(i));
     let drawn = cut.shown;
     if (this.missing.length > 0) {
+      // Held: a node (format 4: a group) with a visible child not resident.
       const waiting = {
-        has: (i) => {
-          const [c0, c1] = s.children(i);
-          for (let c = c0; c < c1; c++) if (!this.cache.has(c) && sees(s, c, camera, planes)) return true;
-          return false;
-        },
+        has: s.dag
+          ? (g) => s.dag.childrenOf(g).some((c) => !this.cache.has(c) && sees(s, c, camera, planes))
+          : (i) => {
+            const [c0, c1] = s.children(i);
+            for (let c = c0; c < c1; c++) if (!this.cache.has(c) && sees(s, c, camera, planes)) return true;
+            return false;
+          },
       };
       drawn = this.drawSelector.select(camera, limits, waiting).shown;
     }
     this.drawn = drawn;
     this.drawOrder = this.orderer.order(drawn, camera);
-    this.sealSeams(drawn);
+    if (!s.dag) this.sealSeams(drawn);
     // Drawn nodes and their ancestors become the most recently used, ancestors first, so that
     // moving away finds the coarser nodes still resident.
+    if (s.dag) this.touchAbove(drawn);
     for (const i of drawn) {
       const chain = [];
       for (let a = s.parent[i]; a !== NO_PARENT && this.touched[a] !== this.frame; a = s.parent[a]) chain.push(a);
@@ -425,6 +457,31 @@ export class Streamer {
     // The planes only reorder what is drawn: they are read once nothing else is wanted.
     if (this.planes === 'unread' && this.idle()) this.readPlanes();
     return this.drawn;
+  }
+
+  /**
+   * Format 4: touch the nodes above `drawn`, the outputs of their consumers and of those outputs'
+   * consumers up to the top, coarsest first (nodes are numbered top level first).
+   */
+  touchAbove(drawn) {
+    const d = this.skeleton.dag;
+    const groups = new Set();
+    const stack = [];
+    for (const i of drawn) stack.push(d.consumer[i]);
+    while (stack.length > 0) {
+      const g = stack.pop();
+      if (g === NO_PARENT || groups.has(g)) continue;
+      groups.add(g);
+      const [o0, o1] = d.outputsOf(g);
+      for (let o = o0; o < o1; o++) stack.push(d.consumer[o]);
+    }
+    const above = [];
+    for (const g of groups) {
+      const [o0, o1] = d.outputsOf(g);
+      for (let o = o0; o < o1; o++) above.push(o);
+    }
+    above.sort((a, b) => a - b);
+    for (const o of above) this.touch(o);
   }
 
   /**

@@ -61,8 +61,8 @@ pub struct Args {
     #[arg(long)]
     pub in_core: bool,
     /// Build a DAG of nodes and write format 4 (format-spec/strata-v4.md): displayed nodes meet
-    /// edge for edge at any level difference. In memory; `strata verify`, `inspect` and `extract`
-    /// read it, the streamers and the web viewer not yet.
+    /// edge for edge at any level difference. Built in memory; every strata reader and the web
+    /// viewer read it.
     #[arg(long, conflicts_with_all = ["partitioned", "format_version"])]
     pub dag: bool,
     /// Format version to write: 3 compresses node geometry (positions quantized as --grid-bits,

@@ -29,12 +29,17 @@ use std::path::Path;
 pub fn write(path: &Path, dag: &Dag, clusters: &hierarchy::Level, opts: &WriteOptions) -> Result<WriteSummary> {
     let mut file = AtomicFile::create(path)?;
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let summary = write_to(file.writer(), path, dag, clusters, opts, Some(dir))?;
+    let summary = write_named(file.writer(), path, dag, clusters, opts, Some(dir))?;
     file.commit()?;
     Ok(summary)
 }
 
-fn write_to<W: std::io::Write>(
+/// [`write`] into any writer, from its current position; encoded nodes wait in memory.
+pub fn write_to<W: std::io::Write>(out: W, dag: &Dag, clusters: &hierarchy::Level, opts: &WriteOptions) -> Result<WriteSummary> {
+    write_named(out, Path::new("<output>"), dag, clusters, opts, None)
+}
+
+fn write_named<W: std::io::Write>(
     out: W,
     path: &Path,
     dag: &Dag,

@@ -333,6 +333,18 @@ pub fn dump<S: ByteSource>(rd: &Reader<S>) -> Result<serde_json::Value> {
         })).collect::<Vec<_>>(),
         "nodes": nodes,
     });
+    if let Some(d) = rd.dag() {
+        // Format 4: the groups in file order, and each node's consumer and source (null: none).
+        let none = |x: u32| (x != NO_PARENT).then_some(x);
+        out["dag"] = json!({
+            "groups": d.groups.iter().map(|g| json!({
+                "level": g.level, "first_output": g.first_output, "outputs": g.outputs, "children": g.children,
+                "error": f(g.error), "center": v3(g.center), "radius": f(g.radius),
+            })).collect::<Vec<_>>(),
+            "consumer": d.consumer.iter().map(|&x| none(x)).collect::<Vec<_>>(),
+            "source": d.source.iter().map(|&x| none(x)).collect::<Vec<_>>(),
+        });
+    }
     let planes = rd.read_planes()?;
     if !planes.is_empty() {
         // Files with separating planes (2.3): per parent (-1 = the virtual root), its entries.

@@ -9,9 +9,10 @@ import { createServer } from 'node:http';
 import { existsSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { extname } from 'node:path';
-import { root, scratch, strataBin, converted, run } from './helpers.mjs';
-import { crc32, decodeSkeleton, planesOffset, IMAGE_MIME } from '../../viewer/format.js';
+import { root, scratch, strataBin, converted, run, cameraFrom } from './helpers.mjs';
+import { NEWEST_MAJOR, crc32, decodeSkeleton, planesOffset, IMAGE_MIME } from '../../viewer/format.js';
 import { Camera } from '../../viewer/camera.js';
+import { Selector } from '../../viewer/select.js';
 
 const CHROMIUM = [process.env.CHROMIUM, '/usr/bin/chromium', '/usr/bin/chromium-browser', '/usr/bin/google-chrome'].find((p) => p && existsSync(p));
 let playwright = null;
@@ -55,6 +56,8 @@ before(async () => {
   copy('sphere', converted('noisy_sphere', `${root}/fixtures/noisy_sphere.ply`, []));
   // Format 3 explicitly, whatever convert's default (strata-v3.md: compressed node geometry).
   copy('sphere3', converted('noisy_sphere_v3', `${root}/fixtures/noisy_sphere.ply`, ['--format-version', '3']));
+  // Format 4: the node table as a DAG (strata-v4.md).
+  copy('sphere4', converted('noisy_sphere_dag', `${root}/fixtures/noisy_sphere.ply`, ['--dag']));
   if (existsSync(CT_HEAD)) copy('cthead3', converted('cthead_v3', CT_HEAD, ['--format-version', '3']));
   copy('ico', converted('icosphere', `${root}/fixtures/icosphere.obj`, ['--leaf-faces', '16', '--cluster-faces', '4', '--top-groups', '2']));
   if (existsSync(CT_HEAD)) copy('cthead', converted('cthead', CT_HEAD, []));
@@ -116,6 +119,43 @@ async function page(url) {
 const viewer = (name) => `${base}/viewer/?file=/${name}.strata`;
 const timeout = (ms, what) => new Promise((_, reject) => setTimeout(() => reject(new Error(`${what}: no answer in ${ms} ms`)), ms));
 const within = (promise, ms, what) => Promise.race([promise, timeout(ms, what)]);
+
+/** Per pixel of the page's canvas, whether it shows the background. */
+function backgroundOf(p) {
+  return p.evaluate(() => {
+    const c = document.getElementById('view');
+    const g = document.createElement('canvas');
+    [g.width, g.height] = [c.width, c.height];
+    const x = g.getContext('2d');
+    x.drawImage(c, 0, 0);
+    const d = x.getImageData(0, 0, g.width, g.height).data;
+    const out = new Uint8Array(g.width * g.height);
+    for (let i = 0; i < out.length; i++) out[i] = d[4 * i] === 28 && d[4 * i + 1] === 30 && d[4 * i + 2] === 36 ? 1 : 0;
+    return { width: g.width, height: g.height, bg: Array.from(out) };
+  });
+}
+
+/** Background pixels of `front` enclosed by the model (not reached from the edge) where `full` (full detail) is not background. */
+function cracks(front, full) {
+  const { width: w, height: h, bg } = front;
+  const outside = new Uint8Array(w * h);
+  const stack = [];
+  for (let x = 0; x < w; x++) stack.push(x, (h - 1) * w + x);
+  for (let y = 0; y < h; y++) stack.push(y * w, y * w + w - 1);
+  while (stack.length) {
+    const i = stack.pop();
+    if (outside[i] || !bg[i]) continue;
+    outside[i] = 1;
+    const x = i % w;
+    if (x > 0) stack.push(i - 1);
+    if (x + 1 < w) stack.push(i + 1);
+    if (i >= w) stack.push(i - w);
+    if (i + w < w * h) stack.push(i + w);
+  }
+  let n = 0;
+  for (let i = 0; i < w * h; i++) if (bg[i] && !outside[i] && !full.bg[i]) n++;
+  return n;
+}
 
 /** The page's canvas against `strata render` of the same file and camera: coverage and shade. */
 async function compareWithRender(p, file, camera, t) {
@@ -424,39 +464,7 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       assert.ok(frames.length >= 4, `${frames.length} mixed fronts with seams in the orbit`);
       const { p, errors } = await page(viewer(name));
       await within(p.evaluate(() => window.strata.ready()), 60000, 'first frame');
-      // Per pixel of the canvas, whether it shows the background.
-      const background = () => p.evaluate(() => {
-        const c = document.getElementById('view');
-        const g = document.createElement('canvas');
-        [g.width, g.height] = [c.width, c.height];
-        const x = g.getContext('2d');
-        x.drawImage(c, 0, 0);
-        const d = x.getImageData(0, 0, g.width, g.height).data;
-        const out = new Uint8Array(g.width * g.height);
-        for (let i = 0; i < out.length; i++) out[i] = d[4 * i] === 28 && d[4 * i + 1] === 30 && d[4 * i + 2] === 36 ? 1 : 0;
-        return { width: g.width, height: g.height, bg: Array.from(out) };
-      });
-      // Background pixels enclosed by the front (not reached from the edge) where full detail is not background.
-      const cracks = (front, full) => {
-        const { width: w, height: h, bg } = front;
-        const outside = new Uint8Array(w * h);
-        const stack = [];
-        for (let x = 0; x < w; x++) stack.push(x, (h - 1) * w + x);
-        for (let y = 0; y < h; y++) stack.push(y * w, y * w + w - 1);
-        while (stack.length) {
-          const i = stack.pop();
-          if (outside[i] || !bg[i]) continue;
-          outside[i] = 1;
-          const x = i % w;
-          if (x > 0) stack.push(i - 1);
-          if (x + 1 < w) stack.push(i + 1);
-          if (i >= w) stack.push(i - w);
-          if (i + w < w * h) stack.push(i + w);
-        }
-        let n = 0;
-        for (let i = 0; i < w * h; i++) if (bg[i] && !outside[i] && !full.bg[i]) n++;
-        return n;
-      };
+      const background = () => backgroundOf(p);
       let open = 0, sealed = 0, filled = 0;
       for (const f of frames.slice(0, 8)) {
         await p.evaluate((c) => window.strata.setCamera(c), f.camera);
@@ -486,6 +494,53 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       assert.deepEqual(errors, []);
       await p.close();
     }
+  });
+
+  await sub('a format-4 file (a DAG) streams fronts of mixed levels with no seams and no cracks (selection.md §9)', async (t) => {
+    const bytes = new Uint8Array(readFileSync(models.sphere4));
+    const s = decodeSkeleton(bytes, bytes.length);
+    assert.ok(s.dag);
+    // Cameras of an orbit whose 1 px fronts (by the viewer's own selection) mix levels.
+    const selector = new Selector(s);
+    const cams = [];
+    for (let k = 0; k < 48 && cams.length < 8; k++) {
+      const a = (2 * Math.PI * k) / 48;
+      const cam = cameraFrom(s, [Math.sin(a), 0.5 * Math.cos(2 * a), Math.cos(a)], 0.3 + 0.25 * (k % 4));
+      cam.width = W;
+      cam.height = H;
+      const front = selector.select(cam, { pixelError: 1 }).shown;
+      if (new Set(front.map((i) => s.level[i])).size > 1) cams.push({ cam, front });
+    }
+    assert.ok(cams.length >= 4, `${cams.length} mixed fronts in the orbit`);
+    const { p, errors } = await page(viewer('sphere4'));
+    await within(p.evaluate(() => window.strata.ready()), 60000, 'first frame');
+    let crackPixels = 0, covered = 0, levels = 0;
+    for (const [k, { cam, front }] of cams.entries()) {
+      await p.evaluate((c) => window.strata.setCamera(c), cam.toJSON());
+      await p.evaluate(() => window.strata.setLimits({ pixelError: 0 }));
+      await within(p.evaluate(() => window.strata.idle()), 120000, `camera ${k}: full detail`);
+      const full = await backgroundOf(p);
+      await p.evaluate(() => window.strata.setLimits({ pixelError: 1 }));
+      await within(p.evaluate(() => window.strata.idle()), 120000, `camera ${k}: 1 px`);
+      const st = await p.evaluate(() => window.strata.state());
+      assert.deepEqual(st.drawn, front, `camera ${k}: the front selected here`);
+      assert.deepEqual([...st.drawOrder].sort((a, b) => a - b), st.drawn);
+      assert.equal(st.planes, 'none');
+      const image = await backgroundOf(p);
+      crackPixels += cracks(image, full);
+      covered += image.bg.filter((b) => !b).length;
+      levels = Math.max(levels, new Set(st.drawn.map((i) => s.level[i])).size);
+      // Nothing is drawn to seal: the image is the same with the seams off.
+      await p.evaluate(() => window.strata.setSeams(false));
+      await within(p.evaluate(() => window.strata.idle(false)), 60000, `camera ${k}: seams off`);
+      assert.deepEqual((await backgroundOf(p)).bg, image.bg, `camera ${k}: seams drawn`);
+      await p.evaluate(() => window.strata.setSeams(true));
+    }
+    t.diagnostic(`sphere4, ${cams.length} mixed fronts at 1 px (up to ${levels} levels): ${crackPixels} crack pixels, ${covered} model pixels`);
+    assert.ok(covered > 0);
+    assert.equal(crackPixels, 0);
+    assert.deepEqual(errors, []);
+    await p.close();
   });
 
   await sub('picking finds the surface under the cursor and measures between two points', async () => {
@@ -687,7 +742,7 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       })(),
       'newer-major': (() => {
         const b = Buffer.from(original);
-        b.writeUInt16LE(4, 8);
+        b.writeUInt16LE(NEWEST_MAJOR + 1, 8);
         b.writeUInt32LE(crc32(new Uint8Array(b.subarray(0, 12))), 12);
         return b;
       })(),
@@ -707,7 +762,7 @@ test('the viewer in headless Chromium', { skip: missing ?? false, timeout: 60000
       }), 60000, `${name}: a message`);
       t.diagnostic(`${name}: "${message}"`);
       assert.ok(message.length > 10, `${name}: no message on the page`);
-      if (name === 'newer-major') assert.match(message, /4\.\d+ is newer/);
+      if (name === 'newer-major') assert.match(message, new RegExp(`${NEWEST_MAJOR + 1}\\.\\d+ is newer`));
       assert.ok(await p.isVisible('#message'));
       await p.close();
     }

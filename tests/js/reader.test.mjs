@@ -9,7 +9,7 @@ import { execFileSync } from 'node:child_process';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { MAJOR, MINOR, NEWEST_MAJOR, MINOR3, FormatError, crc32, openingRange, completeSkeleton, skeletonNeeds, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
+import { MAJOR, MINOR, NEWEST_MAJOR, MINOR3, MINOR4, FormatError, crc32, openingRange, completeSkeleton, skeletonNeeds, decodeSkeleton, decodeNode, decodeImageLevel, decodePlanes, planesOffset, MAP_KINDS } from '../../viewer/format.js';
 
 const ROOT = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const VECTORS = join(ROOT, 'format-spec', 'vectors');
@@ -133,6 +133,24 @@ function dump(sk, geoms, images = [], planes = { starts: [], entries: [] }) {
       },
     })),
     ...(sk.code ? { code: { normal_bits: sk.code.normalBits, color_bits: sk.code.colorBits, freqs: sk.code.freqs } } : {}),
+    // Format 4: the groups in file order, each node's consumer and source (null: none).
+    ...(sk.dag
+      ? {
+          dag: {
+            groups: Array.from({ length: sk.dag.groupCount }, (_, g) => ({
+              level: sk.dag.groups.level[g],
+              first_output: sk.dag.groups.firstOutput[g],
+              outputs: sk.dag.groups.outputs[g],
+              children: sk.dag.groups.children[g],
+              error: sk.dag.groups.error[g],
+              center: v3(sk.dag.groups.center, 3 * g),
+              radius: sk.dag.groups.radius[g],
+            })),
+            consumer: Array.from(sk.dag.consumer, (x) => (x === 0xffffffff ? null : x)),
+            source: Array.from(sk.dag.source, (x) => (x === 0xffffffff ? null : x)),
+          },
+        }
+      : {}),
     ...(planes.starts.length
       ? {
           planes: planes.starts.slice(0, -1).flatMap((a, p) =>
@@ -231,8 +249,10 @@ function parseChunks(b, start, end) {
 
 function parseTree(bytes) {
   const tree = { major: le(bytes).getUint16(8, true), minor: le(bytes).getUint16(10, true), chunks: parseChunks(bytes, 16, bytes.length) };
-  // Format 3: the node payloads' sizes, to cut GEOS's payload into them when resealing.
+  // Format 3: the node payloads' sizes, to cut GEOS's payload into them when resealing. Format 4's
+  // pages hold group records before the node records.
   const skel = find(tree.chunks, 'SKEL');
+  if (skel) skel.dag = tree.major === 4;
   if (tree.major >= 3 && skel) {
     tree.payloadSizes = [];
     for (let i = 0, r; (r = recordOf(skel, i)); i++) tree.payloadSizes.push(r[0].getUint32(r[1] + 48, true));
@@ -240,7 +260,7 @@ function parseTree(bytes) {
   return tree;
 }
 
-/** Where node i's record lies in SKEL: [DataView, offset] in NODE, or in its level's NODL page (format 3); null past the last. */
+/** Where node i's record lies in SKEL: [DataView, offset] in NODE, or in its level's NODL page (formats 3 and 4); null past the last. */
 function recordOf(skel, i) {
   const node = find(skel.subs, 'NODE');
   if (node) return 56 * i + 56 <= node.payload.length ? [le(node.payload), 56 * i] : null;
@@ -250,7 +270,8 @@ function recordOf(skel, i) {
   const d = le(levl.payload);
   for (let r = d.byteLength - 32, k = 0; r >= 0 && k < pages.length; r -= 32, k++) {
     const first = d.getUint32(r, true), n = d.getUint32(r + 4, true);
-    if (i >= first && i < first + n && 56 * (i - first) + 56 <= pages[k].payload.length) return [le(pages[k].payload), 56 * (i - first)];
+    const base = skel.dag ? 4 + 24 * le(pages[k].payload).getUint32(0, true) : 0;
+    if (i >= first && i < first + n && base + 56 * (i - first) + 56 <= pages[k].payload.length) return [le(pages[k].payload), base + 56 * (i - first)];
   }
   return null;
 }
@@ -602,7 +623,7 @@ test('openingRange refuses a bad prologue, an unsupported major version and a ba
     le(b).setUint16(10, minor, true);
     le(b).setUint32(12, crc32(b, 0, 12), true);
   };
-  bad(version(4, 0), ['4.0', 'newer', `${NEWEST_MAJOR}.${MINOR3}`]);
+  bad(version(5, 0), ['5.0', 'newer', `${NEWEST_MAJOR}.${MINOR4}`]);
   bad(version(65535, 0), ['65535.0', 'newer']);
   bad(version(1, 0), ['1.0', 'not supported']);
   bad((b) => (b[12] ^= 1), ['CRC']);
@@ -654,7 +675,7 @@ function uncheckedBytes(bytes) {
   return out;
 }
 
-for (const file of ['sphere.strata', 'sphere-v3.strata']) test(`every byte of ${file} flipped: refused with a FormatError, or read only where no check applies`, (t) => {
+for (const file of ['sphere.strata', 'sphere-v3.strata', 'sphere-v4.strata'].filter((f) => existsSync(join(VECTORS, f)))) test(`every byte of ${file} flipped: refused with a FormatError, or read only where no check applies`, (t) => {
   const bytes = read(file);
   const free = uncheckedBytes(bytes);
   const original = JSON.stringify(dump(...Object.values(decodeAll(bytes))));
@@ -674,7 +695,7 @@ for (const file of ['sphere.strata', 'sphere-v3.strata']) test(`every byte of ${
   t.diagnostic(`${bytes.length} bytes × 2 flips (^0xff, ^0x01): read ${accepted[0xff].length} / ${accepted[1].length} (the ${free.size} bytes no check covers: flags of HEAD, SKEL and GEOM, GEOM padding; GEOS's frame, CRC and padding); every other flip refused`);
 });
 
-for (const file of ['sphere.strata', 'terrain.strata', 'textured.strata', 'sphere-v3.strata']) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
+for (const file of ['sphere.strata', 'terrain.strata', 'textured.strata', 'sphere-v3.strata', 'sphere-v4.strata'].filter((f) => existsSync(join(VECTORS, f)))) test(`resealed mutations of ${file} (every checksum recomputed): a FormatError or a sane decode, never another error`, (t) => {
   const bytes = read(file);
   const tree = parseTree(bytes);
   const spots = leaves(tree);
@@ -1205,7 +1226,7 @@ test('format 3: versions, layout, hostile counts and damaged payloads are refuse
     assert.throws(() => decodeAll(b), (e) => (e instanceof FormatError && words.every((w) => e.message.includes(w))) || assert.fail(`${e.name}: ${e.message}, not ${words}`));
   const head = (v) => find(v.chunks, 'HEAD').payload;
   const node = (v) => recordOf(find(v.chunks, 'SKEL'), 0)[0];
-  // A newer minor of 3 reads as 3.0 does, with what it may add; 3.0 refuses the additions; 4.0 is refused.
+  // A newer minor of 3 reads as 3.0 does, with what it may add; 3.0 refuses the additions; 5.x is refused.
   const newer = (minor) => (v) => {
     v.minor = minor;
     const h = find(v.chunks, 'HEAD');
@@ -1216,7 +1237,7 @@ test('format 3: versions, layout, hostile counts and damaged payloads are refuse
   assert.equal(`${n.sk.major}.${n.sk.minor}`, `3.${MINOR3 + 1}`);
   assert.deepEqual(n.geoms, base.geoms);
   refusedWith(variant(newer(MINOR3)), ['unknown attribute bits']);
-  refusedWith(variant((v) => (v.major = 4)), [`format version 4.${MINOR3}`, 'newer']);
+  refusedWith(variant((v) => (v.major = 5)), [`format version 5.${MINOR3}`, 'newer']);
   // GEOS before SKEL; a node of no bytes; a payload longer than its stream and raw bits.
   refusedWith(variant((v) => v.chunks.splice(1, 0, find(v.chunks, 'GEOS'))), ['GEOS', 'expected the SKEL chunk']);
   const sizes = tree.payloadSizes;

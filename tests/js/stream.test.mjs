@@ -9,7 +9,7 @@ import assert from 'node:assert/strict';
 import { existsSync, readFileSync } from 'node:fs';
 import { Streamer, levelBytes, neededLevel, usedImages, wantedLevels } from '../../viewer/stream.js';
 import { Camera } from '../../viewer/camera.js';
-import { IMAGE_MIME, decodeNode, decodeSkeleton, imageSize, planesOffset } from '../../viewer/format.js';
+import { FormatError, IMAGE_MIME, crc32, decodeNode, decodeSkeleton, imageSize, planesOffset } from '../../viewer/format.js';
 import { root, converted, cameraFrom } from './helpers.mjs';
 
 /** The bytes of a file served with a delay per read; records reads and the most in flight. */
@@ -58,11 +58,14 @@ function orbitCamera(s, k, n, distance) {
   return cameraFrom(s, [Math.sin(a), 0.3 * Math.cos(3 * a), Math.cos(a)], distance);
 }
 
-// Format 3 (strata-v3.md): the same fixtures with compressed node geometry.
+// Format 3 (strata-v3.md): the same fixtures with compressed node geometry; format 4
+// (strata-v4.md): the node table as a DAG.
 const V3 = ['--format-version', '3'];
+const DAG = ['--dag'];
 
 test('opening takes two round trips and reads no more than the skeleton and the top level', async () => {
-  for (const [name, mesh, args] of [['noisy_sphere', 'noisy_sphere.ply', []], ['icosphere', 'icosphere.obj', []], ['noisy_sphere_v3', 'noisy_sphere.ply', V3], ['icosphere_v3', 'icosphere.obj', V3]]) {
+  for (const [name, mesh, args] of [['noisy_sphere', 'noisy_sphere.ply', []], ['icosphere', 'icosphere.obj', []], ['noisy_sphere_v3', 'noisy_sphere.ply', V3], ['icosphere_v3', 'icosphere.obj', V3],
+    ['noisy_sphere_dag', 'noisy_sphere.ply', DAG]]) {
     const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/${mesh}`, args)));
     const src = new SlowSource(bytes);
     const st = await Streamer.open(src);
@@ -99,7 +102,7 @@ test('a format-3 file opens from its top pages: two round trips, a small share o
   assert.ok(st.front.some((i) => s.level[i] < s.top()), 'the front refines below the top level');
 });
 
-for (const [name, args, n] of [['noisy_sphere', [], 240], ['noisy_sphere_v3', V3, 80]]) test(`a long orbit under a small budget keeps converging, within the cap on reads in flight (${name})`, async (t) => {
+for (const [name, args, n] of [['noisy_sphere', [], 240], ['noisy_sphere_v3', V3, 80], ['noisy_sphere_dag', DAG, 80]]) test(`a long orbit under a small budget keeps converging, within the cap on reads in flight (${name})`, async (t) => {
   const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/noisy_sphere.ply`, args)));
   const src = new SlowSource(bytes, 0);
   const budget = 1_500_000;
@@ -117,7 +120,7 @@ for (const [name, args, n] of [['noisy_sphere', [], 240], ['noisy_sphere_v3', V3
 });
 
 // Format 3 with sliceMs 0: every node of a range waits for its own task, frames drawn between them.
-for (const [name, args, opts] of [['noisy_sphere', [], {}], ['noisy_sphere_v3', V3, { sliceMs: 0 }]]) test(`what is drawn while loading is resident and a front: coarser where data is missing, nothing drawn twice (${name})`, async () => {
+for (const [name, args, opts] of [['noisy_sphere', [], {}], ['noisy_sphere_v3', V3, { sliceMs: 0 }], ['noisy_sphere_dag', DAG, {}]]) test(`what is drawn while loading is resident and a front: coarser where data is missing, nothing drawn twice (${name})`, async () => {
   const bytes = new Uint8Array(readFileSync(converted(name, `${root}/fixtures/noisy_sphere.ply`, args)));
   const st = await Streamer.open(new SlowSource(bytes, 2), { pixelError: 0.5, ...opts });
   const s = st.skeleton;
@@ -130,14 +133,81 @@ for (const [name, args, opts] of [['noisy_sphere', [], {}], ['noisy_sphere_v3', 
       frames++;
       if (st.error) throw st.error;
       for (const i of drawn) assert.ok(st.geometry(i), `node ${i} drawn without geometry`);
-      // No drawn node lies under another drawn node.
+      // No drawn node lies under another drawn node (format 4: under an output of a group above it).
       const set = new Set(drawn);
-      for (const i of drawn) for (let a = s.parent[i]; a !== 0xffffffff; a = s.parent[a]) assert.ok(!set.has(a), `${i} and its ancestor ${a} both drawn`);
+      for (const i of drawn) for (const a of above(s, i)) assert.ok(!set.has(a), `${i} and its ancestor ${a} both drawn`);
       if (st.idle()) break;
       await new Promise((r) => setTimeout(r, 1));
     }
     if (k === 0) assert.ok(frames > 1, 'refining took more than one frame');
   }
+});
+
+/** The nodes above node i: its ancestors, or in format 4 the outputs of its consumer and of theirs, up to the top. */
+function above(s, i) {
+  const out = [];
+  if (!s.dag) {
+    for (let a = s.parent[i]; a !== 0xffffffff; a = s.parent[a]) out.push(a);
+    return out;
+  }
+  const d = s.dag, seen = new Set();
+  for (const stack = [d.consumer[i]]; stack.length > 0; ) {
+    const g = stack.pop();
+    if (g === 0xffffffff || seen.has(g)) continue;
+    seen.add(g);
+    const [o0, o1] = d.outputsOf(g);
+    for (let o = o0; o < o1; o++) {
+      out.push(o);
+      stack.push(d.consumer[o]);
+    }
+  }
+  return out;
+}
+
+test('format 4 streams as a DAG: drawn fronts are cuts of it, no seams, nearest box first, an ORDR chunk refused', async (t) => {
+  const bytes = new Uint8Array(readFileSync(converted('noisy_sphere_dag', `${root}/fixtures/noisy_sphere.ply`, DAG)));
+  const st = await Streamer.open(new SlowSource(bytes, 1), { pixelError: 1 });
+  const s = st.skeleton;
+  assert.ok(s.dag);
+  let mixed = 0;
+  for (let k = 0; k < 12; k++) {
+    const camera = orbitCamera(s, k, 12, 0.35 + 0.3 * (k % 3));
+    await settle(st, camera);
+    assert.deepEqual(st.drawn, st.front);
+    assert.equal(st.seams, null);
+    assert.equal(st.planes, 'none');
+    // Nearest box first: drawing keys never decrease.
+    const key = (i) => {
+      const e = camera.eye.map(Math.fround);
+      let d2 = 0;
+      for (let c = 0; c < 3; c++) d2 += Math.max(s.boxMin[3 * i + c] - e[c], 0, e[c] - s.boxMax[3 * i + c]) ** 2;
+      return d2;
+    };
+    for (let j = 1; j < st.drawOrder.length; j++) assert.ok(key(st.drawOrder[j - 1]) <= key(st.drawOrder[j]));
+    assert.deepEqual([...st.drawOrder].sort((a, b) => a - b), st.drawn);
+    if (new Set(st.drawn.map((i) => s.level[i])).size > 1) mixed++;
+  }
+  t.diagnostic(`12 cameras: ${mixed} fronts of several levels`);
+  assert.ok(mixed > 0);
+  st.close();
+  // The same file with an ORDR chunk after its geometry: refused once the streamer looks there.
+  const payload = new Uint8Array(4 * (s.nodeCount + 1));
+  const ordr = new Uint8Array(24 + payload.length);
+  ordr.set([0x4f, 0x52, 0x44, 0x52]);
+  const dv = new DataView(ordr.buffer);
+  dv.setUint32(4, 2, true);
+  dv.setBigUint64(8, BigInt(payload.length), true);
+  dv.setUint32(16 + payload.length, crc32(payload), true);
+  const withPlanes = new Uint8Array(bytes.length + ordr.length);
+  withPlanes.set(bytes);
+  withPlanes.set(ordr, bytes.length);
+  const head = new DataView(withPlanes.buffer);
+  head.setBigUint64(32, BigInt(withPlanes.length), true);
+  const headSize = Number(head.getBigUint64(24, true));
+  head.setUint32(32 + headSize, crc32(withPlanes, 32, 32 + headSize), true);
+  const bad = await Streamer.open(new SlowSource(withPlanes, 1), { pixelError: 1 });
+  await assert.rejects(() => settle(bad, orbitCamera(s, 0, 12, 1)), (e) => e instanceof FormatError && /ORDR chunk in a format-4 file/.test(e.message));
+  bad.close();
 });
 
 // ---------------------------------------------------------------------------------------------
