@@ -26,6 +26,26 @@ fn encoding(major: u16) -> Encoding {
     }
 }
 
+/// How every vector is written: levels halving, the vectors' tool string, the mesh's own normals.
+fn options(
+    params: HierarchyParams,
+    metres_per_unit: f64,
+    georef: Option<format::Georef>,
+    major: u16,
+    images: std::sync::Arc<Vec<strata::format::texture::ImageIn>>,
+) -> WriteOptions {
+    WriteOptions {
+        metres_per_unit,
+        params,
+        level_ratio: 0.5,
+        tool: "strata vectors".into(),
+        georef,
+        encoding: encoding(major),
+        derive_normals: false,
+        images,
+    }
+}
+
 /// The chunk file of `mesh`, grouped with `params` and simplified per level.
 fn convert(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, major: u16) -> Vec<u8> {
     convert_placed(mesh, params, metres_per_unit, None, major)
@@ -37,16 +57,7 @@ fn convert_placed(mesh: Mesh, params: HierarchyParams, metres_per_unit: f64, geo
     let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
     let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
     let mut out = Cursor::new(Vec::new());
-    let opts = WriteOptions {
-        metres_per_unit,
-        params,
-        level_ratio: 0.5,
-        tool: "strata vectors".into(),
-        georef,
-        encoding: encoding(major),
-        derive_normals: false,
-        images: Default::default(),
-    };
+    let opts = options(params, metres_per_unit, georef, major, Default::default());
     write_to(&mut out, &h, &lv, &opts).expect("the vector meshes write");
     out.into_inner()
 }
@@ -83,16 +94,7 @@ fn sphere_dag() -> Vec<u8> {
     let level0 = h.levels[0].face_group.clone();
     let dag = strata::dag::build(mesh, &level0, &strata::dag::DagParams { ratio: 0.5, top_faces: 16 }, &mut |_, _| {});
     let mut out = Cursor::new(Vec::new());
-    let opts = WriteOptions {
-        metres_per_unit: 1.0,
-        params,
-        level_ratio: 0.5,
-        tool: "strata vectors".into(),
-        georef: None,
-        encoding: encoding(3),
-        derive_normals: false,
-        images: Default::default(),
-    };
+    let opts = options(params, 1.0, None, 3, Default::default());
     strata::dag::write::write_to(&mut out, &dag, &h.clusters, &opts).expect("the DAG vector writes");
     out.into_inner()
 }
@@ -109,16 +111,7 @@ fn textured(major: u16) -> Vec<u8> {
     let mut h = strata::hierarchy::build(&mesh, &adjacency, &params);
     let lv = levels::build(mesh, &mut h, &LevelParams { ratio: 0.5, top_faces: 16 }, &mut |_| {});
     let mut out = Cursor::new(Vec::new());
-    let opts = WriteOptions {
-        metres_per_unit: 1.0,
-        params,
-        level_ratio: 0.5,
-        tool: "strata vectors".into(),
-        georef: None,
-        encoding: encoding(major),
-        derive_normals: false,
-        images: images.into(),
-    };
+    let opts = options(params, 1.0, None, major, images.into());
     write_to(&mut out, &h, &lv, &opts).expect("the textured vector writes");
     out.into_inner()
 }

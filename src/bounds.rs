@@ -91,12 +91,7 @@ pub fn nodes(
             }
             let (radius_code, radius) = store_radius(grid, needed);
 
-            let normals: Vec<Vec3> = own
-                .iter()
-                .map(|&f| triangle_cross(&q.positions, &mesh.triangles[f as usize]))
-                .filter(|c| c.length_squared() > 0.0)
-                .map(|c| c.normalize().as_vec3())
-                .collect();
+            let normals = face_normals(mesh, q, own);
             let axis = info.cone.axis.normalize_or(Vec3::Z);
             let (axis_code, half_angle, cone) = store_cone(axis, |d| {
                 let mut need = info.cone.half_angle as f64 + angle(axis, d);
@@ -114,6 +109,41 @@ pub fn nodes(
         out.push(level);
     }
     Ok(out)
+}
+
+/// The unit normals of the non-degenerate faces `faces` of `mesh`, on its quantized positions.
+fn face_normals(mesh: &Mesh, q: &Quantized, faces: &[u32]) -> Vec<Vec3> {
+    faces
+        .iter()
+        .map(|&f| triangle_cross(&q.positions, &mesh.triangles[f as usize]))
+        .filter(|c| c.length_squared() > 0.0)
+        .map(|c| c.normalize().as_vec3())
+        .collect()
+}
+
+/// The stored box, sphere (around `center`) and cone (around `axis`) of the faces `faces` of
+/// `mesh` alone, on its quantized positions, rounded outward; and the sphere they decode to. A
+/// DAG's node bounds its own geometry only (strata-v4.md §2).
+pub fn of_faces(mesh: &Mesh, q: &Quantized, grid: &Grid, faces: &[u32], center: Vec3, axis: Vec3) -> (NodeCodes, Vec3, f32) {
+    let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
+    let center = grid.encode(center);
+    let dc = grid.decode(center).as_dvec3();
+    let mut needed = 0f64;
+    for &f in faces {
+        for &v in &mesh.triangles[f as usize] {
+            let p = q.points[v as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+            needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
+        }
+    }
+    let (radius_code, radius) = store_radius(grid, needed);
+    let normals = face_normals(mesh, q, faces);
+    let axis = axis.normalize_or(Vec3::Z);
+    let (axis_code, half_angle, _) = store_cone(axis, |d| normals.iter().map(|&n| angle(d, n)).fold(0.0, f64::max));
+    (NodeCodes { min: lo, max: hi, center, axis: axis_code, half_angle, radius: radius_code }, grid.decode(center), radius)
 }
 
 /// The stored record of a culling cluster of faces `run` of `mesh`, starting from the hierarchy's

@@ -2,20 +2,17 @@
 //! nearest grid point, and at level 0 distinct input positions kept distinct.
 
 use crate::format::Grid;
-use crate::levels::LevelMeshes;
 use crate::mesh::Mesh;
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 
-/// The grid of the file: the bounds of every level's positions, `bits` bits per axis
+/// The grid of the file: the bounds of every level mesh's positions, `bits` bits per axis
 /// ([`GRID_BITS`] in format 2; format 3's precision).
-pub fn model_grid(lv: &LevelMeshes, bits: u32) -> Grid {
+pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> Grid {
     let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for l in &lv.levels {
-        for p in &l.mesh.positions {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
-        }
+    for p in levels.into_iter().flat_map(|m| &m.positions) {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
     }
     if lo.cmpgt(hi).any() {
         (lo, hi) = (Vec3::ZERO, Vec3::ZERO);

@@ -140,28 +140,41 @@ fn write_named<W: Write>(
         Some(p) if p.grid_bits == 0 => auto_grid_bits(&lv.levels[0].mesh),
         Some(p) => p.grid_bits,
     };
-    let grid = model_grid(lv, bits);
+    let grid = model_grid(lv.levels.iter().map(|l| &l.mesh), bits);
     let piece = Piece::new(h, lv, &grid, precision, None, &[], lv.levels.len()).map_err(bad)?;
-    let writer_opts = WriterOptions {
-        metres_per_unit: opts.metres_per_unit,
-        params: opts.params,
-        level_ratio: opts.level_ratio,
-        tool: opts.tool.clone(),
-        grid,
-        attributes,
-        materials: material_table(&lv.levels[0].mesh),
-        input_vertices: lv.levels[0].mesh.vertex_count() as u64,
-        levels: h.levels.len() as u32,
-        georef: opts.georef.clone(),
-        major: opts.encoding.major(),
-        images: opts.images.clone(),
-    };
+    let writer_opts = opts.writer_options(grid, attributes, &lv.levels[0].mesh, h.levels.len() as u32, opts.encoding.major());
     let mut writer = Writer::new(w, path, writer_opts, spill)?;
     let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g, shared: None };
     let textured = !opts.images.is_empty();
     let looks = Looks { attributes, precision, textured, derive_normals: opts.derive_normals };
     piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, looks, &place)?;
     writer.finish()
+}
+
+impl WriteOptions {
+    /// What the format's writer records besides the nodes, for a file of `levels` levels of format
+    /// `major` whose level 0 is `level0`.
+    pub(crate) fn writer_options(&self, grid: Grid, attributes: Attributes, level0: &Mesh, levels: u32, major: u16) -> WriterOptions {
+        WriterOptions {
+            metres_per_unit: self.metres_per_unit,
+            params: self.params,
+            level_ratio: self.level_ratio,
+            tool: self.tool.clone(),
+            grid,
+            attributes,
+            materials: material_table(level0),
+            input_vertices: level0.vertex_count() as u64,
+            levels,
+            georef: self.georef.clone(),
+            major,
+            images: self.images.clone(),
+        }
+    }
+}
+
+/// The corner attributes `mesh` carries.
+pub(crate) fn attributes_of(mesh: &Mesh) -> Attributes {
+    Attributes { normals: !mesh.normals.is_empty(), uvs: !mesh.uvs.is_empty(), colors: !mesh.colors.is_empty() }
 }
 
 /// Where a piece's nodes go in the file: piece level `l` is file level `l + offset`; the levels in
@@ -398,7 +411,7 @@ fn check_inputs(h: &Hierarchy, lv: &LevelMeshes, opts: &WriteOptions) -> std::re
     if let Some(f) = h.clusters.face_group.iter().position(|&c| c as usize >= h.clusters.groups.len()) {
         return Err(format!("face {f} is in cluster {} of {}", h.clusters.face_group[f], h.clusters.groups.len()));
     }
-    let has = |m: &Mesh| Attributes { normals: !m.normals.is_empty(), uvs: !m.uvs.is_empty(), colors: !m.colors.is_empty() };
+    let has = attributes_of;
     let attributes = has(m0);
     let materials = material_table(m0).len();
     let mut total_nodes = 0usize;

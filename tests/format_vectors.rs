@@ -46,7 +46,7 @@ fn the_reader_agrees_with_every_golden_vector() {
 fn front_selection_agrees_with_every_golden_front() {
     use strata::camera::Camera;
     use strata::stream::cache::record_bytes;
-    use strata::stream::refine::{Limits, Priority, Refiner};
+    use strata::stream::refine::Refiner;
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
     let fronts: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(dir.join("fronts.json")).unwrap()).unwrap();
     assert!(fronts.len() >= 10);
@@ -55,17 +55,7 @@ fn front_selection_agrees_with_every_golden_front() {
         let bytes = std::fs::read(dir.join(f["file"].as_str().unwrap())).unwrap();
         let rd = Reader::open(Cursor::new(&bytes)).unwrap();
         let camera = Camera::from_json(&f["camera"]).expect("a camera");
-        let l = &f["limits"];
-        let limits = Limits {
-            pixel_error: l["pixel_error"].as_f64().unwrap() as f32,
-            max_faces: l["max_faces"].as_u64(),
-            max_bytes: l["max_bytes"].as_u64(),
-            priority: match l["priority"].as_str().unwrap() {
-                "error" => Priority::Error,
-                "silhouette" => Priority::Silhouette,
-                _ => Priority::Breadth,
-            },
-        };
+        let limits = limits_of(&f["limits"]);
         let held: Vec<u32> = f["held"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect();
         let attrs = rd.header().attributes;
         let cut = Refiner::default().select(rd.skeleton(), &camera, &limits, &held, &|n| record_bytes(n, attrs));
@@ -86,7 +76,6 @@ fn front_selection_agrees_with_every_golden_front() {
 fn dag_selection_agrees_with_every_golden_front() {
     use strata::camera::Camera;
     use strata::stream::cache::record_bytes;
-    use strata::stream::refine::{Limits, Priority};
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors");
     let fronts: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(dir.join("fronts-v4.json")).unwrap()).unwrap();
     assert!(fronts.len() >= 8);
@@ -96,13 +85,8 @@ fn dag_selection_agrees_with_every_golden_front() {
         let rd = Reader::open(Cursor::new(&bytes)).unwrap();
         assert!(rd.header().is_dag());
         let camera = Camera::from_json(&f["camera"]).expect("a camera");
-        let l = &f["limits"];
-        let limits = Limits {
-            pixel_error: l["pixel_error"].as_f64().unwrap() as f32,
-            max_faces: l["max_faces"].as_u64(),
-            max_bytes: l["max_bytes"].as_u64(),
-            priority: Priority::Error,
-        };
+        let limits = limits_of(&f["limits"]);
+        assert_eq!(limits.priority, strata::stream::refine::Priority::Error, "format 4 has one order");
         let attrs = rd.header().attributes;
         let cut = strata::stream::dag::select_skeleton(rd.skeleton(), &camera, &limits, &[], &|n| record_bytes(n, attrs));
         let ids = |v: &serde_json::Value| v.as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect::<Vec<u32>>();
@@ -115,4 +99,19 @@ fn dag_selection_agrees_with_every_golden_front() {
         mixed += (levels.len() > 1) as usize;
     }
     assert!(mixed >= 2, "{mixed} golden fronts mix levels");
+}
+
+/// A golden front's limits.
+fn limits_of(l: &serde_json::Value) -> strata::stream::refine::Limits {
+    use strata::stream::refine::{Limits, Priority};
+    Limits {
+        pixel_error: l["pixel_error"].as_f64().unwrap() as f32,
+        max_faces: l["max_faces"].as_u64(),
+        max_bytes: l["max_bytes"].as_u64(),
+        priority: match l["priority"].as_str().unwrap() {
+            "error" => Priority::Error,
+            "silhouette" => Priority::Silhouette,
+            _ => Priority::Breadth,
+        },
+    }
 }

@@ -9,10 +9,9 @@
 //! was made from, two shown nodes that border each other share their border edge for edge.
 
 use super::{Dag, Node, NONE};
-use crate::camera::{Camera, Projection};
-use crate::cone::{facing_orthographic, facing_perspective, Facing};
+use crate::camera::Camera;
 use crate::stream::dag::{self as rule, Graph};
-use crate::stream::refine::{Limits, Priority};
+use crate::stream::refine::{sees_bounds, Limits, Priority};
 use glam::Vec3;
 use std::ops::Range;
 
@@ -61,11 +60,7 @@ pub fn shown(node: &Node, p: &[f32], tau: f32) -> bool {
 /// Whether `node` can show anything from `camera`: inside the frustum and not back-facing by its
 /// cone.
 pub fn sees(node: &Node, camera: &Camera) -> bool {
-    let facing = match camera.projection {
-        Projection::Perspective { .. } => facing_perspective(&node.cone, node.center, node.radius, camera.eye),
-        Projection::Orthographic { .. } => facing_orthographic(&node.cone, -camera.forward()),
-    };
-    facing != Facing::Back && camera.sees_sphere(node.center, node.radius)
+    sees_bounds(&node.cone, node.center, node.radius, camera)
 }
 
 /// A cut: the threshold and the nodes shown at it that the camera sees.

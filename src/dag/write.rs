@@ -8,17 +8,16 @@
 
 use super::{Dag, NONE};
 use crate::atomic::AtomicFile;
+use crate::bounds;
 use crate::derived_normals::DerivedNormals;
 use crate::error::{Error, Result};
-use crate::format::codes::{angle, store_cone, store_radius};
+use crate::format::codes::store_radius;
 use crate::format::geom::v3::Lattice;
-use crate::format::skeleton::NodeCodes;
-use crate::format::{Attributes, Grid, GroupIn, NodeIn, WriteSummary, Writer, WriterOptions, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
+use crate::format::{GroupIn, NodeIn, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
 use crate::hierarchy;
 use crate::levels::position_key;
-use crate::mesh::{triangle_cross, Mesh};
-use crate::quantize::{auto_grid_bits, Quantized};
-use crate::write::{check_precision, lattice_shift, material_table, median_edge, node_geometry, uv_density, Encoding, WriteOptions};
+use crate::quantize::{auto_grid_bits, model_grid, Quantized};
+use crate::write::{attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, WriteOptions};
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 use std::path::Path;
@@ -61,9 +60,8 @@ fn write_named<W: std::io::Write>(
     if clusters.face_group.len() != m0.face_count() || dag.input_faces.len() != m0.face_count() {
         return Err(bad(format!("clusters label {} faces but level 0 has {}", clusters.face_group.len(), m0.face_count())));
     }
-    let has = |m: &Mesh| Attributes { normals: !m.normals.is_empty(), uvs: !m.uvs.is_empty(), colors: !m.colors.is_empty() };
-    let attributes = has(m0);
-    if let Some(l) = dag.levels.iter().position(|m| has(m) != attributes) {
+    let attributes = attributes_of(m0);
+    if let Some(l) = dag.levels.iter().position(|m| attributes_of(m) != attributes) {
         return Err(bad(format!("level {l}: corner attributes differ from level 0's {attributes:?}")));
     }
     // Level 0's clusters in level 0's face order.
@@ -71,21 +69,8 @@ fn write_named<W: std::io::Write>(
     clusters.face_group = dag.input_faces.iter().map(|&f| clusters.face_group[f as usize]).collect();
 
     let bits = if precision.grid_bits == 0 { auto_grid_bits(m0) } else { precision.grid_bits };
-    let grid = grid_of(dag, bits);
-    let writer_opts = WriterOptions {
-        metres_per_unit: opts.metres_per_unit,
-        params: opts.params,
-        level_ratio: opts.level_ratio,
-        tool: opts.tool.clone(),
-        grid,
-        attributes,
-        materials: material_table(m0),
-        input_vertices: m0.vertex_count() as u64,
-        levels: dag.levels.len() as u32,
-        georef: opts.georef.clone(),
-        major: MAJOR4,
-        images: opts.images.clone(),
-    };
+    let grid = model_grid(&dag.levels, bits);
+    let writer_opts = opts.writer_options(grid, attributes, m0, dag.levels.len() as u32, MAJOR4);
     let mut writer = Writer::new(out, path, writer_opts, spill)?;
     let textured = !opts.images.is_empty();
 
@@ -111,13 +96,15 @@ fn write_named<W: std::io::Write>(
         for (k, n) in dag.nodes[nodes.start as usize..nodes.end as usize].iter().enumerate() {
             node_of_face[n.faces.start as usize..n.faces.end as usize].fill(k as u32);
         }
-        let faces = |n: u32| -> Vec<u32> { dag.nodes[n as usize].faces.clone().collect() };
+        // Each node's faces, as the codec and the measures take them.
+        let faces: Vec<Vec<u32>> = nodes.clone().map(|n| dag.nodes[n as usize].faces.clone().collect()).collect();
+        let faces = |n: u32| faces[(n - first) as usize].as_slice();
         // Lattices of the inner vertices, from each node's error as built and its edges.
         let shifts: Vec<u32> = nodes
             .clone()
             .map(|n| match dag.nodes[n as usize].source {
                 NONE => 0,
-                s => lattice_shift(dag.groups[s as usize].error.min(median_edge(mesh, &faces(n))), precision.lattice, &grid),
+                s => lattice_shift(dag.groups[s as usize].error.min(median_edge(mesh, faces(n))), precision.lattice, &grid),
             })
             .collect();
         if l > 0 {
@@ -126,7 +113,7 @@ fn write_named<W: std::io::Write>(
         // This level's groups: error and sphere over their children (one level down, stored).
         for g in dag.groups.iter().enumerate().filter(|(_, g)| g.level as usize == l).map(|(g, _)| g) {
             let group = &dag.groups[g];
-            let quantization = group.outputs.clone().map(|n| q.error(&grid, mesh, &faces(n))).fold(0.0, f32::max);
+            let quantization = group.outputs.clone().map(|n| q.error(&grid, mesh, faces(n))).fold(0.0, f32::max);
             let children = dag.children.get(g);
             let mut error = group.error + quantization;
             let center = grid.encode(group.center);
@@ -152,8 +139,8 @@ fn write_named<W: std::io::Write>(
         for n in nodes {
             let node = &dag.nodes[n as usize];
             let own = faces(n);
-            let error = if l == 0 { q.error(&grid, mesh, &own) } else { group_error[node.source as usize] };
-            let (codes, center, radius) = bounds(mesh, &q, &grid, &own, node.center, node.cone.axis);
+            let error = if l == 0 { q.error(&grid, mesh, own) } else { group_error[node.source as usize] };
+            let (codes, center, radius) = bounds::of_faces(mesh, &q, &grid, own, node.center, node.cone.axis);
             node_error[n as usize] = error;
             node_sphere[n as usize] = (center, radius);
             let lattice = Lattice {
@@ -162,7 +149,7 @@ fn write_named<W: std::io::Write>(
                 uv_bits: if attributes.uvs { precision.uv_bits } else { 0 },
                 color_bits: if attributes.colors { precision.color_bits } else { 0 },
             };
-            let geometry = node_geometry(mesh, &q, &grid, &own, (l == 0).then_some(&clusters), attributes, lattice, derived.as_ref())
+            let geometry = node_geometry(mesh, &q, &grid, own, (l == 0).then_some(&clusters), attributes, lattice, derived.as_ref())
                 .map_err(|m| bad(format!("level {l} node {n}: {m}")))?;
             writer.add(NodeIn {
                 level: l as u32,
@@ -172,52 +159,10 @@ fn write_named<W: std::io::Write>(
                 neighbors: Vec::new(),
                 codes,
                 error,
-                uv_density: if textured { uv_density(mesh, &own) } else { 0.0 },
+                uv_density: if textured { uv_density(mesh, own) } else { 0.0 },
                 geometry,
             })?;
         }
     }
     writer.finish()
-}
-
-/// The grid spanning every level's positions, `bits` bits per axis.
-fn grid_of(dag: &Dag, bits: u32) -> Grid {
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for p in dag.levels.iter().flat_map(|m| &m.positions) {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
-    if lo.cmpgt(hi).any() {
-        (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
-    }
-    Grid::fit(lo, hi, bits)
-}
-
-/// A node's stored box, sphere and cone over its own quantized faces, rounded outward; and the
-/// sphere they decode to.
-fn bounds(mesh: &Mesh, q: &Quantized, grid: &Grid, faces: &[u32], center: Vec3, axis: Vec3) -> (NodeCodes, Vec3, f32) {
-    let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
-    let center = grid.encode(center);
-    let dc = grid.decode(center).as_dvec3();
-    let mut needed = 0f64;
-    for &f in faces {
-        for &v in &mesh.triangles[f as usize] {
-            let p = q.points[v as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-            needed = needed.max(dc.distance(q.positions[v as usize].as_dvec3()));
-        }
-    }
-    let (radius_code, radius) = store_radius(grid, needed);
-    let normals: Vec<Vec3> = faces
-        .iter()
-        .map(|&f| triangle_cross(&q.positions, &mesh.triangles[f as usize]))
-        .filter(|c| c.length_squared() > 0.0)
-        .map(|c| c.normalize().as_vec3())
-        .collect();
-    let axis = axis.normalize_or(Vec3::Z);
-    let (axis_code, half_angle, _) = store_cone(axis, |d| normals.iter().map(|&n| angle(d, n)).fold(0.0, f64::max));
-    (NodeCodes { min: lo, max: hi, center, axis: axis_code, half_angle, radius: radius_code }, grid.decode(center), radius)
 }

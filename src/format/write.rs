@@ -398,10 +398,11 @@ impl<W: Write> Writer<W> {
     }
 
     /// Format 4: the group records and each node's consumer as stored, for nodes in file order
-    /// (`order`: per level, the pending nodes in node order).
-    fn dag_codes(&self, order: &[Vec<usize>]) -> std::result::Result<DagCodes, String> {
+    /// (`order`: per level, the pending nodes in node order; `group_of`: per level, each group's
+    /// number by its key).
+    fn dag_codes(&self, order: &[Vec<usize>], group_of: &[FxHashMap<u32, u32>]) -> std::result::Result<DagCodes, String> {
         let nl = self.levels.len();
-        let index = |l: usize, key: u32| self.groups[l].binary_search_by_key(&key, |g| g.key).ok();
+        let index = |l: usize, key: u32| group_of[l].get(&key).map(|&g| g as usize);
         let mut out = DagCodes { groups: vec![Vec::new(); nl], consumer: Vec::new() };
         let mut outputs: Vec<Vec<u32>> = self.groups.iter().map(|g| vec![0; g.len()]).collect();
         let mut children = outputs.clone();
@@ -690,7 +691,7 @@ impl<W: Write> Writer<W> {
         let texr = (!images.is_empty()).then(|| texture::encode_texr(images, &image_order, &self.opts.materials, &density));
         let code_payload = code.as_ref().map(|(t, _)| t.encode());
         let paged = super::paged(header.major, header.minor);
-        let dag_codes = if dag { Some(self.dag_codes(&order).map_err(bad)?) } else { None };
+        let dag_codes = if dag { Some(self.dag_codes(&order, &group_of).map_err(bad)?) } else { None };
         let skel = encode_skel(
             &levels,
             &records,

@@ -2,9 +2,10 @@
 //! the top level down as in the paper, so that displayed neighbours differ by at most one level.
 
 use crate::camera::{Camera, Projection};
-use crate::cone::{facing_orthographic, facing_perspective, Facing};
+use crate::cone::{facing_orthographic, facing_perspective, Cone, Facing};
 use crate::format::skeleton::Skeleton;
 use crate::format::{NodeRecord, NO_PARENT};
+use glam::Vec3;
 use std::cmp::Ordering;
 use std::f32::consts::PI;
 
@@ -191,11 +192,17 @@ impl Refiner {
 
 /// Whether a node can show anything: inside the frustum and not back-facing by its cone.
 pub fn sees(n: &NodeRecord, camera: &Camera) -> bool {
+    sees_bounds(&n.cone, n.center, n.radius, camera)
+}
+
+/// Whether anything with normals in `cone` and inside the sphere (`center`, `radius`) can show:
+/// the sphere meets the frustum and the cone is not back-facing (selection.md §2).
+pub fn sees_bounds(cone: &Cone, center: Vec3, radius: f32, camera: &Camera) -> bool {
     let facing = match camera.projection {
-        Projection::Perspective { .. } => facing_perspective(&n.cone, n.center, n.radius, camera.eye),
-        Projection::Orthographic { .. } => facing_orthographic(&n.cone, -camera.forward()),
+        Projection::Perspective { .. } => facing_perspective(cone, center, radius, camera.eye),
+        Projection::Orthographic { .. } => facing_orthographic(cone, -camera.forward()),
     };
-    facing != Facing::Back && camera.sees_sphere(n.center, n.radius)
+    facing != Facing::Back && camera.sees_sphere(center, radius)
 }
 
 /// The paper's refinement priority f(g) = (1 − cos(angle(e, n) + c)) / 2 when angle(e, n) + c < π,
