@@ -2,7 +2,7 @@
 //! simplify per level → write.
 
 use crate::dag::{self, DagParams};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::format::WriteSummary;
 use crate::hierarchy::{self, HierarchyParams};
 use crate::import::{import_with, ImportOptions};
@@ -206,11 +206,6 @@ pub fn convert(
     };
 
     let mut choice_warnings = Vec::new();
-    if opts.dag && opts.build == Build::Partitioned {
-        return Err(Error::invalid(input, None, "a DAG (format 4) is built in memory; the partitioned build makes trees"));
-    }
-    let in_core = ConvertOptions { build: Build::InCore, ..opts.clone() };
-    let opts = if opts.dag { &in_core } else { opts };
     if let Some((budget, reader, declared)) = partitioned(input, import, opts, &mut choice_warnings)? {
         let input = crate::partition::Input { path: input, import, reader, declared };
         return crate::partition::convert(input, output, opts, &budget, progress);
@@ -239,7 +234,8 @@ pub fn convert(
     let mesh = &imported.mesh;
     progress.stage("group", 0);
     let adjacency = Adjacency::build(mesh);
-    let mut h = hierarchy::build(mesh, &adjacency, &opts.hierarchy);
+    // A DAG takes only level 0's groups (and the culling clusters) from the grouping.
+    let mut h = hierarchy::build_levels(mesh, &adjacency, &opts.hierarchy, opts.dag.then_some(1));
     drop(adjacency);
     lap(&mut times.group_ms);
 

@@ -10,7 +10,7 @@ use rustc_hash::FxHashMap;
 use std::path::Path;
 use strata::camera::Camera;
 use strata::format::{NodeGeometry, Reader, NO_PARENT};
-use strata::pipeline::{convert, ConvertOptions, Silent};
+use strata::pipeline::{convert, Build, ConvertOptions, Silent};
 use strata::render::{crack_pixels, Image};
 use strata::stream::{session, Budgets, Streamer};
 
@@ -33,17 +33,38 @@ fn threshold_cut(rd: &Reader<std::fs::File>, camera: &Camera, tau: f32) -> Vec<u
         .collect()
 }
 
-fn converted(name: &str) -> std::path::PathBuf {
+/// The noisy sphere converted with `--dag`: in memory, or partitioned into about ten cells whose
+/// borders the cuts cross.
+fn converted(name: &str, partitioned: bool) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = std::env::temp_dir().join(format!("strata-format4-{name}-{}.strata", std::process::id()));
-    let opts = ConvertOptions { dag: true, ..ConvertOptions::default() };
-    convert(&root.join("fixtures/noisy_sphere.ply"), &Default::default(), &out, &opts, &mut Silent).expect("convert");
+    let work = std::env::temp_dir().join(format!("strata-format4-{name}-{}-work", std::process::id()));
+    std::fs::create_dir_all(&work).unwrap();
+    let opts = match partitioned {
+        true => ConvertOptions { dag: true, build: Build::Partitioned, memory: 16 << 20, temp: Some(work.clone()), ..Default::default() },
+        false => ConvertOptions { dag: true, build: Build::InCore, ..ConvertOptions::default() },
+    };
+    let c = convert(&root.join("fixtures/noisy_sphere.ply"), &Default::default(), &out, &opts, &mut Silent).expect("convert");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
+    std::fs::remove_dir(&work).ok();
+    match partitioned {
+        true => assert!(c.cells.is_some_and(|n| n >= 6), "{:?} cells", c.cells),
+        false => assert_eq!(c.cells, None),
+    }
     out
 }
 
 #[test]
 fn dag_files_verify_and_every_cut_of_them_is_closed() {
-    let out = converted("cuts");
+    every_cut_is_closed(converted("cuts", false));
+}
+
+#[test]
+fn partitioned_dag_files_verify_and_every_cut_of_them_is_closed() {
+    every_cut_is_closed(converted("cuts-partitioned", true));
+}
+
+fn every_cut_is_closed(out: std::path::PathBuf) {
     let v = strata::format::verify_path(&out);
     assert!(v.problems.is_empty(), "{:?}", v.problems);
     let rd = Reader::open_path(&out).expect("open");
@@ -90,10 +111,18 @@ fn dag_files_verify_and_every_cut_of_them_is_closed() {
 /// file with no seams, leave no crack pixel though most mix levels.
 #[test]
 fn the_streamer_shows_dag_cuts_without_cracks() {
+    streamed_without_cracks(converted("stream", false));
+}
+
+#[test]
+fn the_streamer_shows_partitioned_dag_cuts_without_cracks() {
+    streamed_without_cracks(converted("stream-partitioned", true));
+}
+
+fn streamed_without_cracks(out: std::path::PathBuf) {
     const W: u32 = 640;
     const H: u32 = 480;
     const FRAMES: usize = 32;
-    let out = converted("stream");
     let rd = Reader::open_path(&out).expect("open");
     let full = strata::assemble::to_mesh(&rd, 0).expect("level 0");
     let full_indices: Vec<u32> = full.triangles.iter().flatten().copied().collect();

@@ -61,9 +61,9 @@ pub struct Args {
     #[arg(long)]
     pub in_core: bool,
     /// Build a DAG of nodes and write format 4 (format-spec/strata-v4.md): displayed nodes meet
-    /// edge for edge at any level difference. Built in memory; every strata reader and the web
-    /// viewer read it.
-    #[arg(long, conflicts_with_all = ["partitioned", "format_version"])]
+    /// edge for edge at any level difference, in memory or partitioned; every strata reader and
+    /// the web viewer read it.
+    #[arg(long, conflicts_with = "format_version")]
     pub dag: bool,
     /// Format version to write: 3 compresses node geometry (positions quantized as --grid-bits,
     /// --lattice and --normal-bits say); 2 stores fixed-width arrays on a 20-bit grid.

@@ -39,24 +39,70 @@ const NORMAL_SEAM_ANGLE: f32 = 30.0;
 /// `level0` (one per face, `0..n`; the grouping's level 0). `on_level` is called after each level
 /// with its index and face count, for progress reports.
 pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut(usize, usize)) -> Dag {
+    let start = Start { mesh, labels: level0.to_vec(), made_by: Vec::new() };
+    build_from(start, p, &Bounds::default(), on_level)
+}
+
+/// Where a build starts: a mesh and its level-0 nodes.
+pub struct Start {
+    /// Cleaned, face geometry computed.
+    pub mesh: Mesh,
+    /// Per face, its level-0 node (`0..n`).
+    pub labels: Vec<u32>,
+    /// Empty when level 0 is the input. In a piece of a partitioned build whose level 0 holds the
+    /// top nodes of earlier pieces: the groups that made them, as stand-ins of level 0 whose
+    /// `outputs` are runs of labels (every label in one), with the error and sphere those groups
+    /// were stored with. The DAG's groups begin with them.
+    pub made_by: Vec<Group>,
+}
+
+/// What else bounds a build besides [`DagParams`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Bounds<'a> {
+    /// Build exactly this many levels above level 0 (a piece of a partitioned build), whatever
+    /// the top's size; `None`: until the top has at most `top_faces` faces or stops shrinking.
+    pub levels: Option<usize>,
+    /// Positions (as [`position_key`]s) pinned at every level: where a piece meets other pieces.
+    pub pinned: Option<&'a FxHashSet<[u32; 3]>>,
+}
+
+/// [`build`] from any [`Start`], within `bounds`.
+pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut dyn FnMut(usize, usize)) -> Dag {
+    let Start { mesh, labels: level0, made_by } = start;
     assert_eq!(level0.len(), mesh.triangles.len(), "dag::build: one level-0 label per face");
     let labels = level0.iter().copied().max().map_or(0, |m| m as usize + 1);
     let mut pieces: Vec<Vec<u32>> = vec![Vec::new(); labels];
     for (f, &n) in level0.iter().enumerate() {
         pieces[n as usize].push(f as u32);
     }
-    pieces.retain(|p| !p.is_empty());
+    let mut sources = vec![NONE; pieces.len()];
+    for (g, group) in made_by.iter().enumerate() {
+        sources[group.outputs.start as usize..group.outputs.end as usize].fill(g as u32);
+    }
+    let (pieces, sources): (Vec<Vec<u32>>, Vec<u32>) = pieces.into_iter().zip(sources).filter(|(p, _)| !p.is_empty()).unzip();
     let median = {
         let mut sizes: Vec<usize> = pieces.iter().map(Vec::len).collect();
         sizes.sort_unstable();
         sizes.get(sizes.len() / 2).copied().unwrap_or(1).max(1)
     };
-    let sources = vec![NONE; pieces.len()];
     let mut dag = Dag { input_faces: pieces.iter().flatten().copied().collect(), ..Dag::default() };
     let mut mesh = place(mesh, 0, pieces, &sources, &mut dag.nodes);
+    // The stand-ins' outputs, renumbered as placed.
+    dag.groups = made_by;
+    for g in &mut dag.groups {
+        g.outputs = 0..0;
+    }
+    for (n, node) in dag.nodes.iter().enumerate().filter(|(_, n)| n.source != NONE) {
+        let out = &mut dag.groups[node.source as usize].outputs;
+        *out = if out.start == out.end { n as u32..n as u32 + 1 } else { out.start..n as u32 + 1 };
+    }
     on_level(0, mesh.triangles.len());
     let mut level = 0usize;
-    while mesh.triangles.len() > p.top_faces {
+    let more = |level: usize, faces: usize| match bounds.levels {
+        Some(n) => level < n,
+        None => faces > p.top_faces,
+    };
+    while more(level, mesh.triangles.len()) {
         let here = dag.level_nodes(level);
         let first = here.start as usize;
         let count = here.len();
@@ -66,7 +112,12 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
         }
         let (group_of_node, group_count) = gather(&mesh, &node_of_face, count);
         let labels: Vec<u32> = node_of_face.iter().map(|&n| group_of_node[n as usize]).collect();
-        let pinned = shared_vertices(&mesh, &labels);
+        let mut pinned = shared_vertices(&mesh, &labels);
+        if let Some(keep) = bounds.pinned {
+            for (flag, &x) in pinned.iter_mut().zip(&mesh.positions) {
+                *flag |= keep.contains(&position_key(x));
+            }
+        }
         let before = mesh.triangles.len();
         let s = simplify_each(&mesh, &labels, group_count, &pinned, p.ratio.clamp(0.0, 1.0));
 
@@ -113,7 +164,8 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
         let below = std::mem::replace(&mut mesh, place(s.mesh, level, pieces, &sources, &mut dag.nodes));
         dag.levels.push(below);
         on_level(level, mesh.triangles.len());
-        if mesh.triangles.len() as f64 > STALLED * before as f64 || made <= 1 {
+        let stalled = mesh.triangles.len() as f64 > STALLED * before as f64 || made <= 1;
+        if stalled && bounds.levels.is_none() {
             break;
         }
     }

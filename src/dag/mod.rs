@@ -21,7 +21,7 @@ mod gather;
 mod split;
 pub mod write;
 
-pub use build::{build, shared_vertices, DagParams};
+pub use build::{build, build_from, shared_vertices, Bounds, DagParams, Start};
 
 use crate::cone::Cone;
 use crate::hierarchy::Lists;

@@ -13,13 +13,15 @@ use crate::derived_normals::DerivedNormals;
 use crate::error::{Error, Result};
 use crate::format::codes::store_radius;
 use crate::format::geom::v3::Lattice;
-use crate::format::{GroupIn, NodeIn, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
+use crate::format::{Attributes, Grid, GroupIn, NodeIn, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
 use crate::hierarchy;
 use crate::levels::position_key;
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
-use crate::write::{attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, WriteOptions};
+use crate::write::{
+    attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions,
+};
 use glam::Vec3;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::Path;
 
 /// Write `dag` to `path` as format 4, atomically (a temporary file renamed when complete).
@@ -57,34 +59,168 @@ fn write_named<W: std::io::Write>(
     let Some(m0) = dag.levels.first().filter(|m| m.face_count() > 0) else {
         return Err(bad("nothing to write: level 0 has no faces".into()));
     };
-    if clusters.face_group.len() != m0.face_count() || dag.input_faces.len() != m0.face_count() {
-        return Err(bad(format!("clusters label {} faces but level 0 has {}", clusters.face_group.len(), m0.face_count())));
-    }
     let attributes = attributes_of(m0);
-    if let Some(l) = dag.levels.iter().position(|m| attributes_of(m) != attributes) {
-        return Err(bad(format!("level {l}: corner attributes differ from level 0's {attributes:?}")));
-    }
-    // Level 0's clusters in level 0's face order.
-    let mut clusters = clusters.clone();
-    clusters.face_group = dag.input_faces.iter().map(|&f| clusters.face_group[f as usize]).collect();
-
     let bits = if precision.grid_bits == 0 { auto_grid_bits(m0) } else { precision.grid_bits };
     let grid = model_grid(&dag.levels, bits);
     let writer_opts = opts.writer_options(grid, attributes, m0, dag.levels.len() as u32, MAJOR4);
     let mut writer = Writer::new(out, path, writer_opts, spill)?;
-    let textured = !opts.images.is_empty();
+    let place = Place {
+        grid,
+        precision,
+        attributes,
+        derive_normals: opts.derive_normals,
+        textured: !opts.images.is_empty(),
+        first: 0,
+        node_key: &|n| n,
+        group_key: &|g| g,
+        base: Base::Input { clusters, pinned: None },
+    };
+    write_levels(dag, &place, &mut |r| r.add_to(&mut writer), &bad)?;
+    writer.finish()
+}
 
-    // Per group, its stored error and sphere (decoded), filled level by level from the bottom.
-    let mut group_error = vec![0f32; dag.groups.len()];
-    let mut group_sphere = vec![(Vec3::ZERO, 0f32); dag.groups.len()];
-    let mut node_error = vec![0f32; dag.nodes.len()];
-    let mut node_sphere = vec![(Vec3::ZERO, 0f32); dag.nodes.len()];
+/// Where a DAG's levels go in a file, and what its level 0 is.
+pub struct Place<'a> {
+    pub grid: Grid,
+    pub precision: Precision,
+    /// The file's corner attributes, which every level must carry.
+    pub attributes: Attributes,
+    /// Whether nodes store normals derived from each level's geometry.
+    pub derive_normals: bool,
+    /// Whether the file has images (then nodes get their UV density).
+    pub textured: bool,
+    /// The file level of the DAG's level 0.
+    pub first: u32,
+    /// The key of node `n` and of group `g` (their indices in the DAG) among their file level's.
+    pub node_key: &'a dyn Fn(u32) -> u32,
+    pub group_key: &'a dyn Fn(u32) -> u32,
+    pub base: Base<'a>,
+}
+
+/// What a DAG's level 0 is.
+pub enum Base<'a> {
+    /// The input, written with the grouping's culling `clusters` (over the input's faces, in the
+    /// input's order). Vertices at `pinned` positions (where a piece meets others) take their
+    /// nearest grid point whatever the others do, as every piece puts them.
+    Input { clusters: &'a hierarchy::Level, pinned: Option<&'a FxHashSet<[u32; 3]>> },
+    /// Nodes written already, the tops of earlier pieces: their vertices' grid points by position
+    /// and, per node, what it was stored with. Not written again; their consumers are.
+    Tops { points: &'a FxHashMap<[u32; 3], [u32; 3]>, stored: &'a [Stored] },
+}
+
+/// A node's or group's error and sphere as stored (decoded).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stored {
+    pub error: f32,
+    pub center: Vec3,
+    pub radius: f32,
+}
+
+/// What [`write_levels`] gives the file.
+pub enum Record {
+    Node(Box<NodeIn>),
+    Group(GroupIn),
+    /// Node `key` of `level`, added earlier, is a child of `group`.
+    Consumer {
+        level: u32,
+        key: u32,
+        group: u32,
+    },
+}
+
+impl Record {
+    /// Give it to `writer`.
+    pub fn add_to<W: std::io::Write>(self, writer: &mut Writer<W>) -> Result<()> {
+        match self {
+            Record::Node(n) => writer.add(*n),
+            Record::Group(g) => writer.add_group(g),
+            Record::Consumer { level, key, group } => {
+                writer.set_parent(level, key, group);
+                Ok(())
+            }
+        }
+    }
+}
+
+/// How a DAG's top level was written: its vertices' grid points, and what its nodes and their
+/// source groups were stored with (per top node; per group, [`Stored::default`] for the others).
+pub struct Written {
+    pub points: Vec<[u32; 3]>,
+    pub nodes: Vec<Stored>,
+    pub groups: Vec<Stored>,
+}
+
+/// Encode `dag`'s levels (all but level 0 when it holds [`Base::Tops`]) and their groups into
+/// records for the file, level 0 first. A top node's consumer is left for whoever builds on it.
+pub fn write_levels(
+    dag: &Dag,
+    place: &Place,
+    emit: &mut dyn FnMut(Record) -> Result<()>,
+    bad: &dyn Fn(String) -> Error,
+) -> Result<Written> {
+    let Place { grid, precision, attributes, .. } = *place;
+    if let Some(l) = dag.levels.iter().position(|m| attributes_of(m) != attributes) {
+        return Err(bad(format!("level {l}: corner attributes differ from the file's {attributes:?}")));
+    }
+    // Per group, its stored error and sphere, filled level by level from the bottom; the
+    // stand-ins for earlier pieces' groups hold what those were stored with.
+    let mut group_stored = vec![Stored::default(); dag.groups.len()];
+    for (g, group) in dag.groups.iter().enumerate().filter(|(_, g)| g.level == 0) {
+        group_stored[g] = Stored { error: group.error, center: group.center, radius: group.radius };
+    }
+    let mut node_stored = vec![Stored::default(); dag.nodes.len()];
     // Grid points of the level below, by position, before its lattices.
     let mut below: FxHashMap<[u32; 3], [u32; 3]> = FxHashMap::default();
+    let mut top_points = Vec::new();
     for (l, mesh) in dag.levels.iter().enumerate() {
+        let file_level = place.first + l as u32;
         let nodes = dag.level_nodes(l);
         let first = nodes.start;
-        let mut q = if l == 0 { Quantized::distinct(&grid, mesh).map_err(bad)? } else { Quantized::new(&grid, mesh) };
+        let node_key = |n: u32| (place.node_key)(n);
+        // Each node's faces, as the codec and the measures take them.
+        let faces: Vec<Vec<u32>> = nodes.clone().map(|n| dag.nodes[n as usize].faces.clone().collect()).collect();
+        let faces = |n: u32| faces[(n - first) as usize].as_slice();
+        let mut clusters = None;
+        let mut q = match (&place.base, l) {
+            (Base::Input { clusters: c, pinned }, 0) => {
+                if c.face_group.len() != mesh.face_count() || dag.input_faces.len() != mesh.face_count() {
+                    return Err(bad(format!("clusters label {} faces but level 0 has {}", c.face_group.len(), mesh.face_count())));
+                }
+                // Level 0's clusters in level 0's face order.
+                let mut c = (*c).clone();
+                c.face_group = dag.input_faces.iter().map(|&f| c.face_group[f as usize]).collect();
+                clusters = Some(c);
+                let kept: Vec<bool> = match pinned {
+                    Some(p) => mesh.positions.iter().map(|x| p.contains(&position_key(*x))).collect(),
+                    None => Vec::new(),
+                };
+                Quantized::distinct_keeping(&grid, mesh, &kept).map_err(bad)?
+            }
+            (Base::Tops { points, stored }, 0) => {
+                if stored.len() != nodes.len() {
+                    return Err(bad(format!("{} stored nodes for {} at level 0", stored.len(), nodes.len())));
+                }
+                let mut q = Quantized::new(&grid, mesh);
+                for (v, x) in mesh.positions.iter().enumerate() {
+                    let g = *points.get(&position_key(*x)).ok_or_else(|| bad(format!("level 0 vertex {v} has no grid point")))?;
+                    q.points[v] = g;
+                    q.positions[v] = grid.decode(g);
+                }
+                below = mesh.positions.iter().zip(&q.points).map(|(p, &g)| (position_key(*p), g)).collect();
+                for n in nodes.clone() {
+                    node_stored[n as usize] = stored[(n - first) as usize];
+                    let consumer = dag.nodes[n as usize].consumer;
+                    if consumer != NONE {
+                        emit(Record::Consumer { level: file_level, key: node_key(n), group: (place.group_key)(consumer) })?;
+                    }
+                }
+                if dag.levels.len() == 1 {
+                    top_points = q.points;
+                }
+                continue;
+            }
+            _ => Quantized::new(&grid, mesh),
+        };
         for (v, p) in mesh.positions.iter().enumerate() {
             if let Some(&g) = below.get(&position_key(*p)) {
                 q.points[v] = g;
@@ -96,9 +232,6 @@ fn write_named<W: std::io::Write>(
         for (k, n) in dag.nodes[nodes.start as usize..nodes.end as usize].iter().enumerate() {
             node_of_face[n.faces.start as usize..n.faces.end as usize].fill(k as u32);
         }
-        // Each node's faces, as the codec and the measures take them.
-        let faces: Vec<Vec<u32>> = nodes.clone().map(|n| dag.nodes[n as usize].faces.clone().collect()).collect();
-        let faces = |n: u32| faces[(n - first) as usize].as_slice();
         // Lattices of the inner vertices, from each node's error as built and its edges.
         let shifts: Vec<u32> = nodes
             .clone()
@@ -111,7 +244,7 @@ fn write_named<W: std::io::Write>(
             q.snap_inner(&grid, mesh, &node_of_face, &shifts);
         }
         // This level's groups: error and sphere over their children (one level down, stored).
-        for g in dag.groups.iter().enumerate().filter(|(_, g)| g.level as usize == l).map(|(g, _)| g) {
+        for g in dag.groups.iter().enumerate().filter(|(_, g)| g.level as usize == l && l > 0).map(|(g, _)| g) {
             let group = &dag.groups[g];
             let quantization = group.outputs.clone().map(|n| q.error(&grid, mesh, faces(n))).fold(0.0, f32::max);
             let children = dag.children.get(g);
@@ -120,49 +253,51 @@ fn write_named<W: std::io::Write>(
             let dc = grid.decode(center).as_dvec3();
             let mut needed = 0f64;
             for &c in children {
-                error = error.max(node_error[c as usize]);
-                let (cc, cr) = node_sphere[c as usize];
-                needed = needed.max(dc.distance(cc.as_dvec3()) + cr as f64);
+                let child = node_stored[c as usize];
+                error = error.max(child.error);
+                needed = needed.max(dc.distance(child.center.as_dvec3()) + child.radius as f64);
                 let s = dag.nodes[c as usize].source;
                 if s != NONE {
-                    let (sc, sr) = group_sphere[s as usize];
-                    needed = needed.max(dc.distance(sc.as_dvec3()) + sr as f64);
+                    let source = group_stored[s as usize];
+                    needed = needed.max(dc.distance(source.center.as_dvec3()) + source.radius as f64);
                 }
             }
             let (radius_code, radius) = store_radius(&grid, needed);
-            group_error[g] = error;
-            group_sphere[g] = (grid.decode(center), radius);
-            writer.add_group(GroupIn { level: l as u32, key: g as u32, error, center, radius: radius_code })?;
+            group_stored[g] = Stored { error, center: grid.decode(center), radius };
+            emit(Record::Group(GroupIn { level: file_level, key: (place.group_key)(g as u32), error, center, radius: radius_code }))?;
         }
         let derived =
-            (opts.derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &q.points, precision.normal_bits, |_| false));
+            (place.derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &q.points, precision.normal_bits, |_| false));
         for n in nodes {
             let node = &dag.nodes[n as usize];
             let own = faces(n);
-            let error = if l == 0 { q.error(&grid, mesh, own) } else { group_error[node.source as usize] };
+            let error = if l == 0 { q.error(&grid, mesh, own) } else { group_stored[node.source as usize].error };
             let (codes, center, radius) = bounds::of_faces(mesh, &q, &grid, own, node.center, node.cone.axis);
-            node_error[n as usize] = error;
-            node_sphere[n as usize] = (center, radius);
+            node_stored[n as usize] = Stored { error, center, radius };
             let lattice = Lattice {
                 shift: shifts[(n - first) as usize],
                 normal_bits: if attributes.normals { precision.normal_bits } else { 0 },
                 uv_bits: if attributes.uvs { precision.uv_bits } else { 0 },
                 color_bits: if attributes.colors { precision.color_bits } else { 0 },
             };
-            let geometry = node_geometry(mesh, &q, &grid, own, (l == 0).then_some(&clusters), attributes, lattice, derived.as_ref())
-                .map_err(|m| bad(format!("level {l} node {n}: {m}")))?;
-            writer.add(NodeIn {
-                level: l as u32,
-                key: n,
-                parent: if node.consumer == NONE { NO_PARENT } else { node.consumer },
-                source: if node.source == NONE { NO_PARENT } else { node.source },
+            let geometry = node_geometry(mesh, &q, &grid, own, clusters.as_ref(), attributes, lattice, derived.as_ref())
+                .map_err(|m| bad(format!("level {file_level} node {}: {m}", node_key(n))))?;
+            let key = |g: u32| if g == NONE { NO_PARENT } else { (place.group_key)(g) };
+            emit(Record::Node(Box::new(NodeIn {
+                level: file_level,
+                key: node_key(n),
+                parent: key(node.consumer),
+                source: key(node.source),
                 neighbors: Vec::new(),
                 codes,
                 error,
-                uv_density: if textured { uv_density(mesh, own) } else { 0.0 },
+                uv_density: if place.textured { uv_density(mesh, own) } else { 0.0 },
                 geometry,
-            })?;
+            })))?;
         }
+        top_points = q.points;
     }
-    writer.finish()
+    let top = dag.level_nodes(dag.levels.len().saturating_sub(1));
+    let nodes = node_stored[top.start as usize..top.end as usize].to_vec();
+    Ok(Written { points: top_points, nodes, groups: group_stored })
 }

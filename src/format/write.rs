@@ -216,6 +216,8 @@ pub struct Writer<W> {
     color_bits: Option<u32>,
     /// Neighbour pairs `(level, key, key)` added after their nodes ([`Writer::link`]).
     links: Vec<(u32, u32, u32)>,
+    /// Parents `(level, key, parent)` set after their nodes ([`Writer::set_parent`]).
+    parents: Vec<(u32, u32, u32)>,
     /// Format 4: the groups of each level.
     groups: Vec<Vec<GroupIn>>,
     spill_dir: Option<PathBuf>,
@@ -253,6 +255,7 @@ impl<W: Write> Writer<W> {
             normal_bits: None,
             color_bits: None,
             links: Vec::new(),
+            parents: Vec::new(),
             groups,
             spill_dir: spill_dir.map(Path::to_path_buf),
         })
@@ -460,6 +463,11 @@ impl<W: Write> Writer<W> {
         self.opts.input_vertices = n;
     }
 
+    /// The file's levels so far.
+    pub fn levels(&self) -> u32 {
+        self.levels.len() as u32
+    }
+
     /// Let the file have `levels` levels (not fewer than it has): the partitioned build knows how
     /// many only once it has merged its cells.
     pub fn set_levels(&mut self, levels: u32) -> Result<()> {
@@ -481,10 +489,36 @@ impl<W: Write> Writer<W> {
         self.links.push((level, a, b));
     }
 
+    /// Make `parent` the parent (format 4: the consumer group) of node `key` of `level`, whether or
+    /// not it has been added yet: a partitioned build knows it only once it builds on the node.
+    pub fn set_parent(&mut self, level: u32, key: u32, parent: u32) {
+        self.parents.push((level, key, parent));
+    }
+
     /// Number the nodes, write the whole file and return what it holds.
     pub fn finish(mut self) -> Result<WriteSummary> {
         if self.levels[0].is_empty() {
             return Err(Error::invalid(&self.path, None, "nothing to write: level 0 has no nodes"));
+        }
+        if !self.parents.is_empty() {
+            let mut parents = std::mem::take(&mut self.parents);
+            parents.sort_unstable();
+            for (l, pending) in self.levels.iter_mut().enumerate() {
+                let set = &parents[parents.partition_point(|x| (x.0 as usize) < l)..parents.partition_point(|x| (x.0 as usize) <= l)];
+                let mut by_key: Vec<(u32, usize)> = pending.iter().enumerate().map(|(i, p)| (p.key, i)).collect();
+                by_key.sort_unstable();
+                for &(_, key, parent) in set {
+                    match by_key.binary_search_by_key(&key, |x| x.0) {
+                        Ok(i) => pending[by_key[i].1].parent = parent,
+                        Err(_) => {
+                            return Err(Error::invalid(&self.path, None, format!("level {l}: no node {key} to give parent {parent}")))
+                        }
+                    }
+                }
+            }
+            if let Some(&(l, key, _)) = parents.iter().find(|x| x.0 as usize >= self.levels.len()) {
+                return Err(Error::invalid(&self.path, None, format!("a parent for node {key} of level {l}: the file has fewer levels")));
+            }
         }
         let code = if self.opts.major >= 3 { Some(self.code_models()?) } else { None };
         let bad = |msg: String| Error::invalid(&self.path, None, msg);

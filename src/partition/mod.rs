@@ -17,6 +17,7 @@
 //! that weld the tops by position link such nodes as neighbours.
 
 mod cells;
+mod dag;
 mod tops;
 mod vertex_normals;
 mod work;
@@ -238,7 +239,12 @@ pub fn convert(
         input_vertices: 0,
         levels: k as u32 + 1,
         georef: None,
-        major: if precision.is_some() { 3 } else { 2 },
+        major: match precision {
+            Some(_) if opts.dag => crate::format::MAJOR4,
+            Some(_) => 3,
+            None if opts.dag => return Err(Error::invalid(input, None, "a DAG (format 4) stores node geometry as format 3 does")),
+            None => 2,
+        },
         images: images.into(),
     };
     let mut file = crate::atomic::AtomicFile::create(output)?;
@@ -262,7 +268,11 @@ pub fn convert(
         derive_normals: vertex_normals.is_some(),
         temp: temp.path(),
     };
-    let (summary, cell_warnings) = work::build(&job, &spooled, writer, budget.threads, progress)?;
+    let (summary, cell_warnings) = if opts.dag {
+        dag::build(&job, &spooled, writer, budget.threads, progress)?
+    } else {
+        work::build(&job, &spooled, writer, budget.threads, progress)?
+    };
     warnings.extend(cell_warnings);
     drop(vertex_normals);
     drop(temp);

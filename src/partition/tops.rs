@@ -8,6 +8,7 @@
 //! in an error naming it.
 
 use crate::bounds::NodeBounds;
+use crate::dag::write::Stored;
 use crate::error::{Error, Result};
 use crate::format::skeleton::NodeCodes;
 use crate::format::Cone;
@@ -46,12 +47,7 @@ impl Top {
         let mut w = BufWriter::with_capacity(1 << 20, File::options().write(true).create_new(true).open(&path).map_err(io)?);
         let m = &self.level.mesh;
         let faces = m.face_count();
-        put(&mut w, &m.positions, |w, p| vec3(w, *p)).map_err(io)?;
-        put(&mut w, &m.triangles, |w, t| t.iter().try_for_each(|&i| w.write_u32::<LE>(i))).map_err(io)?;
-        put(&mut w, &m.normals, |w, n| vec3(w, *n)).map_err(io)?;
-        put(&mut w, &m.uvs, |w, uv| uv.to_array().iter().try_for_each(|&x| w.write_f32::<LE>(x))).map_err(io)?;
-        put(&mut w, &m.colors, |w, c| w.write_all(c)).map_err(io)?;
-        put(&mut w, &m.face_materials, |w, &x| w.write_u32::<LE>(x)).map_err(io)?;
+        put_mesh(&mut w, m).map_err(io)?;
         put(&mut w, &self.level.face_group, |w, &x| w.write_u32::<LE>(x)).map_err(io)?;
         put(&mut w, &self.level.group_error, |w, &x| w.write_f32::<LE>(x)).map_err(io)?;
         put(&mut w, &self.groups, |w, g| {
@@ -99,16 +95,7 @@ impl Spilled {
     /// Read the top back and remove its file (left for the temporary folder's removal on error).
     pub fn load(self) -> Result<Top> {
         let mut r = self.open()?;
-        let positions = r.array(12, |r| r.vec3())?;
-        let triangles = r.array(12, |r| Ok([r.u32()?, r.u32()?, r.u32()?]))?;
-        let normals = r.array(12, |r| r.vec3())?;
-        let uvs = r.array(8, |r| Ok(Vec2::new(r.f32()?, r.f32()?)))?;
-        let colors = r.array(4, |r| {
-            let mut c = [0u8; 4];
-            r.read.read_exact(&mut c)?;
-            Ok(c)
-        })?;
-        let face_materials = r.array(4, |r| r.u32())?;
+        let m = r.mesh()?;
         let face_group = r.array(4, |r| r.u32())?;
         let group_error = r.array(4, |r| r.f32())?;
         let groups = r.array(GROUP_BYTES, |r| {
@@ -144,8 +131,7 @@ impl Spilled {
             return Err(Error::invalid(&self.path, None, format!("{} bytes after a top", r.left.saturating_sub(8))));
         }
         let _ = std::fs::remove_file(&self.path);
-        let n = triangles.len();
-        let m = Mesh { positions, triangles, normals, uvs, colors, face_materials, ..Mesh::default() };
+        let n = m.triangles.len();
         let fits = face_group.len() == n
             && m.triangles.iter().flatten().all(|&v| (v as usize) < m.positions.len())
             && face_group.iter().all(|&g| (g as usize) < groups.len())
@@ -165,6 +151,86 @@ impl Spilled {
         let left = file.metadata().map_err(|e| Error::io(&self.path, e))?.len();
         Ok(Reading { read: BufReader::with_capacity(1 << 20, file), left, path: &self.path })
     }
+}
+
+/// A DAG piece's top level, for the next round ([`super::dag`]): its mesh, faces ordered by node,
+/// with each vertex's grid point; per node its face count, key and what it was stored with, and
+/// the index of its source among `sources`; per source group, what it was stored with.
+pub struct DagTop {
+    pub mesh: Mesh,
+    pub points: Vec<[u32; 3]>,
+    pub faces: Vec<u32>,
+    pub keys: Vec<u32>,
+    pub stored: Vec<Stored>,
+    pub source: Vec<u32>,
+    pub sources: Vec<Stored>,
+}
+
+impl DagTop {
+    /// Write the top to a new file at `path`.
+    pub fn spill(self, path: PathBuf) -> Result<Spilled> {
+        let io = |e| Error::io(&path, e);
+        let mut w = BufWriter::with_capacity(1 << 20, File::options().write(true).create_new(true).open(&path).map_err(io)?);
+        let m = &self.mesh;
+        let faces = m.face_count();
+        put_mesh(&mut w, m).map_err(io)?;
+        put(&mut w, &self.points, |w, p| p.iter().try_for_each(|&x| w.write_u32::<LE>(x))).map_err(io)?;
+        put(&mut w, &self.faces, |w, &x| w.write_u32::<LE>(x)).map_err(io)?;
+        put(&mut w, &self.keys, |w, &x| w.write_u32::<LE>(x)).map_err(io)?;
+        put(&mut w, &self.stored, stored).map_err(io)?;
+        put(&mut w, &self.source, |w, &x| w.write_u32::<LE>(x)).map_err(io)?;
+        put(&mut w, &self.sources, stored).map_err(io)?;
+        w.into_inner().map_err(|e| io(e.into_error()))?;
+        Ok(Spilled { path, faces })
+    }
+}
+
+fn stored(w: &mut BufWriter<File>, s: &Stored) -> std::io::Result<()> {
+    w.write_f32::<LE>(s.error)?;
+    vec3(w, s.center)?;
+    w.write_f32::<LE>(s.radius)
+}
+
+impl Spilled {
+    /// Read a [`DagTop`] back and remove its file (left for the temporary folder's removal on
+    /// error).
+    pub fn load_dag(self) -> Result<DagTop> {
+        let mut r = self.open()?;
+        let mesh = r.mesh()?;
+        let points = r.array(12, |r| Ok([r.u32()?, r.u32()?, r.u32()?]))?;
+        let faces = r.array(4, |r| r.u32())?;
+        let keys = r.array(4, |r| r.u32())?;
+        let read_stored = |r: &mut Reading| Ok(Stored { error: r.f32()?, center: r.vec3()?, radius: r.f32()? });
+        let stored = r.array(20, read_stored)?;
+        let source = r.array(4, |r| r.u32())?;
+        let sources = r.array(20, read_stored)?;
+        if r.left != 0 {
+            return Err(Error::invalid(&self.path, None, format!("{} bytes after a top", r.left)));
+        }
+        let _ = std::fs::remove_file(&self.path);
+        let n = mesh.triangles.len();
+        let fits = mesh.triangles.iter().flatten().all(|&v| (v as usize) < mesh.positions.len())
+            && [mesh.normals.len(), mesh.uvs.len(), mesh.colors.len()].iter().all(|&c| c == 0 || c == 3 * n)
+            && (mesh.face_materials.is_empty() || mesh.face_materials.len() == n)
+            && points.len() == mesh.positions.len()
+            && faces.iter().map(|&f| f as u64).sum::<u64>() == n as u64
+            && [keys.len(), stored.len(), source.len()].iter().all(|&c| c == faces.len())
+            && source.iter().all(|&s| (s as usize) < sources.len());
+        if !fits || n != self.faces {
+            return Err(Error::invalid(&self.path, None, "a top's arrays do not fit together"));
+        }
+        Ok(DagTop { mesh, points, faces, keys, stored, source, sources })
+    }
+}
+
+/// Write a mesh's vertex and face arrays (not its materials or face geometry).
+fn put_mesh<W: Write>(w: &mut W, m: &Mesh) -> std::io::Result<()> {
+    put(w, &m.positions, |w, p| vec3(w, *p))?;
+    put(w, &m.triangles, |w, t| t.iter().try_for_each(|&i| w.write_u32::<LE>(i)))?;
+    put(w, &m.normals, |w, n| vec3(w, *n))?;
+    put(w, &m.uvs, |w, uv| uv.to_array().iter().try_for_each(|&x| w.write_f32::<LE>(x)))?;
+    put(w, &m.colors, |w, c| w.write_all(c))?;
+    put(w, &m.face_materials, |w, &x| w.write_u32::<LE>(x))
 }
 
 /// Write `items` after their count.
@@ -203,6 +269,21 @@ impl Reading<'_> {
             out.push(each(self).map_err(|e| self.fail(e))?);
         }
         Ok(out)
+    }
+
+    /// A mesh as [`put_mesh`] writes it.
+    fn mesh(&mut self) -> Result<Mesh> {
+        let positions = self.array(12, |r| r.vec3())?;
+        let triangles = self.array(12, |r| Ok([r.u32()?, r.u32()?, r.u32()?]))?;
+        let normals = self.array(12, |r| r.vec3())?;
+        let uvs = self.array(8, |r| Ok(Vec2::new(r.f32()?, r.f32()?)))?;
+        let colors = self.array(4, |r| {
+            let mut c = [0u8; 4];
+            r.read.read_exact(&mut c)?;
+            Ok(c)
+        })?;
+        let face_materials = self.array(4, |r| r.u32())?;
+        Ok(Mesh { positions, triangles, normals, uvs, colors, face_materials, ..Mesh::default() })
     }
 
     fn fail(&self, e: std::io::Error) -> Error {
@@ -296,6 +377,46 @@ mod tests {
         wrong[12 * 4 + 8 + 8..][..4].copy_from_slice(&9u32.to_le_bytes());
         std::fs::write(&path, &wrong).unwrap();
         let e = Spilled { path: path.clone(), faces: 2 }.load().err().expect("an index past the vertices fails");
+        assert!(e.to_string().contains("do not fit"), "{e}");
+    }
+
+    fn dag_top() -> DagTop {
+        let s = |error: f32| Stored { error, center: Vec3::splat(0.5), radius: 0.75 };
+        DagTop {
+            mesh: top().level.mesh,
+            points: vec![[1, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12]],
+            faces: vec![1, 1],
+            keys: vec![3, 1 << 20 | 4],
+            stored: vec![s(0.25), s(0.5)],
+            source: vec![0, 0],
+            sources: vec![s(0.5)],
+        }
+    }
+
+    #[test]
+    fn a_dag_top_reads_back_as_it_was_written_and_damage_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("top");
+        let spilled = dag_top().spill(path.clone()).unwrap();
+        assert_eq!(spilled.positions().unwrap(), dag_top().mesh.positions);
+        let (back, want) = (spilled.load_dag().unwrap(), dag_top());
+        assert_eq!((back.mesh, back.points, back.faces, back.keys), (want.mesh, want.points, want.faces, want.keys));
+        assert_eq!((back.stored, back.source, back.sources), (want.stored, want.source, want.sources));
+        assert!(!path.exists());
+
+        dag_top().spill(path.clone()).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        for cut in [0, 7, 100, bytes.len() - 1] {
+            std::fs::write(&path, &bytes[..cut]).unwrap();
+            let e = Spilled { path: path.clone(), faces: 2 }.load_dag().err().expect("a cut file fails");
+            assert!(e.to_string().contains("top"), "{e}");
+        }
+        // The last source index points past the one source group.
+        let mut wrong = bytes.clone();
+        let at = bytes.len() - 8 - 20 - 4;
+        wrong[at..at + 4].copy_from_slice(&1u32.to_le_bytes());
+        std::fs::write(&path, &wrong).unwrap();
+        let e = Spilled { path: path.clone(), faces: 2 }.load_dag().err().expect("a source past the groups fails");
         assert!(e.to_string().contains("do not fit"), "{e}");
     }
 }

@@ -29,14 +29,14 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 /// Positions (as [`position_key`]s) a piece keeps: those it shares with other pieces.
-type Pins = FxHashSet<[u32; 3]>;
+pub(super) type Pins = FxHashSet<[u32; 3]>;
 
 /// A node key of levels a cell or part builds: the piece in the high bits, its group in the low
 /// ones, so that pieces name their nodes without asking each other.
-const GROUP_BITS: u32 = 20;
-const MAX_PIECES: usize = 1 << (32 - GROUP_BITS);
+pub(super) const GROUP_BITS: u32 = 20;
+pub(super) const MAX_PIECES: usize = 1 << (32 - GROUP_BITS);
 
-fn piece_key(piece: usize, group: u32) -> u32 {
+pub(super) fn piece_key(piece: usize, group: u32) -> u32 {
     (piece as u32) << GROUP_BITS | group
 }
 
@@ -129,40 +129,13 @@ pub fn build<W: Write + Send>(
     }
     let mut first = job.cell_levels;
     let mut round = 0;
-    loop {
-        let faces: usize = tops.iter().map(|t| t.faces).sum();
-        let parts = faces.div_ceil(job.cell_faces.max(1) as usize);
-        if parts <= 1 || tops.len() < 2 || round == MAX_ROUNDS {
-            break;
-        }
-        // Consecutive tops are neighbouring cells (the kd-tree's leaf order): runs of them of
-        // about a cell's faces make the parts.
-        let runs = runs(&tops, parts);
-        let levels = part_levels(faces / parts);
+    while let Some(Round { faces, levels, pins, waiting }) = plan_round(job, &mut tops, round)? {
         writer.lock().map_err(|_| poisoned())?.set_levels((first + levels + 1) as u32)?;
-        progress.stage(&format!("parts, round {}", round + 1), runs.len() as u64);
-        // A part pins its vertices that other parts' tops hold too: its outer border.
-        let mut part_of: FxHashMap<[u32; 3], u32> = FxHashMap::default();
-        for (p, r) in runs.iter().enumerate() {
-            for t in &tops[r.clone()] {
-                for q in t.positions()? {
-                    let e = part_of.entry(position_key(q)).or_insert(p as u32);
-                    if *e != p as u32 {
-                        *e = u32::MAX;
-                    }
-                }
-            }
-        }
-        // Each top's positions are read here and again when its part loads it.
-        let pins: Pins = part_of.into_iter().filter(|&(_, p)| p == u32::MAX).map(|(k, _)| k).collect();
-        let mut groups: Vec<Option<Vec<Spilled>>> = Vec::with_capacity(runs.len());
-        let mut rest = tops.into_iter();
-        for r in &runs {
-            groups.push(Some(rest.by_ref().take(r.len()).collect()));
-        }
-        let groups = Mutex::new(groups);
-        let next = run(runs.len(), threads, progress, |p| {
-            let spilled = groups.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
+        let parts = waiting.len();
+        progress.stage(&format!("parts, round {}", round + 1), parts as u64);
+        let waiting = Mutex::new(waiting);
+        let next = run(parts, threads, progress, |p| {
+            let spilled = waiting.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
             let part = spilled.into_iter().map(Spilled::load).collect::<Result<Vec<Top>>>()?;
             // The part's own shared positions: a simplified vertex may land where other parts meet.
             let own: Pins =
@@ -178,13 +151,7 @@ pub fn build<W: Write + Send>(
             break;
         }
     }
-    let faces: u64 = tops.iter().map(|t| t.faces as u64).sum();
-    if faces > 2 * job.cell_faces {
-        let w = format!(
-            "the final merge holds {faces} faces, more than twice a cell's {}: the mesh simplifies little at its cells' borders \
-             (many separate pieces?), and memory may go past --memory",
-            job.cell_faces
-        );
+    if let Some(w) = final_merge_warning(job, &tops) {
         gathered.lock().map_err(|_| poisoned())?.warnings.push(w);
     }
     progress.stage("merge", 0);
@@ -200,16 +167,71 @@ pub fn build<W: Write + Send>(
     Ok((writer.finish()?, g.warnings))
 }
 
+/// A round of parts: the faces of the tops it takes, the levels each part builds, the positions
+/// two parts share (each part's outer border) and each part's tops.
+pub(super) struct Round {
+    pub faces: usize,
+    pub levels: usize,
+    pub pins: Pins,
+    pub waiting: Vec<Option<Vec<Spilled>>>,
+}
+
+/// The next round of parts over `tops` (taken from it), or `None` when the tops are down to
+/// about a cell's faces (or rounds or pieces run out) and go to the merge as they are.
+pub(super) fn plan_round(job: &Job, tops: &mut Vec<Spilled>, round: usize) -> Result<Option<Round>> {
+    let faces: usize = tops.iter().map(|t| t.faces).sum();
+    let parts = faces.div_ceil(job.cell_faces.max(1) as usize);
+    if parts <= 1 || tops.len() < 2 || round == MAX_ROUNDS {
+        return Ok(None);
+    }
+    // Consecutive tops are neighbouring cells (the kd-tree's leaf order): runs of them of about a
+    // cell's faces make the parts.
+    let runs = runs(tops, parts);
+    let mut part_of: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    for (p, r) in runs.iter().enumerate() {
+        for t in &tops[r.clone()] {
+            for q in t.positions()? {
+                let e = part_of.entry(position_key(q)).or_insert(p as u32);
+                if *e != p as u32 {
+                    *e = u32::MAX;
+                }
+            }
+        }
+    }
+    // Each top's positions are read here and again when its part loads it.
+    let pins: Pins = part_of.into_iter().filter(|&(_, p)| p == u32::MAX).map(|(k, _)| k).collect();
+    let mut rest = std::mem::take(tops).into_iter();
+    let waiting = runs.iter().map(|r| Some(rest.by_ref().take(r.len()).collect())).collect();
+    Ok(Some(Round { faces, levels: part_levels(faces / parts), pins, waiting }))
+}
+
+/// The warning for a final merge of `tops` that memory may not hold.
+pub(super) fn final_merge_warning(job: &Job, tops: &[Spilled]) -> Option<String> {
+    let faces: u64 = tops.iter().map(|t| t.faces as u64).sum();
+    (faces > 2 * job.cell_faces).then(|| {
+        format!(
+            "the final merge holds {faces} faces, more than twice a cell's {}: the mesh simplifies little at its cells' borders \
+             (many separate pieces?), and memory may go past --memory",
+            job.cell_faces
+        )
+    })
+}
+
 /// Rounds of parts at most: each makes the tops smaller by a few levels.
 const MAX_ROUNDS: usize = 16;
 
-fn poisoned() -> Error {
+pub(super) fn poisoned() -> Error {
     Error::invalid(Path::new("partitioned build"), None, "a worker thread panicked")
 }
 
 /// Run `work(i)` for `i in 0..n` on `threads` workers, results in order; the first error stops
 /// the rest. Progress steps on this thread as pieces finish.
-fn run<T: Send>(n: usize, threads: usize, progress: &mut dyn Progress, work: impl Fn(usize) -> Result<T> + Sync) -> Result<Vec<T>> {
+pub(super) fn run<T: Send>(
+    n: usize,
+    threads: usize,
+    progress: &mut dyn Progress,
+    work: impl Fn(usize) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
     let (tx, rx) = std::sync::mpsc::channel::<(usize, Result<T>)>();
@@ -282,6 +304,43 @@ fn cell<W: Write>(
     writer: &Mutex<Writer<W>>,
     gathered: &Mutex<Gathered>,
 ) -> Result<Option<Top>> {
+    let Some(Loaded { mesh, pinned, removed }) = load_cell(job, c, path, faces)? else {
+        return Ok(None);
+    };
+    {
+        let mut g = gathered.lock().map_err(|_| poisoned())?;
+        g.removed.0 += removed.0;
+        g.removed.1 += removed.1;
+    }
+    if mesh.face_count() == 0 {
+        return Ok(None);
+    }
+    let vertices = mesh.vertex_count();
+    let adjacency = Adjacency::build(&mesh);
+    let k = job.cell_levels;
+    let mut h = hierarchy::build_levels(&mesh, &adjacency, &job.hierarchy, Some(k + 1));
+    drop(adjacency);
+    let p = LevelParams { top_faces: usize::MAX, ..job.levels };
+    let first = LevelMesh { face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()], mesh };
+    let lv = levels::build_from(first, &mut h, &p, Some(&pinned), &mut |_| {});
+    let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
+    let keys = |_: usize, g: u32| piece_key(c, g);
+    let top = finish_piece(job, h, lv, Base::Input, &pinned, 0, k, &keys, writer, gathered, &bad)?;
+    gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
+    Ok(top)
+}
+
+/// A cell read back: its mesh cleaned, the positions it shares with other cells, and the
+/// degenerate and duplicate faces cleaning removed.
+pub(super) struct Loaded {
+    pub mesh: Mesh,
+    pub pinned: Pins,
+    pub removed: (usize, usize),
+}
+
+/// Read cell `c` (`faces` faces in the file at `path`, which goes once read), with its computed
+/// normals when normals are computed; `None` when it holds no faces.
+pub(super) fn load_cell(job: &Job, c: usize, path: &Path, faces: u64) -> Result<Option<Loaded>> {
     if faces == 0 {
         return Ok(None);
     }
@@ -304,7 +363,7 @@ fn cell<W: Write>(
             })
             .collect();
     }
-    let pinned: FxHashSet<[u32; 3]> = ids
+    let pinned: Pins = ids
         .iter()
         .zip(&mesh.positions)
         .filter(|(&i, _)| job.shared.get(i as usize / 64).is_some_and(|w| w >> (i % 64) & 1 == 1))
@@ -312,27 +371,7 @@ fn cell<W: Write>(
         .collect();
     drop(ids);
     let (mesh, report) = mesh.clean().map_err(|_| Error::invalid(job.input, None, format!("cell {c}: a vertex is not finite")))?;
-    {
-        let mut g = gathered.lock().map_err(|_| poisoned())?;
-        g.removed.0 += report.degenerate_faces;
-        g.removed.1 += report.duplicate_faces;
-    }
-    if mesh.face_count() == 0 {
-        return Ok(None);
-    }
-    let vertices = mesh.vertex_count();
-    let adjacency = Adjacency::build(&mesh);
-    let k = job.cell_levels;
-    let mut h = hierarchy::build_levels(&mesh, &adjacency, &job.hierarchy, Some(k + 1));
-    drop(adjacency);
-    let p = LevelParams { top_faces: usize::MAX, ..job.levels };
-    let first = LevelMesh { face_group: h.levels[0].face_group.clone(), group_error: vec![0.0; h.levels[0].groups.len()], mesh };
-    let lv = levels::build_from(first, &mut h, &p, Some(&pinned), &mut |_| {});
-    let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
-    let keys = |_: usize, g: u32| piece_key(c, g);
-    let top = finish_piece(job, h, lv, Base::Input, &pinned, 0, k, &keys, writer, gathered, &bad)?;
-    gathered.lock().map_err(|_| poisoned())?.vertices += vertices;
-    Ok(top)
+    Ok(Some(Loaded { mesh, pinned, removed: (report.degenerate_faces, report.duplicate_faces) }))
 }
 
 /// Weld `tops` (whose level is file level `first`) into one mesh and build on it: with
