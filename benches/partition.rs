@@ -1,4 +1,5 @@
-//! The partitioned build against the in-core build, side by side in one run (issue 14): wall time
+//! The partitioned build against the in-core build, as trees and as DAGs (`--dag`, format 4),
+//! side by side in one run (issue 14): wall time
 //! and peak memory of `strata convert` (a child process under `/usr/bin/time`), throughput, each
 //! level's sampled distance to the input, the culling cost measured on the file, node sizes
 //! (largest node of any level over level 0's median), the top level's faces, the time from
@@ -14,7 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use strata::cone::{facing_orthographic, Facing};
-use strata::format::Reader;
+use strata::format::{Reader, NO_PARENT};
 
 #[path = "common/retention_views.rs"]
 mod retention_views;
@@ -46,7 +47,10 @@ fn convert(input: &Path, output: &Path, args: &[&str]) -> Run {
 }
 
 /// The paper's culling cost on the file, over `views` orthographic directions: cone tests made
-/// walking the nodes from the top (and level 0's clusters) plus faces not culled, per face.
+/// walking the nodes from the top (and level 0's clusters) plus faces not culled, per face. In a
+/// DAG the walk goes by groups, whose region is their outputs' and their children's alike: a group
+/// whose outputs all face away culls everything below it; one whose outputs do not all face the
+/// same way is opened, its children's source groups walked in turn.
 fn culling_cost(rd: &Reader<std::fs::File>, views: usize) -> f64 {
     let nodes = rd.nodes();
     let clusters: Vec<Vec<(strata::format::Cone, u32)>> = (0..nodes.len() as u32)
@@ -60,34 +64,87 @@ fn culling_cost(rd: &Reader<std::fs::File>, views: usize) -> f64 {
         .collect();
     let faces = rd.levels()[0].faces as f64;
     let top = rd.levels().len() as u32 - 1;
+    // Level-0 faces below a node (tree) or group (DAG), each level-0 node counted once.
+    let region = |start: Vec<u32>, dag: bool, seen: &mut Vec<bool>| -> u64 {
+        let mut stack = start;
+        let mut f = 0;
+        while let Some(m) = stack.pop() {
+            if dag {
+                let d = rd.dag().expect("a DAG");
+                for &c in d.children(m) {
+                    match d.source[c as usize] {
+                        NO_PARENT if !std::mem::replace(&mut seen[c as usize], true) => f += nodes[c as usize].faces as u64,
+                        NO_PARENT => {}
+                        s => stack.push(s),
+                    }
+                }
+            } else if nodes[m as usize].level == 0 {
+                f += nodes[m as usize].faces as u64;
+            } else {
+                stack.extend(rd.children(m));
+            }
+        }
+        f
+    };
+    let mut outputs: Vec<Vec<u32>> = vec![Vec::new(); rd.dag().map_or(0, |d| d.groups.len())];
+    if let Some(dag) = rd.dag() {
+        for (n, &s) in dag.source.iter().enumerate().filter(|(_, &s)| s != NO_PARENT) {
+            outputs[s as usize].push(n as u32);
+        }
+    }
     let mut total = 0.0;
     for d in strata::culling::sphere_directions(views) {
         let (mut tests, mut culled) = (0u64, 0u64);
-        let subtree_faces = |n: u32| -> u64 {
-            let mut stack = vec![n];
-            let mut f = 0;
-            while let Some(m) = stack.pop() {
-                if nodes[m as usize].level == 0 {
-                    f += nodes[m as usize].faces as u64;
-                } else {
-                    stack.extend(rd.children(m));
+        let facing = |n: u32| facing_orthographic(&nodes[n as usize].cone, d);
+        // A level-0 node: culled whole, or tested cluster by cluster.
+        let leaf = |n: u32, tests: &mut u64, culled: &mut u64| match facing(n) {
+            Facing::Back => *culled += nodes[n as usize].faces as u64,
+            Facing::Front => {}
+            Facing::Mixed => {
+                for &(cone, count) in &clusters[n as usize] {
+                    *tests += 1;
+                    if facing_orthographic(&cone, d) == Facing::Back {
+                        *culled += count as u64;
+                    }
                 }
             }
-            f
         };
-        let mut stack: Vec<u32> = rd.level_nodes(top).collect();
-        while let Some(n) = stack.pop() {
-            tests += 1;
-            match facing_orthographic(&nodes[n as usize].cone, d) {
-                Facing::Back => culled += subtree_faces(n),
-                Facing::Front => {}
-                Facing::Mixed if nodes[n as usize].level > 0 => stack.extend(rd.children(n)),
-                Facing::Mixed => {
-                    for &(cone, count) in &clusters[n as usize] {
-                        tests += 1;
-                        if facing_orthographic(&cone, d) == Facing::Back {
-                            culled += count as u64;
+        match rd.dag() {
+            Some(dag) if top > 0 => {
+                let mut seen = vec![false; nodes.len()];
+                let mut opened = vec![false; dag.groups.len()];
+                let mut stack: Vec<u32> = rd.level_nodes(top).map(|n| dag.source[n as usize]).collect();
+                while let Some(g) = stack.pop() {
+                    if std::mem::replace(&mut opened[g as usize], true) {
+                        continue;
+                    }
+                    let outputs = &outputs[g as usize];
+                    tests += outputs.len() as u64;
+                    let sides: Vec<Facing> = outputs.iter().map(|&n| facing(n)).collect();
+                    if sides.iter().all(|f| *f == Facing::Back) {
+                        culled += region(vec![g], true, &mut seen);
+                    } else if !sides.iter().all(|f| *f == Facing::Front) {
+                        for &c in dag.children(g) {
+                            match dag.source[c as usize] {
+                                NO_PARENT if !std::mem::replace(&mut seen[c as usize], true) => {
+                                    tests += 1;
+                                    leaf(c, &mut tests, &mut culled);
+                                }
+                                NO_PARENT => {}
+                                s => stack.push(s),
+                            }
                         }
+                    }
+                }
+            }
+            _ => {
+                let mut stack: Vec<u32> = rd.level_nodes(top).collect();
+                while let Some(n) = stack.pop() {
+                    tests += 1;
+                    match facing(n) {
+                        Facing::Back => culled += region(vec![n], false, &mut Vec::new()),
+                        Facing::Mixed if nodes[n as usize].level > 0 => stack.extend(rd.children(n)),
+                        _ => leaf(n, &mut tests, &mut culled),
                     }
                 }
             }
@@ -157,17 +214,22 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
             );
         }
     }
-    if distances.len() == 2 {
-        println!("\nmean sampled distance to the input, per level (fraction of the diagonal), and partitioned / in-core:");
+    if distances.len() >= 2 {
+        println!("\nmean sampled distance to the input, per level (fraction of the diagonal), and each build's over the first's:");
         let diag = input.map_or(1.0, |m| m.diagonal());
-        for l in 0..distances[0].len().max(distances[1].len()) {
-            let (a, b) = (distances[0].get(l), distances[1].get(l));
-            let ratio = match (a, b) {
-                (Some(a), Some(b)) if *a > 0.0 => format!("{:.2}", b / a),
-                _ => "–".into(),
-            };
-            let f = |x: Option<&f32>| x.map_or("–".into(), |x| format!("{:.2e}", x / diag));
-            println!("level {l}: in-core {}  partitioned {}  ratio {ratio}", f(a), f(b));
+        let levels = distances.iter().map(Vec::len).max().unwrap_or(0);
+        for l in 0..levels {
+            let first = distances[0].get(l).copied();
+            let cells: Vec<String> = runs
+                .iter()
+                .zip(&distances)
+                .map(|((build, ..), d)| match (d.get(l), first) {
+                    (Some(x), Some(f)) if f > 0.0 => format!("{build} {:.2e} ({:.2})", x / diag, x / f),
+                    (Some(x), _) => format!("{build} {:.2e}", x / diag),
+                    (None, _) => format!("{build} –"),
+                })
+                .collect();
+            println!("level {l}: {}", cells.join("  "));
         }
     }
 }
@@ -193,29 +255,33 @@ fn main() {
     }
     for (input, budget) in &inputs {
         let mesh = strata::import::import(input, None).expect("import").mesh;
-        let a = convert(input, &out("incore.strata"), &["--in-core"]);
-        let b = convert(input, &out("part.strata"), &["--partitioned", "--memory", budget]);
+        let builds = [
+            ("in-core", "incore.strata", vec!["--in-core"]),
+            ("partitioned", "part.strata", vec!["--partitioned", "--memory", budget]),
+            ("in-core DAG", "incore-dag.strata", vec!["--in-core", "--dag"]),
+            ("partitioned DAG", "part-dag.strata", vec!["--partitioned", "--dag", "--memory", budget]),
+        ];
+        let files: Vec<PathBuf> = builds.iter().map(|b| out(b.1)).collect();
+        let runs: Vec<(&str, &Path, Run)> = builds.iter().zip(&files).map(|(b, f)| (b.0, f.as_path(), convert(input, f, &b.2))).collect();
         let name = format!("{} (partitioned at --memory {budget})", input.file_name().unwrap().to_string_lossy());
-        report(
-            &name,
-            mesh.face_count() as u64,
-            Some(&mesh),
-            &[("in-core", &out("incore.strata"), a), ("partitioned", &out("part.strata"), b)],
-        );
+        report(&name, mesh.face_count() as u64, Some(&mesh), &runs);
     }
     for n in large {
         let ply = out(&format!("bumpy-{n}.ply"));
         let mut w = std::io::BufWriter::new(std::fs::File::create(&ply).unwrap());
         let (faces, _) = strata::fixtures::write_bumpy_sphere_ply(&mut w, n, 1, &mut |_| {}).unwrap();
         drop(w);
-        let b = convert(&ply, &out("large.strata"), &["--partitioned", "--memory", &memory]);
+        let (part, dag) = (out("large.strata"), out("large-dag.strata"));
+        let b = convert(&ply, &part, &["--partitioned", "--memory", &memory]);
+        let c = convert(&ply, &dag, &["--partitioned", "--dag", "--memory", &memory]);
         let name = format!("generated bumpy sphere (partitioned at --memory {memory})");
         if faces.saturating_mul(strata::partition::IN_CORE_BYTES_PER_FACE) <= strata::partition::default_memory() {
-            let a = convert(&ply, &out("large-incore.strata"), &["--in-core"]);
+            let incore = out("large-incore.strata");
+            let a = convert(&ply, &incore, &["--in-core"]);
             let mesh = strata::import::import(&ply, None).expect("import").mesh;
-            report(&name, faces, Some(&mesh), &[("in-core", &out("large-incore.strata"), a), ("partitioned", &out("large.strata"), b)]);
+            report(&name, faces, Some(&mesh), &[("in-core", &incore, a), ("partitioned", &part, b), ("partitioned DAG", &dag, c)]);
         } else {
-            report(&name, faces, None, &[("partitioned", &out("large.strata"), b)]);
+            report(&name, faces, None, &[("partitioned", &part, b), ("partitioned DAG", &dag, c)]);
         }
         let _ = std::fs::remove_file(&ply);
     }
