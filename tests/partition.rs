@@ -330,19 +330,28 @@ fn level_looks(rd: &Reader<std::fs::File>, level: u32) -> (Vec<u64>, Vec<[u32; 2
 #[test]
 fn a_textured_obj_glb_or_ply_of_two_materials_builds_partitioned_with_its_uvs_materials_and_images() {
     for name in ["globe.obj", "globe.glb", "globe.ply"] {
-        textured_builds_partitioned_as_in_core(name);
+        textured_builds_partitioned_as_in_core(name, false);
     }
 }
 
-fn textured_builds_partitioned_as_in_core(name: &str) {
-    let work = work_dir(&format!("textured-work-{name}"));
-    let dir = work_dir(&format!("textured-input-{name}"));
+#[test]
+fn a_textured_glb_of_two_materials_builds_partitioned_as_a_dag_with_its_uvs_materials_and_images() {
+    textured_builds_partitioned_as_in_core("globe.glb", true);
+}
+
+/// The textured globe written as `name`, converted partitioned and in memory, as trees or as
+/// DAGs (`dag`), holds the same materials, images, UVs at level 0, and materials at every level.
+fn textured_builds_partitioned_as_in_core(name: &str, dag: bool) {
+    let tag = if dag { format!("dag-{name}") } else { name.to_string() };
+    let work = work_dir(&format!("textured-work-{tag}"));
+    let dir = work_dir(&format!("textured-input-{tag}"));
     let obj = textured_globe(&dir, name);
-    let (part, core) = (temp(&format!("textured-part-{name}.strata")), temp(&format!("textured-core-{name}.strata")));
-    let c = convert(&obj, &Default::default(), &part, &partitioned(&work), &mut Silent).expect("partitioned OBJ");
+    let (part, core) = (temp(&format!("textured-part-{tag}.strata")), temp(&format!("textured-core-{tag}.strata")));
+    let c = convert(&obj, &Default::default(), &part, &ConvertOptions { dag, ..partitioned(&work) }, &mut Silent).expect("partitioned");
     assert!(c.cells.is_some_and(|n| n > 1), "{:?} cells", c.cells);
-    convert(&obj, &Default::default(), &core, &ConvertOptions { build: Build::InCore, ..ConvertOptions::default() }, &mut Silent)
-        .expect("in-core OBJ");
+    convert(&obj, &Default::default(), &core, &ConvertOptions { build: Build::InCore, dag, ..ConvertOptions::default() }, &mut Silent)
+        .expect("in core");
+    assert_eq!(Reader::open_path(&part).unwrap().header().major, if dag { 4 } else { 3 });
     assert!(strata::format::verify_path(&part).is_sound(), "the partitioned file does not verify");
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0, "work files left behind");
     let (rp, rc) = (Reader::open_path(&part).unwrap(), Reader::open_path(&core).unwrap());

@@ -322,8 +322,14 @@ impl<W: Write> Writer<W> {
         let spill_at = self.spills[l].append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
         let padded = self.buf.len() as u32;
         self.buf.clear();
-        Support::of(&g.points).to_bytes(&mut self.buf);
-        let support_at = self.supports.append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
+        // Format 4 has no `ORDR`, which is all supports are for.
+        let support_at = match self.opts.major {
+            MAJOR4 => 0,
+            _ => {
+                Support::of(&g.points).to_bytes(&mut self.buf);
+                self.supports.append(&self.buf).map_err(|e| Error::io(&self.path, e))?
+            }
+        };
         self.clusters += g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
         self.levels[l].push(Pending {
             key: node.key,
@@ -683,15 +689,19 @@ impl<W: Write> Writer<W> {
         // Format 3 carries GEOR from its first minor version; 2.1 added it to format 2, 2.2 images
         // and UVs in glTF's orientation (so a file with UVs is 2.2 with or without images).
         let images = &self.opts.images;
-        let mut bytes = [0u8; Support::BYTES];
-        let supports = (0..nl)
-            .rev()
-            .flat_map(|l| order[l].iter().map(move |&k| (l, k)))
-            .map(|(l, k)| self.supports.read(self.levels[l][k].support_at, &mut bytes).map(|_| Support::from_bytes(&bytes)))
-            .collect::<std::io::Result<Vec<Support>>>()
-            .map_err(|e| Error::io(&self.path, e))?;
-        self.supports = Spill::Memory(Vec::new());
-        let planes = if dag { Planes::default() } else { order_planes(&records, &codes, supports, levels[nl - 1].nodes) };
+        let planes = if dag {
+            Planes::default()
+        } else {
+            let mut bytes = [0u8; Support::BYTES];
+            let supports = (0..nl)
+                .rev()
+                .flat_map(|l| order[l].iter().map(move |&k| (l, k)))
+                .map(|(l, k)| self.supports.read(self.levels[l][k].support_at, &mut bytes).map(|_| Support::from_bytes(&bytes)))
+                .collect::<std::io::Result<Vec<Support>>>()
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.supports = Spill::Memory(Vec::new());
+            order_planes(&records, &codes, supports, levels[nl - 1].nodes)
+        };
         let minor =
             match (self.opts.major, !planes.entries.is_empty(), !images.is_empty() || self.opts.attributes.uvs, self.opts.georef.is_some())
             {

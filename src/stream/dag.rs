@@ -9,6 +9,7 @@ use crate::camera::Camera;
 use crate::format::skeleton::Skeleton;
 use crate::format::{NodeRecord, NO_PARENT};
 use glam::Vec3;
+use std::cell::Cell;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::ops::Range;
@@ -63,15 +64,26 @@ pub fn select(
     limits: &Limits,
     held: &dyn Fn(u32) -> bool,
 ) -> Cut {
-    let seen: Vec<bool> = (0..g.node_count() as u32).map(seen).collect();
-    let cost = |n: u32| if seen[n as usize] { cost(n) } else { (0, 0) };
+    // Whether the camera sees a node, asked only of nodes that enter the cut (0: not asked yet).
+    let memo: Vec<Cell<u8>> = vec![Cell::new(0); g.node_count()];
+    let seen = |n: u32| {
+        let m = &memo[n as usize];
+        if m.get() == 0 {
+            m.set(1 + seen(n) as u8);
+        }
+        m.get() == 2
+    };
+    let cost = |n: u32| if seen(n) { cost(n) } else { (0, 0) };
     let mut in_cut = vec![false; g.node_count()];
+    // Every node that entered the cut (each enters at most once: it has one consumer).
+    let mut entered: Vec<u32> = Vec::new();
     // Outputs of each group not yet in the cut; a group becomes a candidate at 0.
     let mut waiting: Vec<u32> = (0..g.group_count() as u32).map(|k| g.outputs(k).len() as u32).collect();
     let mut heap: BinaryHeap<(u32, Reverse<u32>)> = BinaryHeap::new();
     let tau = limits.pixel_error;
     let mut enter = |n: u32, heap: &mut BinaryHeap<(u32, Reverse<u32>)>, in_cut: &mut Vec<bool>| {
         in_cut[n as usize] = true;
+        entered.push(n);
         let s = g.source(n);
         if s != NO_PARENT {
             waiting[s as usize] -= 1;
@@ -108,7 +120,9 @@ pub fn select(
             enter(c, &mut heap, &mut in_cut);
         }
     }
-    let (shown, culled): (Vec<u32>, Vec<u32>) = (0..g.node_count() as u32).filter(|&n| in_cut[n as usize]).partition(|&n| seen[n as usize]);
+    entered.retain(|&n| in_cut[n as usize]);
+    entered.sort_unstable();
+    let (shown, culled): (Vec<u32>, Vec<u32>) = entered.into_iter().partition(|&n| seen(n));
     Cut { shown, culled, faces, bytes }
 }
 
