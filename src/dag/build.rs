@@ -47,7 +47,7 @@ pub fn build(mesh: Mesh, level0: &[u32], p: &DagParams, on_level: &mut dyn FnMut
 pub struct Start {
     /// Cleaned, face geometry computed.
     pub mesh: Mesh,
-    /// Per face, its level-0 node (`0..n`).
+    /// Per face, its level-0 node (`0..n`; a label no face has makes no node).
     pub labels: Vec<u32>,
     /// Empty when level 0 is the input. In a piece of a partitioned build whose level 0 holds the
     /// top nodes of earlier pieces: the groups that made them, as stand-ins of level 0 whose
@@ -77,7 +77,8 @@ pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut d
     }
     let mut sources = vec![NONE; pieces.len()];
     for (g, group) in made_by.iter().enumerate() {
-        sources[group.outputs.start as usize..group.outputs.end as usize].fill(g as u32);
+        let end = (group.outputs.end as usize).min(sources.len());
+        sources[(group.outputs.start as usize).min(end)..end].fill(g as u32);
     }
     let (pieces, sources): (Vec<Vec<u32>>, Vec<u32>) = pieces.into_iter().zip(sources).filter(|(p, _)| !p.is_empty()).unzip();
     let median = {

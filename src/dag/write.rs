@@ -142,8 +142,10 @@ impl Record {
     }
 }
 
-/// How a DAG's top level was written: its vertices' grid points, and what its nodes and their
-/// source groups were stored with (per top node; per group, [`Stored::default`] for the others).
+/// How a DAG's top level was written: its vertices' grid points as a next level inherits them
+/// (before inner vertices snap to their node's lattice: every vertex at one position has the same
+/// one), and what its nodes and groups were stored with: per top node; per group, for the groups
+/// of levels above level 0 and the stand-ins ([`Stored::default`] for none else).
 pub struct Written {
     pub points: Vec<[u32; 3]>,
     pub nodes: Vec<Stored>,
@@ -240,6 +242,9 @@ pub fn write_levels(
                 s => lattice_shift(dag.groups[s as usize].error.min(median_edge(mesh, faces(n))), precision.lattice, &grid),
             })
             .collect();
+        if l + 1 == dag.levels.len() {
+            top_points = q.points.clone();
+        }
         if l > 0 {
             q.snap_inner(&grid, mesh, &node_of_face, &shifts);
         }
@@ -295,7 +300,6 @@ pub fn write_levels(
                 geometry,
             })))?;
         }
-        top_points = q.points;
     }
     let top = dag.level_nodes(dag.levels.len().saturating_sub(1));
     let nodes = node_stored[top.start as usize..top.end as usize].to_vec();

@@ -79,7 +79,10 @@ pub fn build<W: Write + Send>(
         let next = run(parts, threads, progress, |p| {
             let spilled = waiting.lock().map_err(|_| poisoned())?[p].take().unwrap_or_default();
             let part = spilled.into_iter().map(Spilled::load_dag).collect::<Result<Vec<DagTop>>>()?;
-            let shape = Shape { first, levels: Some(levels), pinned: Some(&pins) };
+            // The part's own shared positions (a smaller set to look up), as the tree's parts.
+            let own: Pins =
+                part.iter().flat_map(|t| t.mesh.positions.iter().map(|&q| position_key(q))).filter(|k| pins.contains(k)).collect();
+            let shape = Shape { first, levels: Some(levels), pinned: Some(&own) };
             spill(merge(job, part, next_piece + p, shape, &params, &writer, &gathered)?, round + 1, p)
         })?;
         drop(pins);
@@ -162,9 +165,10 @@ fn merge<W: Write>(
     let mut mesh = Mesh { materials: job.materials.to_vec(), ..Mesh::default() };
     let (mut labels, mut made_by, mut keys, mut stored) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut points: FxHashMap<[u32; 3], [u32; 3]> = FxHashMap::default();
-    // Per position, the top that holds it first and its vertex there: a later top's vertex at
-    // that position is welded to it. Within one top, vertices at one position stay apart (a
-    // topology change may have cut a vertex in two).
+    // Per position, the top that holds it first and its first vertex there: a later top's vertex
+    // at that position is welded to it. Within one top, vertices at one position stay apart (a
+    // topology change may have cut a vertex in two; never a pinned one, so never one two tops
+    // share).
     let mut at: FxHashMap<[u32; 3], (usize, u32)> = FxHashMap::default();
     let mut welded = 0;
     for (t, top) in tops.into_iter().enumerate() {
@@ -183,7 +187,7 @@ fn merge<W: Write>(
                         v
                     }
                     _ => {
-                        at.insert(key, (t, next));
+                        at.entry(key).or_insert((t, next));
                         mesh.positions.push(x);
                         next
                     }
@@ -197,25 +201,19 @@ fn merge<W: Write>(
         mesh.face_materials.extend_from_slice(&m.face_materials);
         // Nodes become labels in order; a source's outputs are a run of them.
         let base = keys.len() as u32;
-        let groups = made_by.len() as u32;
         for (n, &count) in top.faces.iter().enumerate() {
             labels.extend(std::iter::repeat_n(base + n as u32, count as usize));
         }
-        for (s, source) in top.sources.iter().enumerate() {
-            let outputs: Vec<u32> = (0..top.source.len() as u32).filter(|&n| top.source[n as usize] == s as u32).collect();
-            let (lo, hi) = (outputs.first().copied().unwrap_or(0), outputs.last().map_or(0, |&n| n + 1));
-            if hi - lo != outputs.len() as u32 {
-                return Err(Error::invalid(job.input, None, format!("piece {p}: a top's source group {s} has outputs apart")));
-            }
-            made_by.push(Group {
-                level: 0,
-                error: source.error,
-                center: source.center,
-                radius: source.radius,
-                outputs: base + lo..base + hi,
-            });
+        // Each source's outputs, a run of nodes (checked as the top was read).
+        let mut outputs = vec![0..0; top.sources.len()];
+        for (n, &s) in top.source.iter().enumerate() {
+            let r = &mut outputs[s as usize];
+            *r = if r.start == r.end { n as u32..n as u32 + 1 } else { r.start..n as u32 + 1 };
         }
-        debug_assert!(top.source.iter().all(|&s| s < made_by.len() as u32 - groups));
+        for (source, r) in top.sources.iter().zip(outputs) {
+            let outputs = base + r.start..base + r.end;
+            made_by.push(Group { level: 0, error: source.error, center: source.center, radius: source.radius, outputs });
+        }
         keys.extend_from_slice(&top.keys);
         stored.extend_from_slice(&top.stored);
     }

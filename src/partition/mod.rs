@@ -14,7 +14,8 @@
 //! triangles) leaves large tops, and the final merge, which holds them all, is said to exceed it.
 //! Cells meet exactly: the vertices faces of two cells use are pinned at every level a cell
 //! builds, so the border edges of level ℓ nodes of two cells are the same edges, and the pieces
-//! that weld the tops by position link such nodes as neighbours.
+//! that weld the tops by position link such nodes as neighbours (a tree's), or gather them into
+//! one group (a DAG's, [`dag`]).
 
 mod cells;
 mod dag;

@@ -154,8 +154,9 @@ impl Spilled {
 }
 
 /// A DAG piece's top level, for the next round ([`super::dag`]): its mesh, faces ordered by node,
-/// with each vertex's grid point; per node its face count, key and what it was stored with, and
-/// the index of its source among `sources`; per source group, what it was stored with.
+/// with each vertex's grid point as the next level inherits it; per node its face count (at least
+/// one), key and what it was stored with, and the index of its source among `sources` (a source's
+/// nodes are a run); per source group, what it was stored with.
 pub struct DagTop {
     pub mesh: Mesh,
     pub points: Vec<[u32; 3]>,
@@ -214,6 +215,8 @@ impl Spilled {
             && (mesh.face_materials.is_empty() || mesh.face_materials.len() == n)
             && points.len() == mesh.positions.len()
             && faces.iter().map(|&f| f as u64).sum::<u64>() == n as u64
+            && faces.iter().all(|&f| f > 0)
+            && source.windows(2).all(|w| w[0] <= w[1])
             && [keys.len(), stored.len(), source.len()].iter().all(|&c| c == faces.len())
             && source.iter().all(|&s| (s as usize) < sources.len());
         if !fits || n != self.faces {

@@ -1,5 +1,6 @@
-//! The work of the partitioned build, in three kinds of piece, each an in-core build of a part of
-//! the mesh of at most a cell's size:
+//! The work of the partitioned build of a tree (a DAG's is [`super::dag`], which shares the cells'
+//! reading and the rounds' plan from here), in three kinds of piece, each an in-core build of a
+//! part of the mesh of at most a cell's size:
 //! - a **cell**: its faces from its file, its finest levels built with its border locked;
 //! - a **part**: the tops of neighbouring cells (or parts) welded into one mesh, a few more
 //!   levels built on it with the part's outer border locked — the old borders inside it are now
@@ -31,8 +32,9 @@ use std::sync::Mutex;
 /// Positions (as [`position_key`]s) a piece keeps: those it shares with other pieces.
 pub(super) type Pins = FxHashSet<[u32; 3]>;
 
-/// A node key of levels a cell or part builds: the piece in the high bits, its group in the low
-/// ones, so that pieces name their nodes without asking each other.
+/// A node key of levels a cell or part builds: the piece in the high bits, its group (a DAG's
+/// piece: its node or group) in the low ones, so that pieces name their nodes without asking each
+/// other.
 pub(super) const GROUP_BITS: u32 = 20;
 pub(super) const MAX_PIECES: usize = 1 << (32 - GROUP_BITS);
 
@@ -177,7 +179,7 @@ pub(super) struct Round {
 }
 
 /// The next round of parts over `tops` (taken from it), or `None` when the tops are down to
-/// about a cell's faces (or rounds or pieces run out) and go to the merge as they are.
+/// about a cell's faces (or rounds run out) and go to the merge as they are.
 pub(super) fn plan_round(job: &Job, tops: &mut Vec<Spilled>, round: usize) -> Result<Option<Round>> {
     let faces: usize = tops.iter().map(|t| t.faces).sum();
     let parts = faces.div_ceil(job.cell_faces.max(1) as usize);

@@ -64,7 +64,8 @@ pub fn select(
     limits: &Limits,
     held: &dyn Fn(u32) -> bool,
 ) -> Cut {
-    // Whether the camera sees a node, asked only of nodes that enter the cut (0: not asked yet).
+    // Whether the camera sees a node, asked only of nodes that enter the cut or would (0: not
+    // asked yet).
     let memo: Vec<Cell<u8>> = vec![Cell::new(0); g.node_count()];
     let seen = |n: u32| {
         let m = &memo[n as usize];
