@@ -10,7 +10,8 @@
 //!
 //! `cargo bench --bench cracks [-- file.strata ...]`; without arguments the shipped noisy sphere
 //! and, when present, the bunny and the CT head of ../shared/meshes, converted with defaults as a
-//! tree (format 3) and as a DAG (format 4, `strata convert --dag`: `-dag-` in the name).
+//! tree (format 3) and as a DAG (format 4, `strata convert --dag`: `dag-` in the name), and as a DAG
+//! built partitioned (`part-dag-`).
 
 #[path = "common/convert.rs"]
 mod convert;
@@ -51,11 +52,16 @@ fn main() {
                 println!("skipping {}: not found", p.display());
             }
         }
-        // Each as a tree (format 3) and as a DAG (format 4, `--dag`), which should need no seams.
+        // Each as a tree (format 3) and as a DAG (format 4, `--dag`), which should need no seams,
+        // in memory and partitioned into cells (at 16 MB the small meshes make about ten, at 64 MB
+        // the CT head thirteen), whose borders the DAG's fronts cross without cracks too.
+        use strata::pipeline::{Build, ConvertOptions};
         for p in &inputs {
+            let memory = if p.ends_with("cthead_skin_native.ply") { 64 << 20 } else { 16 << 20 };
             for dag in [false, true] {
-                files.push(convert_with(p, "cracks", &strata::pipeline::ConvertOptions { dag, ..Default::default() }));
+                files.push(convert_with(p, "cracks", &ConvertOptions { dag, build: Build::InCore, ..Default::default() }));
             }
+            files.push(convert_with(p, "cracks", &ConvertOptions { dag: true, build: Build::Partitioned, memory, ..Default::default() }));
         }
     }
     println!(
@@ -99,10 +105,10 @@ fn main() {
             seam_faces += streamer.seams().face_count() as u64;
             covered += reference.depth.iter().filter(|d| d.is_finite()).count() as u64;
         }
-        let name = f.file_name().unwrap().to_string_lossy().replace("strata-cracks-", "");
+        let name = f.file_stem().unwrap().to_string_lossy().replace("strata-cracks-", "");
         println!(
             "{:<28} {:>6} {:>6} {:>12} {:>9} {:>13} {:>10.4}% {:>15} {:>16} {:>17.1}",
-            name.split('-').next().unwrap_or(&name),
+            name.rsplit_once('-').map_or(name.as_str(), |n| n.0),
             FRAMES,
             mixed,
             cracked,
