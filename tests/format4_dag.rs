@@ -71,6 +71,7 @@ fn every_cut_is_closed(out: std::path::PathBuf) {
     std::fs::remove_file(&out).ok();
     assert_eq!(rd.header().major, 4);
     assert_eq!(rd.header().input_faces, 99_372);
+    assert_eq!(rd.header().input_vertices, 49_688, "vertices counted once across cells");
     let nodes = rd.nodes().to_vec();
     let geometry: Vec<NodeGeometry> = (0..nodes.len() as u32).map(|i| rd.read_node(i).expect("node")).collect();
 

@@ -106,7 +106,7 @@ pub fn build<W: Write + Send>(
     if g.removed.0 + g.removed.1 > 0 {
         g.warnings.insert(0, format!("removed {} degenerate and {} duplicate faces", g.removed.0, g.removed.1));
     }
-    writer.set_input_vertices((g.vertices - g.welded) as u64);
+    writer.set_input_vertices(g.vertices.saturating_sub(g.welded) as u64);
     Ok((writer.finish()?, g.warnings))
 }
 
