@@ -86,6 +86,19 @@ impl Mesh {
         self.positions.len()
     }
 
+    /// Append `other`'s faces with its vertex `v` as this mesh's `remap[v]` (vertices already
+    /// here or pushed by the caller), with their corner attributes, materials and face geometry
+    /// (each array as `other` has it: a mesh without one leaves it as it is).
+    pub fn append_faces(&mut self, other: &Mesh, remap: &[u32]) {
+        self.triangles.extend(other.triangles.iter().map(|t| t.map(|v| remap[v as usize])));
+        self.normals.extend_from_slice(&other.normals);
+        self.uvs.extend_from_slice(&other.uvs);
+        self.colors.extend_from_slice(&other.colors);
+        self.face_materials.extend_from_slice(&other.face_materials);
+        self.face_normals.extend_from_slice(&other.face_normals);
+        self.face_areas.extend_from_slice(&other.face_areas);
+    }
+
     /// Axis-aligned bounds of the positions, or `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let first = *self.positions.first()?;

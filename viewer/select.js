@@ -6,6 +6,7 @@
 
 import { angle, dot, length, sub, unit } from './camera.js';
 import { isComplete } from './format.js';
+import { Heap } from './heap.js';
 
 export const OFF = 0, SHOWN = 1, CULLED = 2, REFINED = 3;
 const NO_PARENT = 0xffffffff;
@@ -239,39 +240,13 @@ export class Selector {
       if (seen[n] === 0) seen[n] = sees(s, n, camera, planes) ? 1 : 2;
       return seen[n] === 1;
     };
-    const heap = [];
-    const before = (a, b) => key[a] > key[b] || (key[a] === key[b] && a < b);
-    const push = (g) => {
-      heap.push(g);
-      for (let i = heap.length - 1; i > 0; ) {
-        const up = (i - 1) >> 1;
-        if (!before(heap[i], heap[up])) break;
-        [heap[i], heap[up]] = [heap[up], heap[i]];
-        i = up;
-      }
-    };
-    const pop = () => {
-      const top = heap[0], last = heap.pop();
-      if (heap.length > 0) {
-        heap[0] = last;
-        for (let i = 0; ; ) {
-          const l = 2 * i + 1, r = l + 1;
-          let m = i;
-          if (l < heap.length && before(heap[l], heap[m])) m = l;
-          if (r < heap.length && before(heap[r], heap[m])) m = r;
-          if (m === i) break;
-          [heap[i], heap[m]] = [heap[m], heap[i]];
-          i = m;
-        }
-      }
-      return top;
-    };
+    const heap = new Heap((a, b) => key[a] > key[b] || (key[a] === key[b] && a < b));
     const entered = [];
     const enter = (n) => {
       inCut[n] = 1;
       entered.push(n);
       const g = d.source[n];
-      if (complete && g !== NO_PARENT && --waiting[g] === 0 && p[g] > tau && !held.has(g)) push(g);
+      if (complete && g !== NO_PARENT && --waiting[g] === 0 && p[g] > tau && !held.has(g)) heap.push(g);
     };
     let faces = 0, bytes = 0;
     const [top0, top1] = s.levelNodes(s.top());
@@ -283,8 +258,8 @@ export class Selector {
       enter(n);
     }
     const opened = [];
-    while (heap.length > 0) {
-      const g = pop();
+    while (heap.items.length > 0) {
+      const g = heap.pop();
       const [o0, o1] = d.outputsOf(g);
       const children = d.childrenOf(g);
       let f = faces, b = bytes;

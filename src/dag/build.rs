@@ -223,13 +223,7 @@ fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ra
                 i
             })
             .collect();
-        out.triangles.extend(m.triangles.iter().map(|t| t.map(|v| index[v as usize])));
-        out.normals.extend_from_slice(&m.normals);
-        out.uvs.extend_from_slice(&m.uvs);
-        out.colors.extend_from_slice(&m.colors);
-        out.face_materials.extend_from_slice(&m.face_materials);
-        out.face_normals.extend_from_slice(&m.face_normals);
-        out.face_areas.extend_from_slice(&m.face_areas);
+        out.append_faces(&m, &index);
         face_groups.extend(std::iter::repeat_n(g as u32, m.triangles.len()));
         group_error.push(error);
     }

@@ -15,7 +15,7 @@ use crate::format::codes::store_radius;
 use crate::format::geom::v3::Lattice;
 use crate::format::{Attributes, Grid, GroupIn, NodeIn, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
 use crate::hierarchy;
-use crate::levels::position_key;
+use crate::levels::{pinned_flags, position_key};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use crate::write::{
     attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions,
@@ -179,6 +179,25 @@ pub fn write_levels(
         let nodes = dag.level_nodes(l);
         let first = nodes.start;
         let node_key = |n: u32| (place.node_key)(n);
+        if let (Base::Tops { points, stored }, 0) = (&place.base, l) {
+            // Written already: what the next level inherits, and the nodes' consumers.
+            if stored.len() != nodes.len() {
+                return Err(bad(format!("{} stored nodes for {} at level 0", stored.len(), nodes.len())));
+            }
+            let grid_points = (mesh.positions.iter().enumerate())
+                .map(|(v, x)| points.get(&position_key(*x)).copied().ok_or_else(|| bad(format!("level 0 vertex {v} has no grid point"))))
+                .collect::<Result<Vec<[u32; 3]>>>()?;
+            below = mesh.positions.iter().zip(&grid_points).map(|(p, &g)| (position_key(*p), g)).collect();
+            for n in nodes.clone() {
+                node_stored[n as usize] = stored[(n - first) as usize];
+                let consumer = dag.nodes[n as usize].consumer;
+                if consumer != NONE {
+                    emit(Record::Consumer { level: file_level, key: node_key(n), group: (place.group_key)(consumer) })?;
+                }
+            }
+            top_points = grid_points;
+            continue;
+        }
         // Each node's faces, as the codec and the measures take them.
         let faces: Vec<Vec<u32>> = nodes.clone().map(|n| dag.nodes[n as usize].faces.clone().collect()).collect();
         let faces = |n: u32| faces[(n - first) as usize].as_slice();
@@ -192,34 +211,8 @@ pub fn write_levels(
                 let mut c = (*c).clone();
                 c.face_group = dag.input_faces.iter().map(|&f| c.face_group[f as usize]).collect();
                 clusters = Some(c);
-                let kept: Vec<bool> = match pinned {
-                    Some(p) => mesh.positions.iter().map(|x| p.contains(&position_key(*x))).collect(),
-                    None => Vec::new(),
-                };
+                let kept = pinned.map_or_else(Vec::new, |p| pinned_flags(mesh, p));
                 Quantized::distinct_keeping(&grid, mesh, &kept).map_err(bad)?
-            }
-            (Base::Tops { points, stored }, 0) => {
-                if stored.len() != nodes.len() {
-                    return Err(bad(format!("{} stored nodes for {} at level 0", stored.len(), nodes.len())));
-                }
-                let mut q = Quantized::new(&grid, mesh);
-                for (v, x) in mesh.positions.iter().enumerate() {
-                    let g = *points.get(&position_key(*x)).ok_or_else(|| bad(format!("level 0 vertex {v} has no grid point")))?;
-                    q.points[v] = g;
-                    q.positions[v] = grid.decode(g);
-                }
-                below = mesh.positions.iter().zip(&q.points).map(|(p, &g)| (position_key(*p), g)).collect();
-                for n in nodes.clone() {
-                    node_stored[n as usize] = stored[(n - first) as usize];
-                    let consumer = dag.nodes[n as usize].consumer;
-                    if consumer != NONE {
-                        emit(Record::Consumer { level: file_level, key: node_key(n), group: (place.group_key)(consumer) })?;
-                    }
-                }
-                if dag.levels.len() == 1 {
-                    top_points = q.points;
-                }
-                continue;
             }
             _ => Quantized::new(&grid, mesh),
         };

@@ -13,8 +13,10 @@
 //! the next piece keeps those vertices where the file has them.
 
 use super::tops::{DagTop, Spilled};
-use super::work::{final_merge_warning, load_cell, piece_key, plan_round, poisoned, run, Job, Loaded, Pins, Round, GROUP_BITS, MAX_PIECES};
-use crate::dag::write::{write_levels, Base, Place, Stored};
+use super::work::{
+    final_merge_warning, load_cell, piece_key, plan_round, poisoned, run, Gathered, Job, Loaded, Pins, Round, GROUP_BITS, MAX_PIECES,
+};
+use crate::dag::write::{write_levels, Base, Place};
 use crate::dag::{build_from, Bounds, DagParams, Group, Start};
 use crate::error::{Error, Result};
 use crate::format::{WriteSummary, Writer};
@@ -26,17 +28,6 @@ use rustc_hash::FxHashMap;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Mutex;
-
-/// What the rounds gather besides the tops.
-#[derive(Default)]
-struct Gathered {
-    warnings: Vec<String>,
-    /// Degenerate and duplicate faces the cells removed.
-    removed: (usize, usize),
-    /// Level-0 vertices of the cells, and vertices welded away since (shared by two pieces).
-    vertices: usize,
-    welded: usize,
-}
 
 /// Build the file from the cell files `spooled` (file, faces) as a DAG: the cells, parts while the
 /// tops are larger than a cell, then the merge; returns what was written and the cells' warnings.
@@ -82,7 +73,7 @@ pub fn build<W: Write + Send>(
             // The part's own shared positions (a smaller set to look up), as the tree's parts.
             let own: Pins =
                 part.iter().flat_map(|t| t.mesh.positions.iter().map(|&q| position_key(q))).filter(|k| pins.contains(k)).collect();
-            let shape = Shape { first, levels: Some(levels), pinned: Some(&own) };
+            let shape = Shape { first, bounds: Bounds { levels: Some(levels), pinned: Some(&own) } };
             spill(merge(job, part, next_piece + p, shape, &params, &writer, &gathered)?, round + 1, p)
         })?;
         drop(pins);
@@ -100,22 +91,16 @@ pub fn build<W: Write + Send>(
     }
     progress.stage("merge", 0);
     let tops = tops.into_iter().map(Spilled::load_dag).collect::<Result<Vec<DagTop>>>()?;
-    merge(job, tops, next_piece, Shape { first, levels: None, pinned: None }, &params, &writer, &gathered)?;
+    merge(job, tops, next_piece, Shape { first, bounds: Bounds::default() }, &params, &writer, &gathered)?;
     let mut writer = writer.into_inner().map_err(|_| poisoned())?;
-    let mut g = gathered.into_inner().map_err(|_| poisoned())?;
-    if g.removed.0 + g.removed.1 > 0 {
-        g.warnings.insert(0, format!("removed {} degenerate and {} duplicate faces", g.removed.0, g.removed.1));
-    }
-    writer.set_input_vertices(g.vertices.saturating_sub(g.welded) as u64);
-    Ok((writer.finish()?, g.warnings))
+    let warnings = gathered.into_inner().map_err(|_| poisoned())?.finish(&mut writer);
+    Ok((writer.finish()?, warnings))
 }
 
-/// Where a piece's levels go: its level 0 is file level `first`; it builds `levels` levels on it
-/// (`None`: until the top is small) with the positions `pinned` kept.
+/// Where a piece's levels go: its level 0 is file level `first`; it builds on it within `bounds`.
 struct Shape<'a> {
     first: usize,
-    levels: Option<usize>,
-    pinned: Option<&'a Pins>,
+    bounds: Bounds<'a>,
 }
 
 /// Build cell `c` from its file as a DAG of [`Job::cell_levels`] levels; `None` when it holds no
@@ -145,7 +130,7 @@ fn cell<W: Write>(
     let h = hierarchy::build_levels(&mesh, &adjacency, &job.hierarchy, Some(1));
     drop(adjacency);
     let start = Start { mesh, labels: h.levels[0].face_group.clone(), made_by: Vec::new() };
-    let shape = Shape { first: 0, levels: Some(job.cell_levels), pinned: Some(&pinned) };
+    let shape = Shape { first: 0, bounds: Bounds { levels: Some(job.cell_levels), pinned: Some(&pinned) } };
     let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
     let base = Base::Input { clusters: &h.clusters, pinned: Some(&pinned) };
     piece(job, start, base, c, &[], &shape, params, writer, &bad)
@@ -194,11 +179,7 @@ fn merge<W: Write>(
                 }
             })
             .collect();
-        mesh.triangles.extend(m.triangles.iter().map(|t| t.map(|v| remap[v as usize])));
-        mesh.normals.extend_from_slice(&m.normals);
-        mesh.uvs.extend_from_slice(&m.uvs);
-        mesh.colors.extend_from_slice(&m.colors);
-        mesh.face_materials.extend_from_slice(&m.face_materials);
+        mesh.append_faces(m, &remap);
         // Nodes become labels in order; a source's outputs are a run of them.
         let base = keys.len() as u32;
         for (n, &count) in top.faces.iter().enumerate() {
@@ -244,8 +225,7 @@ fn piece<W: Write>(
     writer: &Mutex<Writer<W>>,
     bad: &dyn Fn(String) -> Error,
 ) -> Result<Option<DagTop>> {
-    let bounds = Bounds { levels: shape.levels, pinned: shape.pinned };
-    let dag = build_from(start, params, &bounds, &mut |_, _| {});
+    let mut dag = build_from(start, params, &shape.bounds, &mut |_, _| {});
     if dag.nodes.len().max(dag.groups.len()) >= 1 << GROUP_BITS {
         return Err(bad(format!("{} nodes and {} groups in one piece, at most {}", dag.nodes.len(), dag.groups.len(), 1 << GROUP_BITS)));
     }
@@ -271,7 +251,7 @@ fn piece<W: Write>(
         base,
     };
     let written = write_levels(&dag, &place, &mut |r| r.add_to(&mut *writer.lock().map_err(|_| poisoned())?), bad)?;
-    if shape.levels.is_none() {
+    if shape.bounds.levels.is_none() {
         return Ok(None);
     }
     // The top, for the next round.
@@ -286,14 +266,14 @@ fn piece<W: Write>(
         }
         source.push(sources.len() as u32 - 1);
     }
-    let mesh = dag.levels.last().cloned().unwrap_or_default();
+    let faces = nodes.iter().map(|n| n.faces.len() as u32).collect();
     Ok(Some(DagTop {
         points: written.points,
-        faces: nodes.iter().map(|n| n.faces.len() as u32).collect(),
-        keys: top.clone().map(node_key).collect(),
+        faces,
+        keys: top.map(node_key).collect(),
         stored: written.nodes,
         source,
-        sources: sources.iter().map(|&s| written.groups.get(s as usize).copied().unwrap_or(Stored::default())).collect(),
-        mesh,
+        sources: sources.iter().map(|&s| written.groups.get(s as usize).copied().unwrap_or_default()).collect(),
+        mesh: dag.levels.pop().unwrap_or_default(),
     }))
 }

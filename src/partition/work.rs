@@ -93,16 +93,28 @@ struct Border {
     edges: Vec<([u32; 6], Vec<u32>)>,
 }
 
-/// What the rounds gather besides the tops.
+/// What the rounds gather besides the tops (a DAG's build gathers no borders).
 #[derive(Default)]
-struct Gathered {
+pub(super) struct Gathered {
     borders: Vec<Border>,
-    warnings: Vec<String>,
+    pub warnings: Vec<String>,
     /// Degenerate and duplicate faces the cells removed.
-    removed: (usize, usize),
+    pub removed: (usize, usize),
     /// Level-0 vertices of the cells, and vertices welded away since (shared by two pieces).
-    vertices: usize,
-    welded: usize,
+    pub vertices: usize,
+    pub welded: usize,
+}
+
+impl Gathered {
+    /// Give `writer` the input's vertex count (the cells', less those welded away) and return
+    /// the warnings, the faces the cells removed first.
+    pub(super) fn finish<W: Write>(mut self, writer: &mut Writer<W>) -> Vec<String> {
+        if self.removed.0 + self.removed.1 > 0 {
+            self.warnings.insert(0, format!("removed {} degenerate and {} duplicate faces", self.removed.0, self.removed.1));
+        }
+        writer.set_input_vertices(self.vertices.saturating_sub(self.welded) as u64);
+        self.warnings
+    }
 }
 
 /// Build the file from the cell files `spooled` (file, faces): the cells, parts while the tops
@@ -161,12 +173,9 @@ pub fn build<W: Write + Send>(
     merge(job, tops, first, None, &writer, &gathered)?;
     let mut writer = writer.into_inner().map_err(|_| poisoned())?;
     let mut g = gathered.into_inner().map_err(|_| poisoned())?;
-    if g.removed.0 + g.removed.1 > 0 {
-        g.warnings.insert(0, format!("removed {} degenerate and {} duplicate faces", g.removed.0, g.removed.1));
-    }
-    link(&mut writer, &g.borders);
-    writer.set_input_vertices((g.vertices - g.welded) as u64);
-    Ok((writer.finish()?, g.warnings))
+    link(&mut writer, &std::mem::take(&mut g.borders));
+    let warnings = g.finish(&mut writer);
+    Ok((writer.finish()?, warnings))
 }
 
 /// A round of parts: the faces of the tops it takes, the levels each part builds, the positions
@@ -405,11 +414,7 @@ fn merge<W: Write>(
                 })
             })
             .collect();
-        mesh.triangles.extend(m.triangles.iter().map(|t| t.map(|v| remap[v as usize])));
-        mesh.normals.extend_from_slice(&m.normals);
-        mesh.uvs.extend_from_slice(&m.uvs);
-        mesh.colors.extend_from_slice(&m.colors);
-        mesh.face_materials.extend_from_slice(&m.face_materials);
+        mesh.append_faces(m, &remap);
         face_group.extend(t.level.face_group.iter().map(|&g| base + g));
         group_error.extend_from_slice(&t.level.group_error);
         keys.extend_from_slice(&t.keys);
