@@ -118,7 +118,8 @@ fn missing_file_fails_cleanly() {
 }
 
 /// The PLY and OBJ cases through the partitioned build's streaming readers (`convert
-/// --partitioned`), and hostile face indices: the same clear errors, and no output left.
+/// --partitioned`, as a tree and as a DAG), and hostile face indices: the same clear errors, and
+/// no output left.
 #[test]
 fn malformed_files_fail_cleanly_when_streamed() {
     let dir = temp_dir("streamed");
@@ -131,18 +132,21 @@ fn malformed_files_fail_cleanly_when_streamed() {
     for case in cases().into_iter().chain(extra).filter(|c| c.name.ends_with(".ply") || c.name.ends_with(".obj")) {
         let path = dir.join(case.name);
         std::fs::write(&path, &case.bytes).unwrap();
-        let out_file = dir.join(format!("{}.strata", case.name));
-        let out = Command::new(env!("CARGO_BIN_EXE_strata"))
-            .args(["convert", "--partitioned", "--memory", "16M", "--temp"])
-            .arg(&dir)
-            .arg(&path)
-            .arg(&out_file)
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        let problems = problems(&case, out.status.success(), &stderr, out_file.exists());
-        if !problems.is_empty() {
-            failures.push(format!("{}: {} — stderr: {}", case.name, problems.join(", "), stderr.trim()));
+        for dag in [&[][..], &["--dag"][..]] {
+            let out_file = dir.join(format!("{}.strata", case.name));
+            let out = Command::new(env!("CARGO_BIN_EXE_strata"))
+                .args(["convert", "--partitioned", "--memory", "16M", "--temp"])
+                .arg(&dir)
+                .args(dag)
+                .arg(&path)
+                .arg(&out_file)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+            let problems = problems(&case, out.status.success(), &stderr, out_file.exists());
+            if !problems.is_empty() {
+                failures.push(format!("{} {dag:?}: {} — stderr: {}", case.name, problems.join(", "), stderr.trim()));
+            }
         }
     }
     let left: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.path().is_dir()).collect();
