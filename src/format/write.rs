@@ -844,10 +844,6 @@ fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: Vec<Suppo
         let c = &codes[i];
         (0..3).map(|k| (c.max[k] as f64 - c.min[k] as f64).powi(2)).sum::<f64>().sqrt()
     };
-    let gap = |a: usize, b: usize| {
-        let (x, y) = (&codes[a], &codes[b]);
-        (0..3).map(|k| (x.min[k].max(y.min[k]) as i64 - x.max[k].min(y.max[k]) as i64).max(0)).max().unwrap_or(0)
-    };
     let parents = std::iter::once((0u32, top)).chain(records.iter().map(|r| (r.first_child, r.child_count)));
     let mut out = Planes { starts: vec![0], entries: Vec::new() };
     for (first, count) in parents {
@@ -858,14 +854,8 @@ fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: Vec<Suppo
                 pairs.extend((a + 1..count).map(|b| (a, b)));
             }
         } else {
-            for a in kids.clone() {
-                let mut near: Vec<(i64, usize)> = kids.clone().filter(|&b| b != a).map(|b| (gap(a, b), b)).collect();
-                let nth = 7.min(near.len() - 1);
-                near.select_nth_unstable(nth);
-                for &(_, b) in near.iter().take(8) {
-                    let (x, y) = ((a - first as usize) as u32, (b - first as usize) as u32);
-                    pairs.push((x.min(y), x.max(y)));
-                }
+            for (a, near) in nearest_by_gap(&codes[kids.clone()], 8).into_iter().enumerate() {
+                pairs.extend(near.into_iter().map(|b| (a.min(b) as u32, a.max(b) as u32)));
             }
             pairs.sort_unstable();
             pairs.dedup();
@@ -881,6 +871,59 @@ fn order_planes(records: &[NodeRecord], codes: &[NodeCodes], supports: Vec<Suppo
         out.starts.push(out.entries.len() as u32);
     }
     out
+}
+
+/// Box gap between two nodes' boxes, in grid steps: the largest separation along an axis, 0 when
+/// they overlap.
+fn box_gap(x: &NodeCodes, y: &NodeCodes) -> i64 {
+    (0..3).map(|k| (x.min[k].max(y.min[k]) as i64 - x.max[k].min(y.max[k]) as i64).max(0)).max().unwrap_or(0)
+}
+
+/// For each box, the `k` others smallest by (box gap, index): exactly the brute-force choice, found
+/// by sweeping the boxes sorted by their lower bound along the axis where those spread most, each
+/// direction stopped once no box further on can have a gap within the `k`-th found.
+fn nearest_by_gap(codes: &[NodeCodes], k: usize) -> Vec<Vec<usize>> {
+    let n = codes.len();
+    let spread = |a: usize| {
+        let (lo, hi) = codes.iter().fold((u32::MAX, 0), |(lo, hi), c| (lo.min(c.min[a]), hi.max(c.min[a])));
+        hi.saturating_sub(lo)
+    };
+    let axis = (0..3).max_by_key(|&a| (spread(a), std::cmp::Reverse(a))).unwrap_or(0);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_unstable_by_key(|&i| (codes[i].min[axis], i));
+    let widest = codes.iter().map(|c| c.max[axis] as i64 - c.min[axis] as i64).max().unwrap_or(0);
+    let mut out = Vec::with_capacity(n);
+    let mut best: Vec<(i64, usize)> = Vec::with_capacity(k + 1);
+    for (at, &a) in order.iter().enumerate() {
+        best.clear();
+        let ca = &codes[a];
+        let worst = |best: &Vec<(i64, usize)>| if best.len() < k { i64::MAX } else { best[k - 1].0 };
+        let offer = |best: &mut Vec<(i64, usize)>, b: usize| {
+            let e = (box_gap(ca, &codes[b]), b);
+            if best.len() < k || e < best[k - 1] {
+                let i = best.partition_point(|x| *x < e);
+                best.insert(i, e);
+                best.truncate(k);
+            }
+        };
+        // Above: gap ≥ b.min − a.max along the axis, which only grows.
+        for &b in &order[at + 1..] {
+            if codes[b].min[axis] as i64 - ca.max[axis] as i64 > worst(&best) {
+                break;
+            }
+            offer(&mut best, b);
+        }
+        // Below: gap ≥ a.min − b.max ≥ a.min − b.min − widest, which only grows.
+        for &b in order[..at].iter().rev() {
+            if ca.min[axis] as i64 - codes[b].min[axis] as i64 - widest > worst(&best) {
+                break;
+            }
+            offer(&mut best, b);
+        }
+        out.push((a, best.iter().map(|&(_, b)| b).collect::<Vec<usize>>()));
+    }
+    out.sort_unstable_by_key(|x| x.0);
+    out.into_iter().map(|(_, near)| near).collect()
 }
 
 fn check_images(opts: &WriterOptions) -> std::result::Result<(), String> {
@@ -923,4 +966,41 @@ fn check_images(opts: &WriterOptions) -> std::result::Result<(), String> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sweep picks exactly what comparing every pair picks, ties included.
+    #[test]
+    fn nearest_by_gap_is_the_brute_force_choice() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = |n: u32| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed % n as u64) as u32
+        };
+        for (n, span, size) in [(17, 40, 5), (60, 1000, 80), (300, 30, 3), (500, 100_000, 20_000), (40, 4, 4)] {
+            let codes: Vec<NodeCodes> = (0..n)
+                .map(|_| {
+                    let min = [next(span), next(span / 3 + 1), next(span)];
+                    let max = min.map(|m| m + next(size));
+                    NodeCodes { min, max, ..NodeCodes::default() }
+                })
+                .collect();
+            let fast = nearest_by_gap(&codes, 8);
+            for a in 0..codes.len() {
+                let mut near: Vec<(i64, usize)> =
+                    (0..codes.len()).filter(|&b| b != a).map(|b| (box_gap(&codes[a], &codes[b]), b)).collect();
+                near.sort_unstable();
+                let mut want: Vec<usize> = near.iter().take(8).map(|x| x.1).collect();
+                let mut got = fast[a].clone();
+                want.sort_unstable();
+                got.sort_unstable();
+                assert_eq!(got, want, "{n} boxes, box {a}");
+            }
+        }
+    }
 }
