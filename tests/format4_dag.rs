@@ -157,3 +157,59 @@ fn streamed_without_cracks(out: std::path::PathBuf) {
     assert!(mixed >= FRAMES / 2, "{mixed} mixed fronts");
     assert_eq!(cracks, 0);
 }
+
+/// A soup of separate triangles (specks, fragments, an unwelded export) has nothing to collapse:
+/// without the DAG's small-component rule (`dag/specks.rs`) each triangle was a node at every
+/// level and the top kept every face. In memory and partitioned, the file verifies, its levels
+/// halve down to the top budget, and its nodes hold hundreds of faces each.
+#[test]
+fn a_soup_of_separate_triangles_shrinks_level_by_level() {
+    const TRIANGLES: usize = 12_000;
+    let dir = std::env::temp_dir().join(format!("strata-format4-soup-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("work")).unwrap();
+    let input = dir.join("soup.obj");
+    let mut obj = String::new();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..TRIANGLES {
+        let c = [next() * 100.0, next() * 100.0, next() * 100.0];
+        for _ in 0..3 {
+            obj += &format!("v {:.4} {:.4} {:.4}\n", c[0] + next() - 0.5, c[1] + next() - 0.5, c[2] + next() - 0.5);
+        }
+    }
+    for t in 0..TRIANGLES {
+        obj += &format!("f {} {} {}\n", 3 * t + 1, 3 * t + 2, 3 * t + 3);
+    }
+    std::fs::write(&input, obj).unwrap();
+    let top_faces = 1000;
+    for partitioned in [false, true] {
+        let mut opts = match partitioned {
+            true => ConvertOptions { build: Build::Partitioned, memory: 8 << 20, temp: Some(dir.join("work")), ..Default::default() },
+            false => ConvertOptions { build: Build::InCore, ..Default::default() },
+        };
+        opts.dag = true;
+        opts.levels.top_faces = top_faces;
+        let out = dir.join(format!("soup-{partitioned}.strata"));
+        let c = convert(&input, &Default::default(), &out, &opts, &mut Silent).expect("convert");
+        if partitioned {
+            assert!(c.cells.is_some_and(|n| n >= 3), "{:?} cells", c.cells);
+        }
+        let s = &c.summary;
+        let faces: Vec<u64> = s.levels.iter().map(|l| l.faces).collect();
+        assert_eq!(faces[0], TRIANGLES as u64);
+        assert!(*faces.last().unwrap() <= top_faces as u64, "partitioned {partitioned}: faces per level {faces:?}");
+        for w in faces.windows(2) {
+            assert!(w[1] * 10 <= w[0] * 6, "partitioned {partitioned}: a level kept over 60 % of the one below: {faces:?}");
+        }
+        assert!((s.nodes as usize) * 100 <= TRIANGLES, "partitioned {partitioned}: {} nodes for {TRIANGLES} faces", s.nodes);
+        assert!(s.bytes_per_face() < 40.0, "partitioned {partitioned}: {:.1} bytes per face", s.bytes_per_face());
+        let v = strata::format::verify_path(&out);
+        assert!(v.problems.is_empty(), "partitioned {partitioned}: {:?}", v.problems);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

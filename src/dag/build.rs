@@ -1,6 +1,7 @@
 //! Building the DAG level by level: gather, simplify with group borders pinned, split.
 
 use super::gather::gather;
+use super::specks;
 use super::split::split;
 use super::{Dag, Group, Node, NONE};
 use crate::cone::smallest_enclosing;
@@ -80,7 +81,11 @@ pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut d
         let end = (group.outputs.end as usize).min(sources.len());
         sources[(group.outputs.start as usize).min(end)..end].fill(g as u32);
     }
-    let (pieces, sources): (Vec<Vec<u32>>, Vec<u32>) = pieces.into_iter().zip(sources).filter(|(p, _)| !p.is_empty()).unzip();
+    let (mut pieces, mut sources): (Vec<Vec<u32>>, Vec<u32>) = pieces.into_iter().zip(sources).filter(|(p, _)| !p.is_empty()).unzip();
+    if made_by.is_empty() {
+        pieces = specks::gather(&mesh, pieces);
+        sources = vec![NONE; pieces.len()];
+    }
     let median = {
         let mut sizes: Vec<usize> = pieces.iter().map(Vec::len).collect();
         sizes.sort_unstable();
@@ -190,22 +195,24 @@ struct Simplified {
 /// meets its neighbours only at pinned vertices, so simplifying it alone changes nothing of theirs.
 fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ratio: f32) -> Simplified {
     let faces = Lists::from_labels(labels, groups);
+    let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
     let results: Vec<(Mesh, f32)> = (0..groups)
         .into_par_iter()
         .map(|g| {
             let (sub, sub_pinned) = part(mesh, faces.get(g), pinned);
+            let target = ((sub.triangles.len() as f64) * ratio as f64).round() as usize;
             let opts = SimplifyOptions {
-                target_faces: ((sub.triangles.len() as f64) * ratio as f64).round() as usize,
+                target_faces: target,
                 normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
                 topology: true,
                 ..SimplifyOptions::default()
             };
-            let s = simplify_pinned(&sub, Some(&vec![0; sub.triangles.len()]), &sub_pinned, &opts);
+            let mut s = simplify_pinned(&sub, Some(&vec![0; sub.triangles.len()]), &sub_pinned, &opts);
             let error = s.group_error.first().copied().unwrap_or(0.0);
+            let error = specks::leave(&mut s.mesh, sub.triangles.len(), target, error, &|x| kept.contains(&position_key(x)));
             (s.mesh, error)
         })
         .collect();
-    let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
     let mut out = Mesh { materials: mesh.materials.clone(), images: mesh.images.clone(), ..Mesh::default() };
     let mut welded: FxHashMap<[u32; 3], u32> = FxHashMap::default();
     let (mut face_groups, mut group_error) = (Vec::new(), Vec::with_capacity(groups));

@@ -119,7 +119,7 @@ fn pair(a: u32, b: u32) -> u64 {
 }
 
 /// Interleaved bits of three 10-bit coordinates.
-fn morton(c: [u32; 3]) -> u32 {
+pub(super) fn morton(c: [u32; 3]) -> u32 {
     let spread = |mut x: u32| {
         x &= 0x3ff;
         x = (x | x << 16) & 0x0300_00ff;

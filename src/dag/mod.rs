@@ -18,6 +18,7 @@
 mod build;
 pub mod cut;
 mod gather;
+mod specks;
 mod split;
 pub mod write;
 
