@@ -15,6 +15,7 @@ use crate::levels::LevelMeshes;
 use crate::mesh::{triangle_cross, Mesh};
 use crate::quantize::Quantized;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// A node's stored bounds, and the values they decode to (for its parent to cover).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,13 +52,14 @@ pub fn nodes(
     for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate().skip(skip) {
         let mesh = &lv.levels[l].mesh;
         let children = (l > 0).then(|| Lists::from_labels(&h.levels[l - 1].parent, hl.groups.len()));
-        let mut level = Vec::with_capacity(hl.groups.len());
-        for (g, info) in hl.groups.iter().enumerate() {
+        let done = &out;
+        // Each group on its own, on every core; the first error in group order is reported.
+        let node = |(g, info): (usize, &crate::hierarchy::GroupInfo)| -> Result<NodeBounds, String> {
             if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
                 return Err(format!("level {l} group {g}: bounds are not finite"));
             }
             let below: Vec<&NodeBounds> =
-                children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &out[l - 1][k as usize]).collect());
+                children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &done[l - 1][k as usize]).collect());
             let own = faces[l].get(g);
             let (mut lo, mut hi) = (grid.bound(info.min, false), grid.bound(info.max, true));
             let mut grow = |p: [u32; 3]| {
@@ -104,8 +106,10 @@ pub fn nodes(
                 need
             });
             let codes = NodeCodes { min: lo, max: hi, center, axis: axis_code, half_angle, radius: radius_code };
-            level.push(NodeBounds { codes, cone, center: grid.decode(center), radius, error });
-        }
+            Ok(NodeBounds { codes, cone, center: grid.decode(center), radius, error })
+        };
+        let level: Vec<Result<NodeBounds, String>> = hl.groups.par_iter().enumerate().map(node).collect();
+        let level = level.into_iter().collect::<Result<Vec<NodeBounds>, String>>()?;
         out.push(level);
     }
     Ok(out)

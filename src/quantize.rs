@@ -4,6 +4,7 @@
 use crate::format::Grid;
 use crate::mesh::Mesh;
 use glam::Vec3;
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 /// The grid of the file: the bounds of every level mesh's positions, `bits` bits per axis
@@ -149,7 +150,7 @@ impl Quantized {
                 edges.push((a.min(b), a.max(b), a < b, face_group[f]));
             }
         }
-        edges.sort_unstable();
+        edges.par_sort_unstable();
         let mut node = vec![u32::MAX; n];
         let mut border = vec![false; n];
         for run in edges.chunk_by(|x, y| (x.0, x.1) == (y.0, y.1)) {

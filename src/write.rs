@@ -12,13 +12,14 @@ use crate::format::geom::v2::{base_and_span, cluster_shift, GeometryCodes};
 use crate::format::geom::v3::Lattice;
 use crate::format::texture::ImageIn;
 use crate::format::{
-    octa, Attributes, Georef, Grid, MaterialRange, NodeIn, WriteSummary, Writer, WriterOptions, GRID_BITS, MAX_GRID_BITS, MAX_TOOL_BYTES,
-    NO_PARENT,
+    octa, Attributes, Georef, Grid, MaterialRange, NodeIn, Prepared, Preparer, WriteSummary, Writer, WriterOptions, GRID_BITS,
+    MAX_GRID_BITS, MAX_TOOL_BYTES, NO_PARENT,
 };
 use crate::hierarchy::{self, Hierarchy, HierarchyParams, Lists};
 use crate::levels::{pinned_flags, LevelMeshes};
 use crate::mesh::{Material, Mesh};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
+use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::io::Write;
 use std::path::Path;
@@ -147,7 +148,8 @@ fn write_named<W: Write>(
     let place = Place { offset: 0, levels: 0..h.levels.len(), file_levels: h.levels.len(), key: &|_, g| g, shared: None };
     let textured = !opts.images.is_empty();
     let looks = Looks { attributes, precision, textured, derive_normals: opts.derive_normals };
-    piece.add(&mut |node| writer.add(node), &bad, h, lv, &grid, looks, &place)?;
+    let preparer = writer.preparer();
+    piece.add(&preparer, &mut |node| writer.add_prepared(node), &bad, h, lv, &grid, looks, &place)?;
     writer.finish()
 }
 
@@ -236,29 +238,39 @@ impl Piece {
             None => Quantized::distinct_keeping(grid, &lv.levels[0].mesh, kept)?,
             Some(_) => Quantized::new(grid, &lv.levels[0].mesh),
         });
-        quant.extend(lv.levels[1..].iter().map(|l| Quantized::new(grid, &l.mesh)));
+        quant.par_extend(lv.levels[1..].par_iter().map(|l| Quantized::new(grid, &l.mesh)));
         let faces: Vec<Lists> = lv.levels.iter().zip(&h.levels).map(|(m, hl)| Lists::from_labels(&m.face_group, hl.groups.len())).collect();
         let mut shifts: Vec<Vec<u32>> = lv.levels.iter().map(|l| vec![0; l.group_error.len()]).collect();
         if let Some(p) = precision {
-            for l in 1..snapped.min(lv.levels.len()) {
-                let level = &lv.levels[l];
-                shifts[l] = (0..level.group_error.len())
-                    .map(|g| lattice_shift(level.group_error[g].min(median_edge(&level.mesh, faces[l].get(g))), p.lattice, grid))
-                    .collect();
-                quant[l].snap_inner(grid, &level.mesh, &level.face_group, &shifts[l]);
-            }
+            let snapped = snapped.min(lv.levels.len()).max(1);
+            // Levels apart, on every core.
+            (
+                quant[1..snapped].par_iter_mut(),
+                shifts[1..snapped].par_iter_mut(),
+                lv.levels[1..snapped].par_iter(),
+                faces[1..snapped].par_iter(),
+            )
+                .into_par_iter()
+                .for_each(|(q, shift, level, faces)| {
+                    *shift = (0..level.group_error.len())
+                        .map(|g| lattice_shift(level.group_error[g].min(median_edge(&level.mesh, faces.get(g))), p.lattice, grid))
+                        .collect();
+                    q.snap_inner(grid, &level.mesh, &level.face_group, shift);
+                });
         }
         let bounds = bounds::nodes(h, lv, &faces, grid, &quant, base)?;
         Ok(Piece { quant, shifts, faces, bounds })
     }
 
-    /// Hand the nodes of `place.levels` to `add` (a [`Writer::add`]), each with its geometry;
-    /// geometry that cannot be stored is an error made by `bad`.
+    /// Hand the nodes of `place.levels` to `add` (a [`Writer::add_prepared`]) in order, each with
+    /// its geometry, prepared by `preparer` a batch at a time on every core; geometry that cannot
+    /// be stored is an error made by `bad`.
     #[allow(clippy::too_many_arguments)]
     pub fn add(
         &self,
-        add: &mut dyn FnMut(NodeIn) -> Result<()>,
-        bad: &dyn Fn(String) -> Error,
+        preparer: &Preparer,
+        add: &mut dyn FnMut(Prepared) -> Result<()>,
+        bad: &(dyn Fn(String) -> Error + Sync),
         h: &Hierarchy,
         lv: &LevelMeshes,
         grid: &Grid,
@@ -275,7 +287,8 @@ impl Piece {
                 let shared = place.shared.map(|s| pinned_flags(mesh, s));
                 DerivedNormals::new(mesh, &self.quant[l].points, normal_bits, |v| shared.as_ref().is_some_and(|f| f[v as usize]))
             });
-            for (g, b) in self.bounds[l].iter().enumerate() {
+            let node = |g: usize| -> Result<Prepared> {
+                let b = &self.bounds[l][g];
                 let clusters = (file_level == 0).then_some(&h.clusters);
                 let lattice = precision.map_or(Lattice::default(), |p| Lattice {
                     shift: self.shifts[l][g],
@@ -288,7 +301,7 @@ impl Piece {
                         .map_err(bad)?;
                 let uv_density = if textured { uv_density(mesh, self.faces[l].get(g)) } else { 0.0 };
                 let top = file_level + 1 == place.file_levels;
-                add(NodeIn {
+                preparer.prepare(NodeIn {
                     level: file_level as u32,
                     key: (place.key)(l, g as u32),
                     parent: if top { NO_PARENT } else { (place.key)(l + 1, hl.parent[g]) },
@@ -298,12 +311,23 @@ impl Piece {
                     error: b.error,
                     uv_density,
                     geometry,
-                })?;
+                })
+            };
+            let count = self.bounds[l].len();
+            for start in (0..count).step_by(PREPARE_BATCH) {
+                let batch: Vec<Result<Prepared>> = (start..(start + PREPARE_BATCH).min(count)).into_par_iter().map(node).collect();
+                for prepared in batch {
+                    add(prepared?)?;
+                }
             }
         }
         Ok(())
     }
 }
+
+/// Nodes prepared at once on every core before they are handed over in order: enough to keep the
+/// cores busy, few enough that their encoded bytes stay small beside the level meshes.
+pub(crate) const PREPARE_BATCH: usize = 64;
 
 pub(crate) fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
     let valid = (0..=MAX_GRID_BITS).contains(&p.grid_bits)

@@ -13,14 +13,15 @@ use crate::derived_normals::DerivedNormals;
 use crate::error::{Error, Result};
 use crate::format::codes::store_radius;
 use crate::format::geom::v3::Lattice;
-use crate::format::{Attributes, Grid, GroupIn, NodeIn, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
+use crate::format::{Attributes, Grid, GroupIn, NodeIn, Prepared, Preparer, WriteSummary, Writer, MAJOR4, MAX_TOOL_BYTES, NO_PARENT};
 use crate::hierarchy;
 use crate::levels::{pinned_flags, position_key};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use crate::write::{
-    attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions,
+    attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions, PREPARE_BATCH,
 };
 use glam::Vec3;
+use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::Path;
 
@@ -74,6 +75,7 @@ fn write_named<W: std::io::Write>(
         node_key: &|n| n,
         group_key: &|g| g,
         base: Base::Input { clusters, pinned: None },
+        preparer: &writer.preparer(),
     };
     write_levels(dag, &place, &mut |r| r.add_to(&mut writer), &bad)?;
     writer.finish()
@@ -92,9 +94,11 @@ pub struct Place<'a> {
     /// The file level of the DAG's level 0.
     pub first: u32,
     /// The key of node `n` and of group `g` (their indices in the DAG) among their file level's.
-    pub node_key: &'a dyn Fn(u32) -> u32,
-    pub group_key: &'a dyn Fn(u32) -> u32,
+    pub node_key: &'a (dyn Fn(u32) -> u32 + Sync),
+    pub group_key: &'a (dyn Fn(u32) -> u32 + Sync),
     pub base: Base<'a>,
+    /// The file's [`Writer::preparer`]: nodes are prepared on every core.
+    pub preparer: &'a Preparer,
 }
 
 /// What a DAG's level 0 is.
@@ -118,7 +122,7 @@ pub struct Stored {
 
 /// What [`write_levels`] gives the file.
 pub enum Record {
-    Node(Box<NodeIn>),
+    Node(Box<Prepared>),
     Group(GroupIn),
     /// Node `key` of `level`, added earlier, is a child of `group`.
     Consumer {
@@ -132,7 +136,7 @@ impl Record {
     /// Give it to `writer`.
     pub fn add_to<W: std::io::Write>(self, writer: &mut Writer<W>) -> Result<()> {
         match self {
-            Record::Node(n) => writer.add(*n),
+            Record::Node(n) => writer.add_prepared(*n),
             Record::Group(g) => writer.add_group(g),
             Record::Consumer { level, key, group } => {
                 writer.set_parent(level, key, group);
@@ -158,7 +162,7 @@ pub fn write_levels(
     dag: &Dag,
     place: &Place,
     emit: &mut dyn FnMut(Record) -> Result<()>,
-    bad: &dyn Fn(String) -> Error,
+    bad: &(dyn Fn(String) -> Error + Sync),
 ) -> Result<Written> {
     let Place { grid, precision, attributes, .. } = *place;
     if let Some(l) = dag.levels.iter().position(|m| attributes_of(m) != attributes) {
@@ -266,12 +270,11 @@ pub fn write_levels(
         }
         let derived =
             (place.derive_normals && attributes.normals).then(|| DerivedNormals::new(mesh, &q.points, precision.normal_bits, |_| false));
-        for n in nodes {
+        let node = |n: u32| -> Result<(Stored, Prepared)> {
             let node = &dag.nodes[n as usize];
             let own = faces(n);
             let error = if l == 0 { q.error(&grid, mesh, own) } else { group_stored[node.source as usize].error };
             let (codes, center, radius) = bounds::of_faces(mesh, &q, &grid, own, node.center, node.cone.axis);
-            node_stored[n as usize] = Stored { error, center, radius };
             let lattice = Lattice {
                 shift: shifts[(n - first) as usize],
                 normal_bits: if attributes.normals { precision.normal_bits } else { 0 },
@@ -281,7 +284,7 @@ pub fn write_levels(
             let geometry = node_geometry(mesh, &q, &grid, own, clusters.as_ref(), attributes, lattice, derived.as_ref())
                 .map_err(|m| bad(format!("level {file_level} node {}: {m}", node_key(n))))?;
             let key = |g: u32| if g == NONE { NO_PARENT } else { (place.group_key)(g) };
-            emit(Record::Node(Box::new(NodeIn {
+            let prepared = place.preparer.prepare(NodeIn {
                 level: file_level,
                 key: node_key(n),
                 parent: key(node.consumer),
@@ -291,7 +294,17 @@ pub fn write_levels(
                 error,
                 uv_density: if place.textured { uv_density(mesh, own) } else { 0.0 },
                 geometry,
-            })))?;
+            })?;
+            Ok((Stored { error, center, radius }, prepared))
+        };
+        for start in nodes.clone().step_by(PREPARE_BATCH) {
+            let batch: Vec<Result<(Stored, Prepared)>> =
+                (start..(start + PREPARE_BATCH as u32).min(nodes.end)).into_par_iter().map(node).collect();
+            for (n, done) in (start..).zip(batch) {
+                let (stored, prepared) = done?;
+                node_stored[n as usize] = stored;
+                emit(Record::Node(Box::new(prepared)))?;
+            }
         }
     }
     let top = dag.level_nodes(dag.levels.len().saturating_sub(1));

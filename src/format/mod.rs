@@ -51,7 +51,7 @@ pub use records::{
 };
 pub use source::ByteSource;
 pub use verify::{verify, verify_path, Verification};
-pub use write::{GroupIn, LevelSummary, NodeIn, WriteSummary, Writer, WriterOptions};
+pub use write::{GroupIn, LevelSummary, NodeIn, Prepared, Preparer, WriteSummary, Writer, WriterOptions};
 
 /// Major format version writers write by default: 2. Readers read 2 and 3 ([`NEWEST_MAJOR`]) and
 /// refuse larger ones.

@@ -1,5 +1,6 @@
 //! The writer as a node sink: a build hands it finished nodes in any order (finest first, one
-//! partition cell at a time, …); it encodes each node's geometry at once and keeps it aside, in a
+//! partition cell at a time, …); it encodes each node's geometry at once (or takes it encoded by a
+//! [`Preparer`], which a build runs on every core) and keeps it aside, in a
 //! spill per level (memory, or an unlinked temporary file in a folder of the caller's choice), and
 //! at [`Writer::finish`] numbers the nodes breadth-first from the top (spec §6), builds `HEAD` and
 //! `SKEL`, and writes the file front to back: prologue, skeleton, then every node's `GEOM` chunk,
@@ -199,6 +200,90 @@ struct Pending {
     support_at: u64,
 }
 
+/// Encodes nodes for one file, on any thread ([`Writer::preparer`]).
+#[derive(Clone, Debug)]
+pub struct Preparer {
+    path: PathBuf,
+    major: u16,
+    grid_bits: u32,
+    attributes: Attributes,
+}
+
+/// A node encoded for its file, waiting for [`Writer::add_prepared`].
+pub struct Prepared {
+    level: u32,
+    /// The node, its geometry taken out.
+    node: NodeIn,
+    faces: u32,
+    vertices: u32,
+    /// Format 3 and 4: the model, to count its symbols, and its normals' and colours' bits.
+    model: Option<(v3::Model, u32, u32)>,
+    /// What its level's spill keeps: the model (formats 3 and 4) or the whole chunk (format 2).
+    bytes: Vec<u8>,
+    span: u32,
+    crc: u32,
+    /// Its [`Support`], before format 4.
+    support: Option<Vec<u8>>,
+    clusters: u64,
+}
+
+impl Preparer {
+    /// Check and encode `node`; what depends on the other nodes (coding tables, numbering) waits
+    /// for [`Writer::finish`].
+    pub fn prepare(&self, mut node: NodeIn) -> Result<Prepared> {
+        let bad = |msg: String| Error::invalid(&self.path, None, msg);
+        let l = node.level as usize;
+        let g = std::mem::take(&mut node.geometry);
+        let (faces, vertices) = (g.indices.len() / 3, g.points.len());
+        let a = self.attributes;
+        let sized = |present: bool, len: usize| if present { len == vertices } else { len == 0 };
+        if !(sized(a.normals, g.normals.len()) && sized(a.uvs, g.uvs.len()) && sized(a.colors, g.colors.len())) || g.indices.len() % 3 != 0
+        {
+            return Err(bad(format!(
+                "level {l} node {}: attributes or indices do not match {vertices} vertices and the file's {a:?}",
+                node.key
+            )));
+        }
+        if (l == 0) != g.clusters.is_some() {
+            return Err(bad(format!("level {l} node {}: level-0 nodes carry clusters, others none", node.key)));
+        }
+        if faces > (u32::MAX / 3) as usize || vertices > u32::MAX as usize {
+            return Err(bad(format!("level {l} node {}: {faces} faces in one node", node.key)));
+        }
+        let mut vertices = vertices;
+        let mut bytes = Vec::new();
+        let mut model = None;
+        if self.major >= 3 {
+            // Modelled now, coded at `finish` once every node's symbols are counted.
+            let normal_bits = if a.normals { g.lattice.normal_bits } else { 0 };
+            let color_bits = if a.colors { g.lattice.color_bits } else { 0 };
+            let (m, order) = v3::model(&g, self.grid_bits, [node.codes.min, node.codes.max], normal_bits)
+                .map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
+            // Format 3 stores the vertices its faces use.
+            vertices = order.vertices.len();
+            m.to_bytes(&mut bytes);
+            model = Some((m, normal_bits, color_bits));
+        }
+        let (span, crc) = if self.major == 2 {
+            let payload = v2::encode(&g);
+            chunk::put(&mut bytes, id::GEOM, 0, &payload);
+            (payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, chunk::crc32(&payload))
+        } else {
+            // Known once coded (`finish`).
+            (bytes.len() as u64, 0)
+        };
+        let span = u32::try_from(span).map_err(|_| bad(format!("level {l} node {}: geometry of {span} bytes exceeds 4 GiB", node.key)))?;
+        // Format 4 has no `ORDR`, which is all supports are for.
+        let support = (self.major != MAJOR4).then(|| {
+            let mut b = Vec::new();
+            Support::of(&g.points).to_bytes(&mut b);
+            b
+        });
+        let clusters = g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
+        Ok(Prepared { level: node.level, node, faces: faces as u32, vertices: vertices as u32, model, bytes, span, crc, support, clusters })
+    }
+}
+
 /// A file being built node by node.
 pub struct Writer<W> {
     out: W,
@@ -209,7 +294,7 @@ pub struct Writer<W> {
     supports: Spill,
     levels: Vec<Vec<Pending>>,
     clusters: u64,
-    buf: Vec<u8>,
+    preparer: Preparer,
     /// Format 3: symbols per alphabet over every node added, and the normals' bits.
     counts: Vec<Vec<u64>>,
     normal_bits: Option<u32>,
@@ -242,6 +327,7 @@ impl<W: Write> Writer<W> {
         let spills = (0..opts.levels).map(|_| Spill::new(spill_dir)).collect::<Result<_>>()?;
         let levels = (0..opts.levels).map(|_| Vec::new()).collect();
         let groups = vec![Vec::new(); opts.levels as usize];
+        let preparer = Preparer { path: path.to_path_buf(), major: opts.major, grid_bits: opts.grid.bits, attributes: opts.attributes };
         Ok(Writer {
             out,
             path: path.to_path_buf(),
@@ -250,7 +336,7 @@ impl<W: Write> Writer<W> {
             supports: Spill::new(spill_dir)?,
             levels,
             clusters: 0,
-            buf: Vec::new(),
+            preparer,
             counts: vec![Vec::new(); v3::alphabet::ALPHABETS],
             normal_bits: None,
             color_bits: None,
@@ -263,88 +349,53 @@ impl<W: Write> Writer<W> {
 
     /// Encode a finished node and keep it for [`finish`](Self::finish).
     pub fn add(&mut self, node: NodeIn) -> Result<()> {
+        let prepared = self.preparer.prepare(node)?;
+        self.add_prepared(prepared)
+    }
+
+    /// What encodes nodes for this file, apart from the writer: so that a build can prepare nodes
+    /// on every core and hand them over in order ([`Writer::add_prepared`]).
+    pub fn preparer(&self) -> Preparer {
+        self.preparer.clone()
+    }
+
+    /// Keep a node [`Preparer::prepare`] encoded for [`finish`](Self::finish).
+    pub fn add_prepared(&mut self, p: Prepared) -> Result<()> {
         let bad = |msg: String| Error::invalid(&self.path, None, msg);
-        let l = node.level as usize;
+        let (l, key) = (p.level as usize, p.node.key);
         if l >= self.levels.len() {
-            return Err(bad(format!("node {} of level {l}: the file has {} levels", node.key, self.levels.len())));
+            return Err(bad(format!("node {key} of level {l}: the file has {} levels", self.levels.len())));
         }
-        let g = &node.geometry;
-        let (faces, vertices) = (g.indices.len() / 3, g.points.len());
-        let a = self.opts.attributes;
-        let sized = |present: bool, len: usize| if present { len == vertices } else { len == 0 };
-        if !(sized(a.normals, g.normals.len()) && sized(a.uvs, g.uvs.len()) && sized(a.colors, g.colors.len())) || g.indices.len() % 3 != 0
-        {
-            return Err(bad(format!(
-                "level {l} node {}: attributes or indices do not match {vertices} vertices and the file's {a:?}",
-                node.key
-            )));
-        }
-        if (l == 0) != g.clusters.is_some() {
-            return Err(bad(format!("level {l} node {}: level-0 nodes carry clusters, others none", node.key)));
-        }
-        if faces > (u32::MAX / 3) as usize || vertices > u32::MAX as usize {
-            return Err(bad(format!("level {l} node {}: {faces} faces in one node", node.key)));
-        }
-        let mut vertices = vertices;
-        self.buf.clear();
-        if self.opts.major >= 3 {
-            // Modelled now, coded at `finish` once every node's symbols are counted.
-            let normal_bits = if a.normals { g.lattice.normal_bits } else { 0 };
-            if *self.normal_bits.get_or_insert(normal_bits) != normal_bits {
-                return Err(bad(format!(
-                    "level {l} node {}: normals at {normal_bits} bits, other nodes at {:?}",
-                    node.key, self.normal_bits
-                )));
+        if let Some((model, normal_bits, color_bits)) = &p.model {
+            if *self.normal_bits.get_or_insert(*normal_bits) != *normal_bits {
+                return Err(bad(format!("level {l} node {key}: normals at {normal_bits} bits, other nodes at {:?}", self.normal_bits)));
             }
-            let color_bits = if a.colors { g.lattice.color_bits } else { 0 };
-            if *self.color_bits.get_or_insert(color_bits) != color_bits {
-                return Err(bad(format!(
-                    "level {l} node {}: colours at {color_bits} bits, other nodes at {:?}",
-                    node.key, self.color_bits
-                )));
+            if *self.color_bits.get_or_insert(*color_bits) != *color_bits {
+                return Err(bad(format!("level {l} node {key}: colours at {color_bits} bits, other nodes at {:?}", self.color_bits)));
             }
-            let (model, order) = v3::model(g, self.opts.grid.bits, [node.codes.min, node.codes.max], normal_bits)
-                .map_err(|m| bad(format!("level {l} node {}: {m}", node.key)))?;
-            // Format 3 stores the vertices its faces use.
-            vertices = order.vertices.len();
             model.count(&mut self.counts);
-            model.to_bytes(&mut self.buf);
         }
-        let (span, crc) = if self.opts.major == 2 {
-            let payload = v2::encode(g);
-            chunk::put(&mut self.buf, id::GEOM, 0, &payload);
-            (payload.len() as u64 + chunk::HEADER_BYTES + chunk::TRAILER_BYTES, chunk::crc32(&payload))
-        } else {
-            // Known once coded (`finish`).
-            (self.buf.len() as u64, 0)
+        let spill_at = self.spills[l].append(&p.bytes).map_err(|e| Error::io(&self.path, e))?;
+        let support_at = match &p.support {
+            Some(bytes) => self.supports.append(bytes).map_err(|e| Error::io(&self.path, e))?,
+            None => 0,
         };
-        let span = u32::try_from(span).map_err(|_| bad(format!("level {l} node {}: geometry of {span} bytes exceeds 4 GiB", node.key)))?;
-        let spill_at = self.spills[l].append(&self.buf).map_err(|e| Error::io(&self.path, e))?;
-        let padded = self.buf.len() as u32;
-        self.buf.clear();
-        // Format 4 has no `ORDR`, which is all supports are for.
-        let support_at = match self.opts.major {
-            MAJOR4 => 0,
-            _ => {
-                Support::of(&g.points).to_bytes(&mut self.buf);
-                self.supports.append(&self.buf).map_err(|e| Error::io(&self.path, e))?
-            }
-        };
-        self.clusters += g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
+        self.clusters += p.clusters;
+        let n = p.node;
         self.levels[l].push(Pending {
-            key: node.key,
-            parent: node.parent,
-            source: node.source,
-            neighbors: node.neighbors,
-            codes: node.codes,
-            error: node.error,
-            uv_density: texture::density_code(node.uv_density),
-            faces: faces as u32,
-            vertices: vertices as u32,
+            key: n.key,
+            parent: n.parent,
+            source: n.source,
+            neighbors: n.neighbors,
+            codes: n.codes,
+            error: n.error,
+            uv_density: texture::density_code(n.uv_density),
+            faces: p.faces,
+            vertices: p.vertices,
             spill_at,
-            padded,
-            span,
-            crc,
+            padded: p.bytes.len() as u32,
+            span: p.span,
+            crc: p.crc,
             support_at,
         });
         Ok(())

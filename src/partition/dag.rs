@@ -223,7 +223,7 @@ fn piece<W: Write>(
     shape: &Shape,
     params: &DagParams,
     writer: &Mutex<Writer<W>>,
-    bad: &dyn Fn(String) -> Error,
+    bad: &(dyn Fn(String) -> Error + Sync),
 ) -> Result<Option<DagTop>> {
     let mut dag = build_from(start, params, &shape.bounds, &mut |_, _| {});
     if dag.nodes.len().max(dag.groups.len()) >= 1 << GROUP_BITS {
@@ -232,13 +232,14 @@ fn piece<W: Write>(
     let base_nodes = base_keys.len() as u32;
     let node_key = |n: u32| if n < base_nodes { base_keys[n as usize] } else { piece_key(p, n) };
     let group_key = |g: u32| piece_key(p, g);
-    {
+    let preparer = {
         let mut w = writer.lock().map_err(|_| poisoned())?;
         let levels = (shape.first + dag.levels.len()) as u32;
         if w.levels() < levels {
             w.set_levels(levels)?;
         }
-    }
+        w.preparer()
+    };
     let place = Place {
         grid: job.grid,
         precision: job.precision.ok_or_else(|| bad("a DAG stores node geometry as format 3 does".into()))?,
@@ -249,6 +250,7 @@ fn piece<W: Write>(
         node_key: &node_key,
         group_key: &group_key,
         base,
+        preparer: &preparer,
     };
     let written = write_levels(&dag, &place, &mut |r| r.add_to(&mut *writer.lock().map_err(|_| poisoned())?), bad)?;
     if shape.bounds.levels.is_none() {

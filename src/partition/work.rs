@@ -15,7 +15,7 @@ use super::cells::{read_cell, Layout};
 use super::tops::{Spilled, Top};
 use crate::bounds::NodeBounds;
 use crate::error::{Error, Result};
-use crate::format::{octa, Attributes, Grid, HierarchyParams, NodeIn, WriteSummary, Writer};
+use crate::format::{octa, Attributes, Grid, HierarchyParams, Prepared, WriteSummary, Writer};
 use crate::hierarchy::{self, Hierarchy, Level};
 use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
@@ -456,6 +456,7 @@ fn merge<W: Write>(
             let file_levels = first + h.levels.len();
             let mut w = writer.lock().map_err(|_| poisoned())?;
             w.set_levels(file_levels as u32)?;
+            let preparer = w.preparer();
             let place = Place {
                 offset: first,
                 levels: 0..h.levels.len(),
@@ -463,7 +464,7 @@ fn merge<W: Write>(
                 key: &|l, g| if l == 0 { keys[g as usize] } else { g },
                 shared: None,
             };
-            piece.add(&mut |n| w.add(n), &bad, &h, &lv, &job.grid, job.looks(), &place)?;
+            piece.add(&preparer, &mut |n| w.add_prepared(n), &bad, &h, &lv, &job.grid, job.looks(), &place)?;
             Ok(None)
         }
     }
@@ -490,7 +491,7 @@ fn finish_piece<W: Write>(
     key: &(dyn Fn(usize, u32) -> u32 + Sync),
     writer: &Mutex<Writer<W>>,
     gathered: &Mutex<Gathered>,
-    bad: &dyn Fn(String) -> Error,
+    bad: &(dyn Fn(String) -> Error + Sync),
 ) -> Result<Option<Top>> {
     if let Some(g) = h.levels.iter().map(|l| l.groups.len()).find(|&g| g >= 1 << GROUP_BITS) {
         return Err(bad(format!("{g} groups in one level, at most {}", 1 << GROUP_BITS)));
@@ -505,8 +506,9 @@ fn finish_piece<W: Write>(
     .map_err(bad)?;
     let border = Border { first: first as u32, edges: border_edges(&lv.levels[..n], &|l, g| key(l, g)) };
     let place = Place { offset: first, levels: 0..n, file_levels: usize::MAX, key, shared: Some(pinned) };
-    let mut add = |node: NodeIn| writer.lock().map_err(|_| poisoned())?.add(node);
-    piece.add(&mut add, bad, &h, &lv, &job.grid, job.looks(), &place)?;
+    let preparer = writer.lock().map_err(|_| poisoned())?.preparer();
+    let mut add = |node: Prepared| writer.lock().map_err(|_| poisoned())?.add_prepared(node);
+    piece.add(&preparer, &mut add, bad, &h, &lv, &job.grid, job.looks(), &place)?;
     gathered.lock().map_err(|_| poisoned())?.borders.push(border);
     let mut levels = lv.levels;
     let level = levels.swap_remove(n);
