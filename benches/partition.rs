@@ -236,29 +236,6 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
     }
 }
 
-/// `n` separate triangles of about unit size, scattered in a 100-unit cube, as an OBJ file.
-fn write_soup(path: &Path, n: usize) {
-    use std::fmt::Write;
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut obj = String::new();
-    for _ in 0..n {
-        let c = [next() * 100.0, next() * 100.0, next() * 100.0];
-        for _ in 0..3 {
-            let _ = writeln!(obj, "v {:.4} {:.4} {:.4}", c[0] + next() - 0.5, c[1] + next() - 0.5, c[2] + next() - 0.5);
-        }
-    }
-    for t in 0..n {
-        let _ = writeln!(obj, "f {} {} {}", 3 * t + 1, 3 * t + 2, 3 * t + 3);
-    }
-    std::fs::write(path, obj).expect("write the soup");
-}
-
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|i| args.get(i + 1).cloned());
@@ -272,7 +249,9 @@ fn main() {
     // A soup of separate triangles (specks, fragments, an unwelded export): nothing to collapse,
     // so only a rule that lets small components leave makes its levels shrink.
     let soup = out("soup.obj");
-    write_soup(&soup, 60_000);
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&soup).unwrap());
+    strata::fixtures::write_soup_obj(&mut w, 60_000).expect("write the soup");
+    drop(w);
     let mut inputs: Vec<(PathBuf, &str)> = vec![(root.join("fixtures/noisy_sphere.ply"), "16M"), (soup, "16M")];
     for (mesh, budget) in [("scans/stanford_bun_zipper.ply", "16M"), ("large/cthead_skin_native.ply", "256M")] {
         let path = root.join("../shared/meshes").join(mesh);

@@ -738,6 +738,23 @@ fn fbm(p: DVec3, octaves: u32, seed: u64) -> f64 {
     sum / total
 }
 
+/// `n` separate triangles of about unit size scattered in a 100-unit cube, as an OBJ file: a soup
+/// (specks, fragments, an unwelded export), whose levels shrink only where small components may
+/// leave. For tests and benchmarks.
+pub fn write_soup_obj(w: &mut impl std::io::Write, n: usize) -> std::io::Result<()> {
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    for _ in 0..n {
+        let c = [rng.unit() * 100.0, rng.unit() * 100.0, rng.unit() * 100.0];
+        for _ in 0..3 {
+            writeln!(w, "v {:.4} {:.4} {:.4}", c[0] + rng.unit() - 0.5, c[1] + rng.unit() - 0.5, c[2] + rng.unit() - 0.5)?;
+        }
+    }
+    for t in 0..n {
+        writeln!(w, "f {} {} {}", 3 * t + 1, 3 * t + 2, 3 * t + 3)?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -208,7 +208,9 @@ pub fn convert(
     let mut choice_warnings = Vec::new();
     if let Some((budget, reader, declared)) = partitioned(input, import, opts, &mut choice_warnings)? {
         let input = crate::partition::Input { path: input, import, reader, declared };
-        return crate::partition::convert(input, output, opts, &budget, progress);
+        let mut converted = crate::partition::convert(input, output, opts, &budget, progress)?;
+        converted.warnings.extend(top_warning(&converted.summary, opts));
+        return Ok(converted);
     }
     crate::atomic::protect(input);
     crate::atomic::check_output(output)?;
@@ -269,5 +271,19 @@ pub fn convert(
     lap(&mut times.write_ms);
 
     choice_warnings.extend(imported.warnings);
+    choice_warnings.extend(top_warning(&summary, opts));
     Ok(Converted { summary, times, warnings: choice_warnings, cells: None })
+}
+
+/// A warning when the top level kept more faces than `--top-faces`: the levels stopped shrinking
+/// (a viewer then opens the file with all of the top level at once).
+fn top_warning(summary: &crate::format::WriteSummary, opts: &ConvertOptions) -> Option<String> {
+    let top = summary.levels.last()?.faces;
+    (top > opts.levels.top_faces as u64).then(|| {
+        let hint = if opts.dag { "" } else { "; --dag lets small separate pieces leave coarse levels" };
+        format!(
+            "the top level holds {top} faces, more than --top-faces {}: the levels stopped shrinking (many separate pieces?){hint}",
+            opts.levels.top_faces
+        )
+    })
 }

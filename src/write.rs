@@ -313,13 +313,7 @@ impl Piece {
                     geometry,
                 })
             };
-            let count = self.bounds[l].len();
-            for start in (0..count).step_by(PREPARE_BATCH) {
-                let batch: Vec<Result<Prepared>> = (start..(start + PREPARE_BATCH).min(count)).into_par_iter().map(node).collect();
-                for prepared in batch {
-                    add(prepared?)?;
-                }
-            }
+            in_order(0..self.bounds[l].len(), &node, &mut |_, prepared| add(prepared))?;
         }
         Ok(())
     }
@@ -327,7 +321,23 @@ impl Piece {
 
 /// Nodes prepared at once on every core before they are handed over in order: enough to keep the
 /// cores busy, few enough that their encoded bytes stay small beside the level meshes.
-pub(crate) const PREPARE_BATCH: usize = 64;
+const PREPARE_BATCH: usize = 64;
+
+/// Run `prepare(i)` for each `i` of `items`, [`PREPARE_BATCH`] at a time on every core, and hand
+/// each result to `add` in order; the first error in that order stops.
+pub(crate) fn in_order<T: Send>(
+    items: std::ops::Range<usize>,
+    prepare: &(dyn Fn(usize) -> Result<T> + Sync),
+    add: &mut dyn FnMut(usize, T) -> Result<()>,
+) -> Result<()> {
+    for start in items.clone().step_by(PREPARE_BATCH) {
+        let batch: Vec<Result<T>> = (start..(start + PREPARE_BATCH).min(items.end)).into_par_iter().map(prepare).collect();
+        for (i, done) in (start..).zip(batch) {
+            add(i, done?)?;
+        }
+    }
+    Ok(())
+}
 
 pub(crate) fn check_precision(p: Precision) -> std::result::Result<Precision, String> {
     let valid = (0..=MAX_GRID_BITS).contains(&p.grid_bits)

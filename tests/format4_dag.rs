@@ -168,24 +168,9 @@ fn a_soup_of_separate_triangles_shrinks_level_by_level() {
     let dir = std::env::temp_dir().join(format!("strata-format4-soup-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("work")).unwrap();
     let input = dir.join("soup.obj");
-    let mut obj = String::new();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    for _ in 0..TRIANGLES {
-        let c = [next() * 100.0, next() * 100.0, next() * 100.0];
-        for _ in 0..3 {
-            obj += &format!("v {:.4} {:.4} {:.4}\n", c[0] + next() - 0.5, c[1] + next() - 0.5, c[2] + next() - 0.5);
-        }
-    }
-    for t in 0..TRIANGLES {
-        obj += &format!("f {} {} {}\n", 3 * t + 1, 3 * t + 2, 3 * t + 3);
-    }
-    std::fs::write(&input, obj).unwrap();
+    let mut obj = std::io::BufWriter::new(std::fs::File::create(&input).unwrap());
+    strata::fixtures::write_soup_obj(&mut obj, TRIANGLES).unwrap();
+    drop(obj);
     let top_faces = 1000;
     for partitioned in [false, true] {
         let mut opts = match partitioned {
@@ -210,6 +195,13 @@ fn a_soup_of_separate_triangles_shrinks_level_by_level() {
         assert!(s.bytes_per_face() < 40.0, "partitioned {partitioned}: {:.1} bytes per face", s.bytes_per_face());
         let v = strata::format::verify_path(&out);
         assert!(v.problems.is_empty(), "partitioned {partitioned}: {:?}", v.problems);
+        assert!(!c.warnings.iter().any(|w| w.contains("top level holds")), "{:?}", c.warnings);
     }
+    // The tree cannot shrink a soup (its groups never join two pieces): it converts, and says so.
+    let mut opts = ConvertOptions { build: Build::InCore, ..Default::default() };
+    opts.levels.top_faces = top_faces;
+    let c = convert(&input, &Default::default(), &dir.join("soup-tree.strata"), &opts, &mut Silent).expect("convert");
+    let said = c.warnings.iter().find(|w| w.contains("top level holds")).expect("a warning");
+    assert!(said.contains(&format!("{TRIANGLES} faces")) && said.contains("--dag"), "{said}");
     std::fs::remove_dir_all(&dir).ok();
 }

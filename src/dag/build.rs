@@ -29,8 +29,9 @@ impl Default for DagParams {
 }
 
 /// A level that keeps more than this share of the faces below it ends the build: the simplifier
-/// has stopped (pins and group rules leave it nothing to collapse).
-const STALLED: f64 = 0.95;
+/// has stopped (pins and group rules leave it nothing to collapse). A group that keeps more of its
+/// own lets components leave to its target ([`specks`]).
+pub(super) const STALLED: f64 = 0.95;
 
 /// Corner normals of one vertex closer than this (degrees) are one normal at levels 1 and up, as
 /// in the tree's levels ([`crate::levels`]).
@@ -193,6 +194,7 @@ struct Simplified {
 /// to `ratio` of its faces, the `pinned` vertices kept; then join the results, welding the pinned
 /// vertices (they never move, so each keeps its position in every group that has it). A group
 /// meets its neighbours only at pinned vertices, so simplifying it alone changes nothing of theirs.
+/// Whole small components touching no pinned vertex may leave a group ([`specks::leave`]).
 fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ratio: f32) -> Simplified {
     let faces = Lists::from_labels(labels, groups);
     let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
@@ -209,7 +211,7 @@ fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ra
             };
             let mut s = simplify_pinned(&sub, Some(&vec![0; sub.triangles.len()]), &sub_pinned, &opts);
             let error = s.group_error.first().copied().unwrap_or(0.0);
-            let error = specks::leave(&mut s.mesh, sub.triangles.len(), target, error, &|x| kept.contains(&position_key(x)));
+            let error = specks::leave(&mut s.mesh, &s.source_faces, &sub, target, error, &|x| kept.contains(&position_key(x)));
             (s.mesh, error)
         })
         .collect();

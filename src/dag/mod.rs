@@ -1,7 +1,8 @@
 //! A DAG of nodes, crack-free by construction (notes/dag.md): the structure Nanite and Nexus build,
 //! made with strata's own simplifier.
 //!
-//! Level 0's nodes are the grouping's level-0 groups (normal cones, METHOD.md). Each coarser level
+//! Level 0's nodes are the grouping's level-0 groups (normal cones, METHOD.md), small separate ones
+//! joined (`specks.rs`). Each coarser level
 //! gathers the nodes of the level below into *groups* of a few adjacent nodes ([`gather`]),
 //! simplifies the level to half with every vertex two groups share pinned and every face kept in
 //! its group, and cuts each group's result into nodes of about level 0's size ([`split`]). A node

@@ -3,9 +3,10 @@
 //! of separate triangles have nothing to collapse, so without it every level would copy them and the
 //! top would never shrink.
 //!
-//! Within one group (simplified on its own, its border pinned), a whole component that touches no
-//! pinned position may be dropped from the outputs, its size (the diagonal of its box) counted in
-//! the group's error: a front that draws the outputs instead of the children misses a piece no
+//! Within one group (simplified on its own, its border pinned), a whole component (faces joined
+//! through shared positions) that touches no pinned position may be dropped from the outputs, its
+//! size (the diagonal of the box of the input component it came from) counted in the group's
+//! error: a front that draws the outputs instead of the children misses a piece no
 //! larger than the error it already claims, and the group's sphere encloses its children's, so
 //! the projected error bounds what is missing. Pinned positions stay, so neighbours still meet
 //! edge for edge (selection.md §9). A component leaves:
@@ -21,42 +22,52 @@
 //! into nodes of the others' median size, in the Morton order of their centres, so that near ones
 //! join.
 
+use super::build::STALLED;
 use super::gather::morton;
+use crate::levels::position_key;
 use crate::mesh::{components, Mesh};
 use glam::Vec3;
+use rustc_hash::FxHashMap;
 
-/// A group stalled when it kept more than this share of its faces.
-const STALLED: f64 = 0.95;
-
-/// Drop from `mesh` (one group's simplified faces, which had `before` faces and aim at `target`)
-/// the components that may leave it, by the rules above; `pinned` says whether a vertex at a
-/// position is pinned. Returns the group's error: `error`, raised to the largest component dropped.
-pub fn leave(mesh: &mut Mesh, before: usize, target: usize, error: f32, pinned: &dyn Fn(Vec3) -> bool) -> f32 {
-    let (count, label) = components(mesh);
+/// Drop from `out` (one group's simplified faces, made from `input`: `source_faces` names the input
+/// face of each, [`crate::simplify::Simplified::source_faces`]) the components that may leave it,
+/// by the rules above, `target` being the group's target face count; `pinned` says whether a
+/// vertex at a position is pinned. A component's size is that of the input component it came
+/// from. Returns the group's error: `error`, raised to the largest component dropped.
+pub fn leave(out: &mut Mesh, source_faces: &[u32], input: &Mesh, target: usize, error: f32, pinned: &dyn Fn(Vec3) -> bool) -> f32 {
+    let (count, label) = components_by_position(out);
     if count < 2 {
         return error;
     }
-    let mut faces = vec![0usize; count];
-    let mut lo = vec![Vec3::splat(f32::MAX); count];
-    let mut hi = vec![Vec3::splat(f32::MIN); count];
-    let mut held = vec![false; count];
-    for (t, &c) in mesh.triangles.iter().zip(&label) {
-        let c = c as usize;
-        faces[c] += 1;
+    let (before, before_label) = components_by_position(input);
+    let mut lo = vec![Vec3::splat(f32::MAX); before];
+    let mut hi = vec![Vec3::splat(f32::MIN); before];
+    for (t, &c) in input.triangles.iter().zip(&before_label) {
         for &v in t {
-            let p = mesh.positions[v as usize];
-            lo[c] = lo[c].min(p);
-            hi[c] = hi[c].max(p);
-            held[c] |= pinned(p);
+            lo[c as usize] = lo[c as usize].min(input.positions[v as usize]);
+            hi[c as usize] = hi[c as usize].max(input.positions[v as usize]);
         }
     }
-    let size: Vec<f32> = (0..count).map(|c| lo[c].distance(hi[c])).collect();
+    let mut faces = vec![0usize; count];
+    let mut size = vec![0.0f32; count];
+    let mut held = vec![false; count];
+    for (f, (t, &c)) in out.triangles.iter().zip(&label).enumerate() {
+        let c = c as usize;
+        faces[c] += 1;
+        let from = source_faces.get(f).and_then(|&s| before_label.get(s as usize)).map(|&b| b as usize);
+        size[c] = size[c].max(match from {
+            Some(b) => lo[b].distance(hi[b]),
+            // Not from the input (never, by `Simplified`'s contract): too large to leave.
+            None => f32::INFINITY,
+        });
+        held[c] |= t.iter().any(|&v| pinned(out.positions[v as usize]));
+    }
     let largest = (0..count).max_by(|&a, &b| size[a].total_cmp(&size[b]).then(b.cmp(&a))).unwrap_or(0);
-    let mut order: Vec<usize> = (0..count).filter(|&c| !held[c] && c != largest).collect();
+    let mut order: Vec<usize> = (0..count).filter(|&c| !held[c] && c != largest && size[c].is_finite()).collect();
     order.sort_by(|&a, &b| size[a].total_cmp(&size[b]).then(a.cmp(&b)));
-    let stalled = mesh.triangles.len() as f64 > STALLED * before as f64;
-    let mut left = mesh.triangles.len();
-    let mut error = error;
+    let stalled = out.triangles.len() as f64 > STALLED * input.triangles.len() as f64;
+    let mut left = out.triangles.len();
+    let mut raised = error;
     let mut gone = vec![false; count];
     for c in order {
         if !(size[c] <= error || (stalled && left > target)) {
@@ -64,13 +75,28 @@ pub fn leave(mesh: &mut Mesh, before: usize, target: usize, error: f32, pinned: 
         }
         gone[c] = true;
         left -= faces[c];
-        error = error.max(size[c]);
+        raised = raised.max(size[c]);
     }
-    if left < mesh.triangles.len() {
-        let keep: Vec<usize> = (0..mesh.triangles.len()).filter(|&f| !gone[label[f] as usize]).collect();
-        *mesh = std::mem::take(mesh).subset(&keep);
+    if left < out.triangles.len() {
+        let keep: Vec<usize> = (0..out.triangles.len()).filter(|&f| !gone[label[f] as usize]).collect();
+        *out = std::mem::take(out).subset(&keep);
     }
-    error
+    raised
+}
+
+/// Components of `mesh`'s faces joined through shared positions (a topology change may have cut a
+/// vertex in two at one position: what touches there is one piece, whose removal would open a
+/// hole): their count and each face's.
+fn components_by_position(mesh: &Mesh) -> (usize, Vec<u32>) {
+    let mut first: FxHashMap<[u32; 3], u32> = FxHashMap::default();
+    let at: Vec<u32> =
+        (0..mesh.positions.len() as u32).map(|v| *first.entry(position_key(mesh.positions[v as usize])).or_insert(v)).collect();
+    let joined = Mesh {
+        positions: mesh.positions.clone(),
+        triangles: mesh.triangles.iter().map(|t| t.map(|v| at[v as usize])).collect(),
+        ..Mesh::default()
+    };
+    components(&joined)
 }
 
 /// The size of the nodes specks join into when nothing else sets it: half the grouping's default
@@ -149,8 +175,9 @@ mod tests {
 
     #[test]
     fn a_stalled_group_drops_its_smallest_components_to_its_target() {
-        let mut m = soup(8);
-        let error = leave(&mut m, 8, 4, 0.0, &|_| false);
+        let input = soup(8);
+        let mut m = input.clone();
+        let error = leave(&mut m, &[0, 1, 2, 3, 4, 5, 6, 7], &input, 4, 0.0, &|_| false);
         assert_eq!(m.triangles.len(), 4);
         // The four largest stay; the error is the largest dropped (the fourth, legs of 4).
         assert!(m.positions.iter().all(|p| p.x >= 40.0));
@@ -159,11 +186,12 @@ mod tests {
 
     #[test]
     fn components_no_larger_than_the_error_leave_for_free_and_pinned_ones_stay() {
-        let mut m = soup(6);
-        // Not stalled (it had 12 faces), the error covers legs up to 3: the first three could go,
-        // but the second is pinned.
+        // Not stalled (six of twelve faces kept), the error covers legs up to 3: the first three
+        // could go, but the second is pinned.
+        let input = soup(12);
+        let mut m = input.clone().subset(&[0, 1, 2, 3, 4, 5]);
         let pinned = |p: Vec3| p == Vec3::new(10.0, 0.0, 0.0);
-        let error = leave(&mut m, 12, 3, 4.3, &pinned);
+        let error = leave(&mut m, &[0, 1, 2, 3, 4, 5], &input, 3, 4.3, &pinned);
         assert_eq!(m.triangles.len(), 4);
         assert!(m.positions.contains(&Vec3::new(10.0, 0.0, 0.0)));
         assert!(!m.positions.contains(&Vec3::new(0.0, 0.0, 0.0)) && !m.positions.contains(&Vec3::new(20.0, 0.0, 0.0)));
@@ -194,9 +222,35 @@ mod tests {
     }
 
     #[test]
+    fn pieces_touching_at_a_position_are_one_component() {
+        // Triangles 0 and 1 meet at (1, 0, 0) through two vertices there (a topology change's cut);
+        // triangle 2 is apart. Stalled at a target of 1: only triangle 2 may leave, and the
+        // touching pair, the largest piece, stays whole.
+        let mut input = Mesh::default();
+        input.positions.extend([
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::X,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(1.5, 1.0, 0.0),
+            Vec3::new(10.0, 0.0, 0.0),
+            Vec3::new(10.5, 0.0, 0.0),
+            Vec3::new(10.0, 0.5, 0.0),
+        ]);
+        input.triangles.extend([[0, 1, 2], [3, 4, 5], [6, 7, 8]]);
+        input.compute_face_geometry();
+        let mut m = input.clone();
+        leave(&mut m, &[0, 1, 2], &input, 1, 0.0, &|_| false);
+        assert_eq!(m.triangles.len(), 2);
+        assert!(!m.positions.contains(&Vec3::new(10.0, 0.0, 0.0)));
+    }
+
+    #[test]
     fn the_largest_component_always_stays() {
-        let mut m = soup(3);
-        leave(&mut m, 3, 0, 100.0, &|_| false);
+        let input = soup(3);
+        let mut m = input.clone();
+        leave(&mut m, &[0, 1, 2], &input, 0, 100.0, &|_| false);
         assert_eq!(m.triangles.len(), 1);
         assert!(m.positions.contains(&Vec3::new(20.0, 3.0, 0.0)));
     }

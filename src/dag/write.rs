@@ -18,10 +18,9 @@ use crate::hierarchy;
 use crate::levels::{pinned_flags, position_key};
 use crate::quantize::{auto_grid_bits, model_grid, Quantized};
 use crate::write::{
-    attributes_of, check_precision, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions, PREPARE_BATCH,
+    attributes_of, check_precision, in_order, lattice_shift, median_edge, node_geometry, uv_density, Encoding, Precision, WriteOptions,
 };
 use glam::Vec3;
-use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 use std::path::Path;
 
@@ -297,15 +296,10 @@ pub fn write_levels(
             })?;
             Ok((Stored { error, center, radius }, prepared))
         };
-        for start in nodes.clone().step_by(PREPARE_BATCH) {
-            let batch: Vec<Result<(Stored, Prepared)>> =
-                (start..(start + PREPARE_BATCH as u32).min(nodes.end)).into_par_iter().map(node).collect();
-            for (n, done) in (start..).zip(batch) {
-                let (stored, prepared) = done?;
-                node_stored[n as usize] = stored;
-                emit(Record::Node(Box::new(prepared)))?;
-            }
-        }
+        in_order(nodes.start as usize..nodes.end as usize, &|n| node(n as u32), &mut |n, (stored, prepared)| {
+            node_stored[n] = stored;
+            emit(Record::Node(Box::new(prepared)))
+        })?;
     }
     let top = dag.level_nodes(dag.levels.len().saturating_sub(1));
     let nodes = node_stored[top.start as usize..top.end as usize].to_vec();

@@ -932,7 +932,8 @@ fn box_gap(x: &NodeCodes, y: &NodeCodes) -> i64 {
 
 /// For each box, the `k` others smallest by (box gap, index): exactly the brute-force choice, found
 /// by sweeping the boxes sorted by their lower bound along the axis where those spread most, each
-/// direction stopped once no box further on can have a gap within the `k`-th found.
+/// direction stopped once no box further on can have a gap within the `k`-th found (downward, by
+/// the largest upper bound among the boxes left).
 fn nearest_by_gap(codes: &[NodeCodes], k: usize) -> Vec<Vec<usize>> {
     let n = codes.len();
     let spread = |a: usize| {
@@ -942,7 +943,14 @@ fn nearest_by_gap(codes: &[NodeCodes], k: usize) -> Vec<Vec<usize>> {
     let axis = (0..3).max_by_key(|&a| (spread(a), std::cmp::Reverse(a))).unwrap_or(0);
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_unstable_by_key(|&i| (codes[i].min[axis], i));
-    let widest = codes.iter().map(|c| c.max[axis] as i64 - c.min[axis] as i64).max().unwrap_or(0);
+    // Over each prefix of that order, the largest upper bound along the axis.
+    let reach: Vec<i64> = order
+        .iter()
+        .scan(0i64, |m, &i| {
+            *m = (*m).max(codes[i].max[axis] as i64);
+            Some(*m)
+        })
+        .collect();
     let mut out = Vec::with_capacity(n);
     let mut best: Vec<(i64, usize)> = Vec::with_capacity(k + 1);
     for (at, &a) in order.iter().enumerate() {
@@ -964,12 +972,12 @@ fn nearest_by_gap(codes: &[NodeCodes], k: usize) -> Vec<Vec<usize>> {
             }
             offer(&mut best, b);
         }
-        // Below: gap ≥ a.min − b.max ≥ a.min − b.min − widest, which only grows.
-        for &b in order[..at].iter().rev() {
-            if ca.min[axis] as i64 - codes[b].min[axis] as i64 - widest > worst(&best) {
+        // Below: gap ≥ a.min − b.max ≥ a.min − (the prefix's largest max), which only grows.
+        for j in (0..at).rev() {
+            if ca.min[axis] as i64 - reach[j] > worst(&best) {
                 break;
             }
-            offer(&mut best, b);
+            offer(&mut best, order[j]);
         }
         out.push((a, best.iter().map(|&(_, b)| b).collect::<Vec<usize>>()));
     }
