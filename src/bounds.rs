@@ -52,14 +52,13 @@ pub fn nodes(
     for (l, (hl, q)) in h.levels.iter().zip(quant).enumerate().skip(skip) {
         let mesh = &lv.levels[l].mesh;
         let children = (l > 0).then(|| Lists::from_labels(&h.levels[l - 1].parent, hl.groups.len()));
-        let done = &out;
         // Each group on its own, on every core; the first error in group order is reported.
         let node = |(g, info): (usize, &crate::hierarchy::GroupInfo)| -> Result<NodeBounds, String> {
             if !(info.min.is_finite() && info.max.is_finite() && info.center.is_finite() && info.radius.is_finite()) {
                 return Err(format!("level {l} group {g}: bounds are not finite"));
             }
             let below: Vec<&NodeBounds> =
-                children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &done[l - 1][k as usize]).collect());
+                children.as_ref().map_or(Vec::new(), |c| c.get(g).iter().map(|&k| &out[l - 1][k as usize]).collect());
             let own = faces[l].get(g);
             let (mut lo, mut hi) = (grid.bound(info.min, false), grid.bound(info.max, true));
             let mut grow = |p: [u32; 3]| {

@@ -382,7 +382,12 @@ impl VertexFaces {
 /// Connected components, faces being connected when they share a vertex. Returns the count and a
 /// component label per face.
 pub fn components(mesh: &Mesh) -> (usize, Vec<u32>) {
-    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
+    components_of(mesh.positions.len(), &mesh.triangles)
+}
+
+/// [`components`] of `triangles` over `vertices` vertices.
+pub fn components_of(vertices: usize, triangles: &[[u32; 3]]) -> (usize, Vec<u32>) {
+    let mut parent: Vec<u32> = (0..vertices as u32).collect();
     fn find(parent: &mut [u32], mut x: u32) -> u32 {
         while parent[x as usize] != x {
             let p = parent[parent[x as usize] as usize];
@@ -391,7 +396,7 @@ pub fn components(mesh: &Mesh) -> (usize, Vec<u32>) {
         }
         x
     }
-    for t in &mesh.triangles {
+    for t in triangles {
         let r0 = find(&mut parent, t[0]);
         for &v in &t[1..] {
             let r = find(&mut parent, v);
@@ -401,10 +406,9 @@ pub fn components(mesh: &Mesh) -> (usize, Vec<u32>) {
             }
         }
     }
-    let mut label_of_root = vec![u32::MAX; mesh.positions.len()];
+    let mut label_of_root = vec![u32::MAX; vertices];
     let mut count = 0u32;
-    let labels = mesh
-        .triangles
+    let labels = triangles
         .iter()
         .map(|t| {
             let r = find(&mut parent, t[0]) as usize;

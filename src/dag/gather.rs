@@ -76,29 +76,19 @@ pub fn gather(mesh: &Mesh, node_of_face: &[u32], nodes: usize) -> (Vec<u32>, usi
     }
 
     // Small groups merge along the Morton order of their centers.
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &c in &center {
-        lo = lo.min(c);
-        hi = hi.max(c);
-    }
-    let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
-    let mut small: Vec<(u32, Vec3)> = members_of
+    let bounds = center.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+    let small: Vec<u32> = (0..members_of.len() as u32).filter(|&g| members_of[g as usize].len() < PER_GROUP).collect();
+    let items: Vec<(Vec3, usize)> = small
         .iter()
-        .enumerate()
-        .filter(|(_, m)| m.len() < PER_GROUP)
-        .map(|(g, m)| (g as u32, m.iter().map(|&n| center[n as usize]).sum::<Vec3>() / m.len() as f32))
+        .map(|&g| {
+            let m = &members_of[g as usize];
+            (m.iter().map(|&n| center[n as usize]).sum::<Vec3>() / m.len() as f32, m.len())
+        })
         .collect();
-    small.sort_by_key(|&(g, c)| (morton(((c - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0)).as_uvec3().to_array()), g));
     let mut merged_into = (0..members_of.len() as u32).collect::<Vec<u32>>();
-    let mut open: Option<(u32, usize)> = None;
-    for &(g, _) in &small {
-        let size = members_of[g as usize].len();
-        match open {
-            Some((into, have)) => {
-                merged_into[g as usize] = into;
-                open = (have + size < PER_GROUP).then_some((into, have + size));
-            }
-            None => open = Some((g, size)),
+    for run in morton_runs(&items, bounds, PER_GROUP) {
+        for &i in &run {
+            merged_into[small[i] as usize] = small[run[0]];
         }
     }
     let mut renumber = vec![u32::MAX; members_of.len()];
@@ -118,8 +108,35 @@ fn pair(a: u32, b: u32) -> u64 {
     (a as u64) << 32 | b as u64
 }
 
+/// Items `(centre, weight)` taken in the Morton order of their centres within `bounds` (equal
+/// codes by index) and joined into runs, each closed once its weight reaches `target` (the last
+/// may fall short): indices into `items`, run by run.
+pub(super) fn morton_runs(items: &[(Vec3, usize)], (lo, hi): (Vec3, Vec3), target: usize) -> Vec<Vec<usize>> {
+    let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
+    let mut order: Vec<(u32, usize)> = items
+        .iter()
+        .enumerate()
+        .map(|(i, &(c, _))| (morton(((c - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0)).as_uvec3().to_array()), i))
+        .collect();
+    order.sort_unstable();
+    let mut runs = Vec::new();
+    let (mut run, mut weight) = (Vec::new(), 0);
+    for (_, i) in order {
+        run.push(i);
+        weight += items[i].1;
+        if weight >= target {
+            runs.push(std::mem::take(&mut run));
+            weight = 0;
+        }
+    }
+    if !run.is_empty() {
+        runs.push(run);
+    }
+    runs
+}
+
 /// Interleaved bits of three 10-bit coordinates.
-pub(super) fn morton(c: [u32; 3]) -> u32 {
+fn morton(c: [u32; 3]) -> u32 {
     let spread = |mut x: u32| {
         x &= 0x3ff;
         x = (x | x << 16) & 0x0300_00ff;

@@ -23,9 +23,9 @@
 //! join.
 
 use super::build::STALLED;
-use super::gather::morton;
+use super::gather::morton_runs;
 use crate::levels::position_key;
-use crate::mesh::{components, Mesh};
+use crate::mesh::{components_of, Mesh};
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 
@@ -91,12 +91,8 @@ fn components_by_position(mesh: &Mesh) -> (usize, Vec<u32>) {
     let mut first: FxHashMap<[u32; 3], u32> = FxHashMap::default();
     let at: Vec<u32> =
         (0..mesh.positions.len() as u32).map(|v| *first.entry(position_key(mesh.positions[v as usize])).or_insert(v)).collect();
-    let joined = Mesh {
-        positions: mesh.positions.clone(),
-        triangles: mesh.triangles.iter().map(|t| t.map(|v| at[v as usize])).collect(),
-        ..Mesh::default()
-    };
-    components(&joined)
+    let joined: Vec<[u32; 3]> = mesh.triangles.iter().map(|t| t.map(|v| at[v as usize])).collect();
+    components_of(mesh.positions.len(), &joined)
 }
 
 /// The size of the nodes specks join into when nothing else sets it: half the grouping's default
@@ -127,8 +123,7 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
     let mut sizes: Vec<usize> = pieces.iter().zip(&touches).filter(|(_, &t)| t).map(|(p, _)| p.len()).collect();
     sizes.sort_unstable();
     let size = sizes.get(sizes.len() / 2).copied().unwrap_or(SPECK_NODE_FACES).max(1);
-    let (lo, hi) = mesh.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-    let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
+    let bounds = mesh.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
     let centre = |faces: &[u32]| {
         let sum: Vec3 = faces.iter().flat_map(|&f| mesh.triangles[f as usize]).map(|v| mesh.positions[v as usize]).sum();
         sum / (3 * faces.len().max(1)) as f32
@@ -138,20 +133,12 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
         if touches[p] || faces.len() >= size {
             kept.push(faces);
         } else {
-            let c = ((centre(&faces) - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0)).as_uvec3();
-            specks.push((morton(c.to_array()), p, faces));
+            specks.push(faces);
         }
     }
-    specks.sort_unstable_by_key(|s| (s.0, s.1));
-    let mut run: Vec<u32> = Vec::new();
-    for (_, _, faces) in specks {
-        run.extend(faces);
-        if run.len() >= size {
-            kept.push(std::mem::take(&mut run));
-        }
-    }
-    if !run.is_empty() {
-        kept.push(run);
+    let items: Vec<(Vec3, usize)> = specks.iter().map(|faces| (centre(faces), faces.len())).collect();
+    for run in morton_runs(&items, bounds, size) {
+        kept.push(run.into_iter().flat_map(|i| std::mem::take(&mut specks[i])).collect());
     }
     kept
 }

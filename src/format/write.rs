@@ -211,7 +211,6 @@ pub struct Preparer {
 
 /// A node encoded for its file, waiting for [`Writer::add_prepared`].
 pub struct Prepared {
-    level: u32,
     /// The node, its geometry taken out.
     node: NodeIn,
     faces: u32,
@@ -280,7 +279,7 @@ impl Preparer {
             b
         });
         let clusters = g.clusters.as_ref().map_or(0, |c| c.1.len() as u64);
-        Ok(Prepared { level: node.level, node, faces: faces as u32, vertices: vertices as u32, model, bytes, span, crc, support, clusters })
+        Ok(Prepared { node, faces: faces as u32, vertices: vertices as u32, model, bytes, span, crc, support, clusters })
     }
 }
 
@@ -362,7 +361,7 @@ impl<W: Write> Writer<W> {
     /// Keep a node [`Preparer::prepare`] encoded for [`finish`](Self::finish).
     pub fn add_prepared(&mut self, p: Prepared) -> Result<()> {
         let bad = |msg: String| Error::invalid(&self.path, None, msg);
-        let (l, key) = (p.level as usize, p.node.key);
+        let (l, key) = (p.node.level as usize, p.node.key);
         if l >= self.levels.len() {
             return Err(bad(format!("node {key} of level {l}: the file has {} levels", self.levels.len())));
         }
