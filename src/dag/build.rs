@@ -183,42 +183,63 @@ pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut d
     dag
 }
 
-/// A level simplified group by group: its mesh, each face's group, each group's error.
+/// A level (or one batch of its groups) simplified: its mesh, each face's group, each group's error.
 struct Simplified {
     mesh: Mesh,
     face_groups: Vec<u32>,
     group_error: Vec<f32>,
 }
 
-/// Simplify each group of `mesh` (`labels` per face, `groups` of them) on its own, on every core,
-/// to `ratio` of its faces, the `pinned` vertices kept; then join the results, welding the pinned
-/// vertices (they never move, so each keeps its position in every group that has it). A group
-/// meets its neighbours only at pinned vertices, so simplifying it alone changes nothing of theirs.
-/// Whole small components touching no pinned vertex may leave a group ([`specks::leave`]).
+/// Simplify the groups of `mesh` (`labels` per face, `groups` of them) to `ratio` of their faces,
+/// the `pinned` vertices kept, in batches of near groups ([`batches`]) on every core: each batch
+/// is one queue, so its collapses go where they cost least, across its groups. Then join the
+/// results, welding the pinned vertices (they never move, so each keeps its position in every
+/// batch that has it). A group meets its neighbours only at pinned vertices, so simplifying it
+/// apart from some of them changes nothing of theirs. Whole small components touching no pinned
+/// vertex may leave a group ([`specks::leave`]).
 fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ratio: f32) -> Simplified {
     let faces = Lists::from_labels(labels, groups);
     let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
-    let results: Vec<(Mesh, f32)> = (0..groups)
+    let results: Vec<(Vec<usize>, Simplified)> = batches(mesh, &faces)
         .into_par_iter()
-        .map(|g| {
-            let (sub, sub_pinned) = part(mesh, faces.get(g), pinned);
-            let target = ((sub.triangles.len() as f64) * ratio as f64).round() as usize;
+        .map(|batch| {
+            let members: Vec<u32> = batch.iter().flat_map(|&g| faces.get(g).iter().copied()).collect();
+            let local: Vec<u32> = batch.iter().enumerate().flat_map(|(i, &g)| std::iter::repeat_n(i as u32, faces.get(g).len())).collect();
+            let (sub, sub_pinned) = part(mesh, &members, pinned);
+            // Each group's target, at least its pinned vertices (what a fan inside a pinned
+            // border keeps), so that groups the pins hold do not push the others below theirs.
+            let mut floor = vec![0usize; batch.len()];
+            let mut seen = vec![u32::MAX; sub.positions.len()];
+            for (t, &g) in sub.triangles.iter().zip(&local) {
+                for &v in t {
+                    if sub_pinned[v as usize] && seen[v as usize] != g {
+                        seen[v as usize] = g;
+                        floor[g as usize] += 1;
+                    }
+                }
+            }
+            let targets: Vec<usize> =
+                batch.iter().zip(&floor).map(|(&g, &p)| (((faces.get(g).len() as f64) * ratio as f64).round() as usize).max(p)).collect();
             let opts = SimplifyOptions {
-                target_faces: target,
+                target_faces: targets.iter().sum(),
                 normal_seam_angle: NORMAL_SEAM_ANGLE.to_radians(),
                 topology: true,
                 ..SimplifyOptions::default()
             };
-            let mut s = simplify_pinned(&sub, Some(&vec![0; sub.triangles.len()]), &sub_pinned, &opts);
-            let error = s.group_error.first().copied().unwrap_or(0.0);
-            let error = specks::leave(&mut s.mesh, &s.source_faces, &sub, target, error, &|x| kept.contains(&position_key(x)));
-            (s.mesh, error)
+            let mut s = simplify_pinned(&sub, Some(&local), &sub_pinned, &opts);
+            let short = s.mesh.triangles.len() > opts.target_faces;
+            let mut errors = s.group_error.clone();
+            errors.resize(batch.len(), 0.0);
+            let from = specks::Batch { input: &sub, input_groups: &local, source_faces: &s.source_faces, targets: &targets, short };
+            specks::leave(&mut s.mesh, &mut s.face_groups, &mut errors, &from, &|x| kept.contains(&position_key(x)));
+            let face_groups = s.face_groups.iter().map(|&i| batch[i as usize] as u32).collect();
+            (batch, Simplified { mesh: s.mesh, face_groups, group_error: errors })
         })
         .collect();
     let mut out = Mesh { materials: mesh.materials.clone(), images: mesh.images.clone(), ..Mesh::default() };
     let mut welded: FxHashMap<[u32; 3], u32> = FxHashMap::default();
-    let (mut face_groups, mut group_error) = (Vec::new(), Vec::with_capacity(groups));
-    for (g, (m, error)) in results.into_iter().enumerate() {
+    let (mut face_groups, mut group_error) = (Vec::new(), vec![0.0; groups]);
+    for (batch, Simplified { mesh: m, face_groups: batch_groups, group_error: errors }) in results {
         let index: Vec<u32> = m
             .positions
             .iter()
@@ -233,10 +254,30 @@ fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ra
             })
             .collect();
         out.append_faces(&m, &index);
-        face_groups.extend(std::iter::repeat_n(g as u32, m.triangles.len()));
-        group_error.push(error);
+        face_groups.extend(batch_groups);
+        for (&g, e) in batch.iter().zip(errors) {
+            group_error[g] = e;
+        }
     }
     Simplified { mesh: out, face_groups, group_error }
+}
+
+/// Faces a batch of groups gathers before it closes (the last may have fewer): batches are the
+/// unit of parallel work, and within one the simplifier spends its collapses where they cost least.
+const BATCH_FACES: usize = 65_536;
+
+/// The groups (`faces` of `mesh` per group) in batches of near ones: runs along the Morton order of
+/// their centres of about [`BATCH_FACES`] faces each.
+fn batches(mesh: &Mesh, faces: &Lists) -> Vec<Vec<usize>> {
+    let items: Vec<(Vec3, usize)> = (0..faces.len())
+        .map(|g| {
+            let fs = faces.get(g);
+            let sum: Vec3 = fs.iter().flat_map(|&f| mesh.triangles[f as usize]).map(|v| mesh.positions[v as usize]).sum();
+            (sum / (3 * fs.len().max(1)) as f32, fs.len())
+        })
+        .collect();
+    let bounds = items.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
+    super::gather::morton_runs(&items, bounds, BATCH_FACES)
 }
 
 /// The faces `faces` of `mesh` as a mesh of their own (images left out), and which of its vertices
@@ -325,4 +366,42 @@ fn lists(pairs: &[(u32, u32)], n: usize) -> Lists {
     let labels: Vec<u32> = pairs.iter().map(|p| p.0).collect();
     let by = Lists::from_labels(&labels, n);
     Lists { offsets: by.offsets, items: by.items.iter().map(|&i| pairs[i as usize].1).collect() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_spends_its_collapses_where_they_cost_least() {
+        // A height field, flat where x < 0.5 and rough beyond, in two groups split there: halving
+        // the two together keeps more of the rough one than half, and less of the flat one.
+        let mut mesh = crate::fixtures::open_grid(40);
+        for p in &mut mesh.positions {
+            if p.x < 0.5 {
+                p.z = 0.0;
+            }
+        }
+        mesh.normals.clear();
+        mesh.uvs.clear();
+        mesh.compute_face_geometry();
+        let labels: Vec<u32> =
+            mesh.triangles.iter().map(|t| u32::from(t.iter().map(|&v| mesh.positions[v as usize].x).sum::<f32>() > 1.5)).collect();
+        let pinned = shared_vertices(&mesh, &labels);
+        let s = simplify_each(&mesh, &labels, 2, &pinned, 0.5);
+        let before = |g: u32| labels.iter().filter(|&&l| l == g).count();
+        let after = |g: u32| s.face_groups.iter().filter(|&&l| l == g).count();
+        assert_eq!(s.face_groups.len(), s.mesh.triangles.len());
+        assert!(s.mesh.triangles.len() <= mesh.triangles.len() / 2 + 1, "{} faces left", s.mesh.triangles.len());
+        assert!(2 * after(0) < before(0), "flat: {} of {}", after(0), before(0));
+        assert!(2 * after(1) > before(1), "rough: {} of {}", after(1), before(1));
+        // Their border stays where it was, vertex for vertex.
+        let border = |m: &Mesh, p: &[bool]| {
+            let mut keys: Vec<[u32; 3]> = m.positions.iter().zip(p).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
+            keys.sort_unstable();
+            keys
+        };
+        let out_pinned = shared_vertices(&s.mesh, &s.face_groups);
+        assert_eq!(border(&mesh, &pinned), border(&s.mesh, &out_pinned));
+    }
 }

@@ -5,7 +5,8 @@
 //! joined (`specks.rs`). Each coarser level
 //! gathers the nodes of the level below into *groups* of a few adjacent nodes ([`gather`]),
 //! simplifies the level to half with every vertex two groups share pinned and every face kept in
-//! its group, and cuts each group's result into nodes of about level 0's size ([`split`]). A node
+//! its group (in batches of near groups, one queue each, so that collapses go where they cost
+//! least), and cuts each group's result into nodes of about level 0's size ([`split`]). A node
 //! is the child of the one group it was gathered into (its *consumer*) and an output of the group
 //! that made it (its *source*); a group has several children and several outputs.
 //!

@@ -3,16 +3,17 @@
 //! of separate triangles have nothing to collapse, so without it every level would copy them and the
 //! top would never shrink.
 //!
-//! Within one group (simplified on its own, its border pinned), a whole component (faces joined
-//! through shared positions) that touches no pinned position may be dropped from the outputs, its
+//! Within one group (its border pinned; simplified in one queue with near groups), a whole
+//! component (faces joined through shared positions) that touches no pinned position and no other
+//! group may be dropped from the outputs, its
 //! size (the diagonal of the box of the input component it came from) counted in the group's
 //! error: a front that draws the outputs instead of the children misses a piece no
 //! larger than the error it already claims, and the group's sphere encloses its children's, so
 //! the projected error bounds what is missing. Pinned positions stay, so neighbours still meet
 //! edge for edge (selection.md §9). A component leaves:
 //! - when it is no larger than the group's error after simplification (it costs nothing);
-//! - or, when the group did not shrink (the simplifier stalled), smallest first until the group is
-//!   down to its target.
+//! - or, when the group stalled (the simplifier ran out of collapses short of its batch's target,
+//!   and the group kept most of its faces), smallest first until the group is down to its target.
 //!
 //! The group's largest component always stays, so a group keeps at least one output.
 //!
@@ -29,16 +30,34 @@ use crate::mesh::{components_of, Mesh};
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 
-/// Drop from `out` (one group's simplified faces, made from `input`: `source_faces` names the input
-/// face of each, [`crate::simplify::Simplified::source_faces`]) the components that may leave it,
-/// by the rules above, `target` being the group's target face count; `pinned` says whether a
-/// vertex at a position is pinned. A component's size is that of the input component it came
-/// from. Returns the group's error: `error`, raised to the largest component dropped.
-pub fn leave(out: &mut Mesh, source_faces: &[u32], input: &Mesh, target: usize, error: f32, pinned: &dyn Fn(Vec3) -> bool) -> f32 {
+/// What a batch of groups was simplified from, as [`leave`] reads it.
+pub struct Batch<'a> {
+    /// The batch's faces before simplification.
+    pub input: &'a Mesh,
+    /// The group of each face of `input` (`0..n`).
+    pub input_groups: &'a [u32],
+    /// The input face of each output face ([`crate::simplify::Simplified::source_faces`]).
+    pub source_faces: &'a [u32],
+    /// Each group's target face count.
+    pub targets: &'a [usize],
+    /// The simplifier ended above the batch's target (it ran out of collapses): groups that kept
+    /// most of their faces have stalled.
+    pub short: bool,
+}
+
+/// Drop from `out` (a batch's simplified faces, `out_groups` naming each face's group) the
+/// components that may leave, by the rules above, group by group; `errors[g]` is group `g`'s
+/// error, raised to the largest component it dropped. `pinned` says whether a vertex at a
+/// position is pinned. A component's size is that of the input component it came from. A
+/// component with faces of two groups stays (it could only join them through an unpinned
+/// position they share).
+pub fn leave(out: &mut Mesh, out_groups: &mut Vec<u32>, errors: &mut [f32], batch: &Batch, pinned: &dyn Fn(Vec3) -> bool) {
+    let Batch { input, input_groups, source_faces, targets, short } = *batch;
     let (count, label) = components_by_position(out);
     if count < 2 {
-        return error;
+        return;
     }
+    let groups = errors.len();
     let (before, before_label) = components_by_position(input);
     let mut lo = vec![Vec3::splat(f32::MAX); before];
     let mut hi = vec![Vec3::splat(f32::MIN); before];
@@ -48,11 +67,18 @@ pub fn leave(out: &mut Mesh, source_faces: &[u32], input: &Mesh, target: usize, 
             hi[c as usize] = hi[c as usize].max(input.positions[v as usize]);
         }
     }
+    let mut input_faces = vec![0usize; groups];
+    for &g in input_groups {
+        input_faces[g as usize] += 1;
+    }
+    let mut left = vec![0usize; groups];
     let mut faces = vec![0usize; count];
     let mut size = vec![0.0f32; count];
     let mut held = vec![false; count];
+    let mut group = vec![u32::MAX; count];
     for (f, (t, &c)) in out.triangles.iter().zip(&label).enumerate() {
-        let c = c as usize;
+        let (c, g) = (c as usize, out_groups[f]);
+        left[g as usize] += 1;
         faces[c] += 1;
         let from = source_faces.get(f).and_then(|&s| before_label.get(s as usize)).map(|&b| b as usize);
         size[c] = size[c].max(match from {
@@ -60,28 +86,41 @@ pub fn leave(out: &mut Mesh, source_faces: &[u32], input: &Mesh, target: usize, 
             // Not from the input (never, by `Simplified`'s contract): too large to leave.
             None => f32::INFINITY,
         });
-        held[c] |= t.iter().any(|&v| pinned(out.positions[v as usize]));
+        held[c] |= t.iter().any(|&v| pinned(out.positions[v as usize])) || (group[c] != u32::MAX && group[c] != g);
+        group[c] = g;
     }
-    let largest = (0..count).max_by(|&a, &b| size[a].total_cmp(&size[b]).then(b.cmp(&a))).unwrap_or(0);
-    let mut order: Vec<usize> = (0..count).filter(|&c| !held[c] && c != largest && size[c].is_finite()).collect();
+    // Each group's largest component stays.
+    let mut largest = vec![usize::MAX; groups];
+    for c in 0..count {
+        let l = &mut largest[group[c] as usize];
+        if *l == usize::MAX || size[c] > size[*l] {
+            *l = c;
+        }
+    }
+    let mut order: Vec<usize> = (0..count).filter(|&c| !held[c] && largest[group[c] as usize] != c && size[c].is_finite()).collect();
     order.sort_by(|&a, &b| size[a].total_cmp(&size[b]).then(a.cmp(&b)));
-    let stalled = out.triangles.len() as f64 > STALLED * input.triangles.len() as f64;
-    let mut left = out.triangles.len();
-    let mut raised = error;
+    let stalled: Vec<bool> = (0..groups).map(|g| short && left[g] as f64 > STALLED * input_faces[g] as f64).collect();
+    let error = errors.to_vec();
+    let mut done = vec![false; groups];
     let mut gone = vec![false; count];
     for c in order {
-        if !(size[c] <= error || (stalled && left > target)) {
-            break;
+        let g = group[c] as usize;
+        if done[g] {
+            continue;
+        }
+        if !(size[c] <= error[g] || (stalled[g] && left[g] > targets[g])) {
+            done[g] = true;
+            continue;
         }
         gone[c] = true;
-        left -= faces[c];
-        raised = raised.max(size[c]);
+        left[g] -= faces[c];
+        errors[g] = errors[g].max(size[c]);
     }
-    if left < out.triangles.len() {
+    if gone.iter().any(|&g| g) {
         let keep: Vec<usize> = (0..out.triangles.len()).filter(|&f| !gone[label[f] as usize]).collect();
+        *out_groups = keep.iter().map(|&f| out_groups[f]).collect();
         *out = std::mem::take(out).subset(&keep);
     }
-    raised
 }
 
 /// Components of `mesh`'s faces joined through shared positions (a topology change may have cut a
@@ -147,6 +186,17 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
 mod tests {
     use super::*;
 
+    /// [`leave`] for one group, stalled when it kept over 95 % of `input`; returns its error.
+    fn alone(out: &mut Mesh, source_faces: &[u32], input: &Mesh, target: usize, error: f32, pinned: &dyn Fn(Vec3) -> bool) -> f32 {
+        let (mut groups, mut errors) = (vec![0; out.triangles.len()], [error]);
+        let short = out.triangles.len() > target;
+        let input_groups = vec![0; input.triangles.len()];
+        let batch = Batch { input, input_groups: &input_groups, source_faces, targets: &[target], short };
+        leave(out, &mut groups, &mut errors, &batch, pinned);
+        assert_eq!(groups.len(), out.triangles.len());
+        errors[0]
+    }
+
     /// `n` separate triangles of growing size along x, each with face geometry.
     fn soup(n: usize) -> Mesh {
         let mut m = Mesh::default();
@@ -164,7 +214,7 @@ mod tests {
     fn a_stalled_group_drops_its_smallest_components_to_its_target() {
         let input = soup(8);
         let mut m = input.clone();
-        let error = leave(&mut m, &[0, 1, 2, 3, 4, 5, 6, 7], &input, 4, 0.0, &|_| false);
+        let error = alone(&mut m, &[0, 1, 2, 3, 4, 5, 6, 7], &input, 4, 0.0, &|_| false);
         assert_eq!(m.triangles.len(), 4);
         // The four largest stay; the error is the largest dropped (the fourth, legs of 4).
         assert!(m.positions.iter().all(|p| p.x >= 40.0));
@@ -178,7 +228,7 @@ mod tests {
         let input = soup(12);
         let mut m = input.clone().subset(&[0, 1, 2, 3, 4, 5]);
         let pinned = |p: Vec3| p == Vec3::new(10.0, 0.0, 0.0);
-        let error = leave(&mut m, &[0, 1, 2, 3, 4, 5], &input, 3, 4.3, &pinned);
+        let error = alone(&mut m, &[0, 1, 2, 3, 4, 5], &input, 3, 4.3, &pinned);
         assert_eq!(m.triangles.len(), 4);
         assert!(m.positions.contains(&Vec3::new(10.0, 0.0, 0.0)));
         assert!(!m.positions.contains(&Vec3::new(0.0, 0.0, 0.0)) && !m.positions.contains(&Vec3::new(20.0, 0.0, 0.0)));
@@ -228,16 +278,45 @@ mod tests {
         input.triangles.extend([[0, 1, 2], [3, 4, 5], [6, 7, 8]]);
         input.compute_face_geometry();
         let mut m = input.clone();
-        leave(&mut m, &[0, 1, 2], &input, 1, 0.0, &|_| false);
+        alone(&mut m, &[0, 1, 2], &input, 1, 0.0, &|_| false);
         assert_eq!(m.triangles.len(), 2);
         assert!(!m.positions.contains(&Vec3::new(10.0, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn groups_of_a_batch_leave_on_their_own_and_only_when_it_ran_short() {
+        // Six separate triangles, groups 0 0 0 1 1 1, every face kept, target 1 each; then two
+        // more faces sharing a vertex, one in each group.
+        let mut input = soup(6);
+        let b = input.positions.len() as u32;
+        input.positions.extend([Vec3::new(100.0, 0.0, 0.0), Vec3::new(100.5, 0.0, 0.0), Vec3::new(100.0, 0.5, 0.0)]);
+        input.positions.extend([Vec3::new(99.5, 0.0, 0.0), Vec3::new(100.0, -0.5, 0.0)]);
+        input.triangles.extend([[b, b + 1, b + 2], [b, b + 3, b + 4]]);
+        input.compute_face_geometry();
+        let groups = [0, 0, 0, 1, 1, 1, 0, 1];
+        let source: Vec<u32> = (0..8).collect();
+        let run = |short: bool| {
+            let (mut m, mut g, mut errors) = (input.clone(), groups.to_vec(), [0.0f32, 0.0]);
+            let batch = Batch { input: &input, input_groups: &groups, source_faces: &source, targets: &[1, 1], short };
+            leave(&mut m, &mut g, &mut errors, &batch, &|_| false);
+            (m, g, errors)
+        };
+        // Not short: the batch reached its target elsewhere, so nothing has stalled.
+        assert_eq!(run(false).0.triangles.len(), 8);
+        // Short: each group keeps its largest component; the pair across the groups stays whole.
+        let (m, g, errors) = run(true);
+        assert_eq!(m.triangles.len(), 4);
+        assert_eq!(g.iter().filter(|&&x| x == 0).count(), 2);
+        assert!(m.positions.contains(&Vec3::new(20.0, 3.0, 0.0)) && m.positions.contains(&Vec3::new(50.0, 6.0, 0.0)));
+        assert!(m.positions.contains(&Vec3::new(99.5, 0.0, 0.0)));
+        assert!((errors[0] - 8f32.sqrt()).abs() < 1e-5 && (errors[1] - 50f32.sqrt()).abs() < 1e-5, "{errors:?}");
     }
 
     #[test]
     fn the_largest_component_always_stays() {
         let input = soup(3);
         let mut m = input.clone();
-        leave(&mut m, &[0, 1, 2], &input, 0, 100.0, &|_| false);
+        alone(&mut m, &[0, 1, 2], &input, 0, 100.0, &|_| false);
         assert_eq!(m.triangles.len(), 1);
         assert!(m.positions.contains(&Vec3::new(20.0, 3.0, 0.0)));
     }
