@@ -262,12 +262,13 @@ fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ra
     Simplified { mesh: out, face_groups, group_error }
 }
 
-/// Faces a batch of groups gathers before it closes (the last may have fewer): batches are the
-/// unit of parallel work, and within one the simplifier spends its collapses where they cost least.
+/// Most faces a batch of groups gathers: batches are the unit of parallel work, and within one the
+/// simplifier spends its collapses where they cost least.
 const BATCH_FACES: usize = 65_536;
 
 /// The groups (`faces` of `mesh` per group) in batches of near ones: runs along the Morton order of
-/// their centres of about [`BATCH_FACES`] faces each.
+/// their centres, as few as hold at most about [`BATCH_FACES`] faces each, of even size so that
+/// they keep the cores evenly busy.
 fn batches(mesh: &Mesh, faces: &Lists) -> Vec<Vec<usize>> {
     let items: Vec<(Vec3, usize)> = (0..faces.len())
         .map(|g| {
@@ -277,7 +278,9 @@ fn batches(mesh: &Mesh, faces: &Lists) -> Vec<Vec<usize>> {
         })
         .collect();
     let bounds = items.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
-    super::gather::morton_runs(&items, bounds, BATCH_FACES)
+    let total: usize = items.iter().map(|i| i.1).sum();
+    let runs = total.div_ceil(BATCH_FACES).max(1);
+    super::gather::morton_runs(&items, bounds, total.div_ceil(runs))
 }
 
 /// The faces `faces` of `mesh` as a mesh of their own (images left out), and which of its vertices
