@@ -7,18 +7,32 @@ use glam::Vec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-/// The grid of the file: the bounds of every level mesh's positions, `bits` bits per axis
-/// ([`GRID_BITS`] in format 2; format 3's precision).
+/// The grid of the file, `bits` bits per axis ([`GRID_BITS`] in format 2; format 3's precision):
+/// its step spans the bounds of every level mesh's positions (level 0 first), and its origin is
+/// level 0's minimum lowered on each axis by whole steps to below the other levels'. Input
+/// coordinates on a lattice (a scanner's, a voxel grid's, an elevation grid's) then keep their
+/// alignment on the grid, whatever the simplified levels' extent.
 pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> Grid {
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for p in levels.into_iter().flat_map(|m| &m.positions) {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
+    let bounds = |m: &Mesh| m.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let mut levels = levels.into_iter();
+    let (lo0, hi0) = levels.next().map_or((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), bounds);
+    let (mut lo, mut hi) = levels.map(bounds).fold((lo0, hi0), |(lo, hi), (l, h)| (lo.min(l), hi.max(h)));
     if lo.cmpgt(hi).any() {
         (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
     }
-    Grid::fit(lo, hi, bits)
+    let anchor = if lo0.cmpgt(hi0).any() { lo } else { lo0 };
+    let mut grid = Grid::fit(lo, hi, bits);
+    loop {
+        let origin: [f64; 3] = std::array::from_fn(|k| {
+            let below = (anchor[k] as f64 - lo[k] as f64) / grid.step;
+            anchor[k] as f64 - below.ceil() * grid.step
+        });
+        let covers = (0..3).all(|k| origin[k] + grid.last() as f64 * grid.step >= hi[k] as f64);
+        if covers {
+            return Grid { origin, ..grid };
+        }
+        grid.step *= 2.0;
+    }
 }
 
 /// Grid steps per median edge that [`auto_grid_bits`] keeps.
@@ -207,6 +221,29 @@ fn round_up(x: f64) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_grid_keeps_level_zero_lattice_points_whatever_the_other_levels_span() {
+        // Level 0 on a lattice of step 1/8 from (1, 1, 1); a coarser level strays below and
+        // above it by amounts that are no multiple of any step.
+        let level0 = Mesh {
+            positions: (0..64)
+                .map(|i| Vec3::new(1.0 + (i % 4) as f32 / 8.0, 1.0 + (i / 4 % 4) as f32 / 8.0, 1.0 + (i / 16) as f32 / 8.0))
+                .collect(),
+            ..Mesh::default()
+        };
+        let level1 = Mesh { positions: vec![Vec3::splat(0.93), Vec3::new(1.5, 1.2, 1.7)], ..Mesh::default() };
+        let grid = model_grid([&level0, &level1], 8);
+        for &p in level0.positions.iter().chain(&level1.positions) {
+            let g = grid.encode(p);
+            assert!(g.iter().all(|&c| c < grid.last()), "{p} off the grid");
+        }
+        for &p in &level0.positions {
+            assert_eq!(grid.decode(grid.encode(p)), p, "{p} moved");
+        }
+        let plain = Grid::fit(Vec3::splat(0.93), Vec3::new(1.5, 1.2, 1.7), 8);
+        assert!(level0.positions.iter().any(|&p| plain.decode(plain.encode(p)) != p), "the bounds' own origin would move them");
+    }
 
     #[test]
     fn level_zero_positions_stay_distinct_within_their_stated_bound() {

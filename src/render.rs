@@ -1225,9 +1225,14 @@ pub fn changed_share(a: &Image, b: &Image, tolerance: u8) -> f64 {
 /// front (not reachable from the picture's edge through background). Silhouette differences reach
 /// the edge and do not count; pinholes between nodes that do not meet do.
 pub fn crack_pixels(front: &Image, full: &Image) -> u64 {
+    crack_mask(front, full).iter().filter(|&&c| c).count() as u64
+}
+
+/// Per pixel, whether it is one of [`crack_pixels`] (all false for images of different sizes).
+pub fn crack_mask(front: &Image, full: &Image) -> Vec<bool> {
     let (w, h) = (front.width as usize, front.height as usize);
     if front.width != full.width || front.height != full.height || front.depth.len() != w * h || full.depth.len() != w * h {
-        return 0;
+        return vec![false; front.depth.len()];
     }
     let bg: Vec<bool> = front.depth.iter().map(|d| !d.is_finite()).collect();
     let mut outside = vec![false; w * h];
@@ -1251,7 +1256,7 @@ pub fn crack_pixels(front: &Image, full: &Image) -> u64 {
             stack.push(i + w);
         }
     }
-    (0..w * h).filter(|&i| bg[i] && !outside[i] && full.depth[i].is_finite()).count() as u64
+    (0..w * h).map(|i| bg[i] && !outside[i] && full.depth[i].is_finite()).collect()
 }
 
 #[cfg(test)]
