@@ -30,10 +30,13 @@ fn draw(camera: &strata::camera::Camera, parts: &[(&[glam::Vec3], &[u32])]) -> I
     img
 }
 
+/// An edge by its ends' positions (as bits), lower first.
+type EdgeKey = ([u32; 3], [u32; 3]);
+
 /// The open edges of `mesh`, by position: the rims of its holes.
 fn rims(mesh: &Mesh) -> Vec<(Vec3, Vec3)> {
     let key = |p: Vec3| p.to_array().map(f32::to_bits);
-    let mut count: HashMap<([u32; 3], [u32; 3]), (i32, Vec3, Vec3)> = HashMap::new();
+    let mut count: HashMap<EdgeKey, (i32, Vec3, Vec3)> = HashMap::new();
     for t in &mesh.triangles {
         for k in 0..3 {
             let (a, b) = (mesh.positions[t[k] as usize], mesh.positions[t[(k + 1) % 3] as usize]);
