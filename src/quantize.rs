@@ -9,9 +9,10 @@ use rustc_hash::FxHashMap;
 
 /// The grid of the file, `bits` bits per axis ([`GRID_BITS`] in format 2; format 3's precision):
 /// its step spans the bounds of every level mesh's positions (level 0 first), and its origin is
-/// level 0's minimum lowered on each axis by whole steps to below the other levels'. Input
-/// coordinates on a lattice (a scanner's, a voxel grid's, an elevation grid's) then keep their
-/// alignment on the grid, whatever the simplified levels' extent.
+/// level 0's minimum lowered on each axis by whole steps to below the other levels' (the step
+/// doubled once, the origin recomputed, where the grid would then fall short of their maximum).
+/// Input coordinates on a lattice (a scanner's, a voxel grid's, an elevation grid's) then keep
+/// their alignment on the grid, whatever the simplified levels' extent.
 pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> Grid {
     let bounds = |m: &Mesh| m.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let mut levels = levels.into_iter();
@@ -21,8 +22,14 @@ pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> 
         (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
     }
     let anchor = if lo0.cmpgt(hi0).any() { lo } else { lo0 };
-    let mut grid = Grid::fit(lo, hi, bits);
-    loop {
+    let fit = Grid::fit(lo, hi, bits);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return fit;
+    }
+    // With 2 or more steps per axis one doubling always suffices; a grid of one step (1 bit) may
+    // never reach both ends from a lowered origin, and keeps the bounds' own.
+    let mut grid = fit;
+    for _ in 0..2 {
         let origin: [f64; 3] = std::array::from_fn(|k| {
             let below = (anchor[k] as f64 - lo[k] as f64) / grid.step;
             anchor[k] as f64 - below.ceil() * grid.step
@@ -33,6 +40,7 @@ pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> 
         }
         grid.step *= 2.0;
     }
+    fit
 }
 
 /// Grid steps per median edge that [`auto_grid_bits`] keeps.
@@ -241,6 +249,10 @@ mod tests {
         for &p in &level0.positions {
             assert_eq!(grid.decode(grid.encode(p)), p, "{p} moved");
         }
+        // A grid of one step per axis cannot lower its origin and still reach the top: the
+        // bounds' own.
+        let one = model_grid([&level0, &level1], 1);
+        assert_eq!(one, Grid::fit(Vec3::splat(0.93), Vec3::new(1.5, 1.2, 1.7), 1));
         let plain = Grid::fit(Vec3::splat(0.93), Vec3::new(1.5, 1.2, 1.7), 8);
         assert!(level0.positions.iter().any(|&p| plain.decode(plain.encode(p)) != p), "the bounds' own origin would move them");
     }

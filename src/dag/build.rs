@@ -30,7 +30,7 @@ impl Default for DagParams {
 
 /// A level that keeps more than this share of the faces below it ends the build: the simplifier
 /// has stopped (pins and group rules leave it nothing to collapse). A group that keeps more of its
-/// own lets components leave to its target ([`specks`]).
+/// own, in a batch that ran short of its target, lets components leave to its target ([`specks`]).
 pub(super) const STALLED: f64 = 0.95;
 
 /// Corner normals of one vertex closer than this (degrees) are one normal at levels 1 and up, as
@@ -196,7 +196,7 @@ struct Simplified {
 /// results, welding the pinned vertices (they never move, so each keeps its position in every
 /// batch that has it). A group meets its neighbours only at pinned vertices, so simplifying it
 /// apart from some of them changes nothing of theirs. Whole small components touching no pinned
-/// vertex may leave a group ([`specks::leave`]).
+/// vertex and no other group may leave a group ([`specks::leave`]).
 fn simplify_each(mesh: &Mesh, labels: &[u32], groups: usize, pinned: &[bool], ratio: f32) -> Simplified {
     let faces = Lists::from_labels(labels, groups);
     let kept: FxHashSet<[u32; 3]> = mesh.positions.iter().zip(pinned).filter(|(_, &p)| p).map(|(&x, _)| position_key(x)).collect();
