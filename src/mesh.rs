@@ -101,8 +101,7 @@ impl Mesh {
 
     /// Axis-aligned bounds of the positions, or `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let first = *self.positions.first()?;
-        Some(self.positions.iter().fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+        box_of(self.positions.iter().copied())
     }
 
     /// Length of the bounding box diagonal (0 for an empty mesh).
@@ -377,6 +376,13 @@ impl VertexFaces {
     pub fn of(&self, v: u32) -> &[u32] {
         &self.faces[self.offsets[v as usize] as usize..self.offsets[v as usize + 1] as usize]
     }
+}
+
+/// The box (min, max) of `points`; `None` when there are none.
+pub fn box_of(points: impl IntoIterator<Item = Vec3>) -> Option<(Vec3, Vec3)> {
+    let mut points = points.into_iter();
+    let first = points.next()?;
+    Some(points.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
 }
 
 /// Connected components, faces being connected when they share a vertex. Returns the count and a

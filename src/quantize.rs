@@ -2,7 +2,7 @@
 //! nearest grid point, and at level 0 distinct input positions kept distinct.
 
 use crate::format::Grid;
-use crate::mesh::Mesh;
+use crate::mesh::{box_of, Mesh};
 use glam::Vec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -14,14 +14,10 @@ use rustc_hash::FxHashMap;
 /// Input coordinates on a lattice (a scanner's, a voxel grid's, an elevation grid's) then keep
 /// their alignment on the grid, whatever the simplified levels' extent.
 pub fn model_grid<'a>(levels: impl IntoIterator<Item = &'a Mesh>, bits: u32) -> Grid {
-    let bounds = |m: &Mesh| m.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let mut levels = levels.into_iter();
-    let (lo0, hi0) = levels.next().map_or((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), bounds);
-    let (mut lo, mut hi) = levels.map(bounds).fold((lo0, hi0), |(lo, hi), (l, h)| (lo.min(l), hi.max(h)));
-    if lo.cmpgt(hi).any() {
-        (lo, hi) = (Vec3::ZERO, Vec3::ZERO);
-    }
-    let anchor = if lo0.cmpgt(hi0).any() { lo } else { lo0 };
+    let first = levels.next().and_then(Mesh::bounds);
+    let (lo, hi) = box_of(first.into_iter().chain(levels.filter_map(Mesh::bounds)).flat_map(|(l, h)| [l, h])).unwrap_or_default();
+    let anchor = first.map_or(lo, |b| b.0);
     let fit = Grid::fit(lo, hi, bits);
     if !(lo.is_finite() && hi.is_finite()) {
         return fit;

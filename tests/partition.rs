@@ -2,6 +2,9 @@
 //! exactly, the file verifies and streams, neighbours are linked across cells, and bad input ends
 //! in a clear error that leaves no output and no work files.
 
+mod common;
+
+use common::{edge, Edge};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use strata::format::Reader;
@@ -34,17 +37,6 @@ fn clean_up<const N: usize>(files: [PathBuf; N], work: &Path) {
 /// Options that make the noisy sphere (99k faces) about ten cells.
 fn partitioned(work: &Path) -> ConvertOptions {
     ConvertOptions { build: Build::Partitioned, memory: 16 << 20, temp: Some(work.to_path_buf()), ..ConvertOptions::default() }
-}
-
-type Edge = ([u32; 3], [u32; 3]);
-
-fn edge(a: glam::Vec3, b: glam::Vec3) -> Edge {
-    let (a, b) = (a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
-    if a <= b {
-        (a, b)
-    } else {
-        (b, a)
-    }
 }
 
 /// Per level: how many faces use each edge (by decoded positions), and which nodes do.

@@ -3,6 +3,9 @@
 //! leaves no pixel the full model covers to an enclosed background (`render::crack_pixels`); drawn
 //! without its seams, it does. Holes of the model itself stay open.
 
+mod common;
+
+use common::{edge, Edge};
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -30,18 +33,13 @@ fn draw(camera: &strata::camera::Camera, parts: &[(&[glam::Vec3], &[u32])]) -> I
     img
 }
 
-/// An edge by its ends' positions (as bits), lower first.
-type EdgeKey = ([u32; 3], [u32; 3]);
-
 /// The open edges of `mesh`, by position: the rims of its holes.
 fn rims(mesh: &Mesh) -> Vec<(Vec3, Vec3)> {
-    let key = |p: Vec3| p.to_array().map(f32::to_bits);
-    let mut count: HashMap<EdgeKey, (i32, Vec3, Vec3)> = HashMap::new();
+    let mut count: HashMap<Edge, (i32, Vec3, Vec3)> = HashMap::new();
     for t in &mesh.triangles {
         for k in 0..3 {
             let (a, b) = (mesh.positions[t[k] as usize], mesh.positions[t[(k + 1) % 3] as usize]);
-            let e = if key(a) < key(b) { (key(a), key(b)) } else { (key(b), key(a)) };
-            count.entry(e).or_insert((0, a, b)).0 += 1;
+            count.entry(edge(a, b)).or_insert((0, a, b)).0 += 1;
         }
     }
     count.into_values().filter(|c| c.0 == 1).map(|c| (c.1, c.2)).collect()

@@ -1,13 +1,13 @@
 //! Building the DAG level by level: gather, simplify with group borders pinned, split.
 
-use super::gather::gather;
+use super::gather::{centre, gather, morton_runs};
 use super::specks;
 use super::split::split;
 use super::{Dag, Group, Node, NONE};
 use crate::cone::smallest_enclosing;
 use crate::hierarchy::Lists;
 use crate::levels::position_key;
-use crate::mesh::Mesh;
+use crate::mesh::{box_of, Mesh};
 use crate::simplify::{simplify_pinned, SimplifyOptions};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -270,17 +270,11 @@ const BATCH_FACES: usize = 65_536;
 /// their centres, as few as hold at most about [`BATCH_FACES`] faces each, of even size so that
 /// they keep the cores evenly busy.
 fn batches(mesh: &Mesh, faces: &Lists) -> Vec<Vec<usize>> {
-    let items: Vec<(Vec3, usize)> = (0..faces.len())
-        .map(|g| {
-            let fs = faces.get(g);
-            let sum: Vec3 = fs.iter().flat_map(|&f| mesh.triangles[f as usize]).map(|v| mesh.positions[v as usize]).sum();
-            (sum / (3 * fs.len().max(1)) as f32, fs.len())
-        })
-        .collect();
-    let bounds = items.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
+    let items: Vec<(Vec3, usize)> = (0..faces.len()).map(|g| (centre(mesh, faces.get(g)), faces.get(g).len())).collect();
+    let bounds = box_of(items.iter().map(|i| i.0)).unwrap_or_default();
     let total: usize = items.iter().map(|i| i.1).sum();
     let runs = total.div_ceil(BATCH_FACES).max(1);
-    super::gather::morton_runs(&items, bounds, total.div_ceil(runs))
+    morton_runs(&items, bounds, total.div_ceil(runs))
 }
 
 /// The faces `faces` of `mesh` as a mesh of their own (images left out), and which of its vertices

@@ -7,7 +7,7 @@
 //! small components of the model gather with their near ones rather than staying apart at every
 //! level.
 
-use crate::mesh::Mesh;
+use crate::mesh::{box_of, Mesh};
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 
@@ -76,7 +76,7 @@ pub fn gather(mesh: &Mesh, node_of_face: &[u32], nodes: usize) -> (Vec<u32>, usi
     }
 
     // Small groups merge along the Morton order of their centers.
-    let bounds = center.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+    let bounds = box_of(center.iter().copied()).unwrap_or_default();
     let small: Vec<u32> = (0..members_of.len() as u32).filter(|&g| members_of[g as usize].len() < PER_GROUP).collect();
     let items: Vec<(Vec3, usize)> = small
         .iter()
@@ -106,6 +106,13 @@ pub fn gather(mesh: &Mesh, node_of_face: &[u32], nodes: usize) -> (Vec<u32>, usi
 
 fn pair(a: u32, b: u32) -> u64 {
     (a as u64) << 32 | b as u64
+}
+
+/// The mean of the corners of `faces` of `mesh` (the origin for none): where a group of faces
+/// stands in the Morton order of [`morton_runs`].
+pub(super) fn centre(mesh: &Mesh, faces: &[u32]) -> Vec3 {
+    let sum: Vec3 = faces.iter().flat_map(|&f| mesh.triangles[f as usize]).map(|v| mesh.positions[v as usize]).sum();
+    sum / (3 * faces.len().max(1)) as f32
 }
 
 /// Items `(centre, weight)` taken in the Morton order of their centres within `bounds` (equal

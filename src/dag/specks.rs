@@ -24,7 +24,7 @@
 //! join.
 
 use super::build::STALLED;
-use super::gather::morton_runs;
+use super::gather::{centre, morton_runs};
 use crate::levels::position_key;
 use crate::mesh::{components_of, Mesh};
 use glam::Vec3;
@@ -162,11 +162,7 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
     let mut sizes: Vec<usize> = pieces.iter().zip(&touches).filter(|(_, &t)| t).map(|(p, _)| p.len()).collect();
     sizes.sort_unstable();
     let size = sizes.get(sizes.len() / 2).copied().unwrap_or(SPECK_NODE_FACES).max(1);
-    let bounds = mesh.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-    let centre = |faces: &[u32]| {
-        let sum: Vec3 = faces.iter().flat_map(|&f| mesh.triangles[f as usize]).map(|v| mesh.positions[v as usize]).sum();
-        sum / (3 * faces.len().max(1)) as f32
-    };
+    let bounds = mesh.bounds().unwrap_or_default();
     let (mut kept, mut specks) = (Vec::new(), Vec::new());
     for (p, faces) in pieces.into_iter().enumerate() {
         if touches[p] || faces.len() >= size {
@@ -175,7 +171,7 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
             specks.push(faces);
         }
     }
-    let items: Vec<(Vec3, usize)> = specks.iter().map(|faces| (centre(faces), faces.len())).collect();
+    let items: Vec<(Vec3, usize)> = specks.iter().map(|faces| (centre(mesh, faces), faces.len())).collect();
     for run in morton_runs(&items, bounds, size) {
         kept.push(run.into_iter().flat_map(|i| std::mem::take(&mut specks[i])).collect());
     }

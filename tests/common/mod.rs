@@ -82,6 +82,20 @@ pub fn written_as(mesh: &Mesh, params: &HierarchyParams, encoding: strata::write
     (cur.into_inner(), summary)
 }
 
+/// An edge as the positions of its ends (bit patterns), lower first: the same for both
+/// directions and for every copy of its vertices.
+pub type Edge = ([u32; 3], [u32; 3]);
+
+/// The [`Edge`] from `a` to `b`.
+pub fn edge(a: Vec3, b: Vec3) -> Edge {
+    let (a, b) = (a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+    if a <= b {
+        (a, b)
+    } else {
+        (b, a)
+    }
+}
+
 /// A face as the positions of its corners (bit patterns), rotated to start at the smallest while
 /// keeping the winding; and its corner order under that rotation.
 pub fn face_key(mesh: &Mesh, f: usize) -> ([[u32; 3]; 3], [usize; 3]) {
