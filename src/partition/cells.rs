@@ -197,12 +197,7 @@ impl Spool {
 /// they are the input's, which the caller holds; a face's material is checked below `materials`.
 pub fn read_cell(path: &Path, faces: u64, layout: Layout, materials: usize) -> Result<(Mesh, Vec<u32>)> {
     let corner = layout.corner_bytes();
-    let expect = faces * layout.face_bytes() as u64;
-    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
-    if len != expect {
-        return Err(Error::invalid(path, None, format!("cell file of {len} bytes, {expect} expected for {faces} faces")));
-    }
-    let mut r = BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
+    let mut r = open_cell(path, faces, layout)?;
     let n = faces as usize * 3;
     let mut mesh =
         Mesh { triangles: Vec::with_capacity(faces as usize), face_materials: Vec::with_capacity(faces as usize), ..Mesh::default() };
@@ -249,6 +244,33 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout, materials: usize) -> R
         }
     }
     Ok((mesh, ids))
+}
+
+/// Cell file `path` for reading, once its length is checked against `faces` faces.
+fn open_cell(path: &Path, faces: u64, layout: Layout) -> Result<BufReader<File>> {
+    let expect = faces * layout.face_bytes() as u64;
+    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+    if len != expect {
+        return Err(Error::invalid(path, None, format!("cell file of {len} bytes, {expect} expected for {faces} faces")));
+    }
+    Ok(BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?))
+}
+
+/// Call `f` with each face's vertex ids and corner positions in cell file `path` (of `faces`
+/// faces), in the order they were written; the file stays.
+pub fn scan_cell(path: &Path, faces: u64, layout: Layout, mut f: impl FnMut([u32; 3], [Vec3; 3])) -> Result<()> {
+    let (corner, size) = (layout.corner_bytes(), layout.face_bytes());
+    let mut r = open_cell(path, faces, layout)?;
+    let mut rec = vec![0u8; size];
+    let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
+    for _ in 0..faces {
+        r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
+        let at = |k: usize| &rec[k * corner..];
+        let ids = [0, 1, 2].map(|k| u32::from_le_bytes(at(k)[0..4].try_into().unwrap()));
+        let positions = [0, 1, 2].map(|k| Vec3::new(f32_at(at(k), 4), f32_at(at(k), 8), f32_at(at(k), 12)));
+        f(ids, positions);
+    }
+    Ok(())
 }
 
 #[cfg(test)]

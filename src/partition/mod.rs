@@ -8,7 +8,8 @@
 //! Memory: the cells in flight (each an in-core build of [`cell_faces`] faces), the vertex arrays
 //! while streaming (positions, and colors, normals and texture coordinates when the input has
 //! them), the images' levels, and what is held for later (the writer's node records, the pieces'
-//! open edges); the tops waiting for the next round and computed normals wait in temporary files.
+//! open edges); the tops waiting for the next round wait in temporary files, and computed normals
+//! are summed by each cell from its own faces, save where cells meet ([`vertex_normals`]).
 //! It stays within the budget
 //! as long as the mesh simplifies where its cells meet; one that does not (a soup of separate
 //! triangles) leaves large tops, and the final merge, which holds them all, is said to exceed it.
@@ -103,9 +104,9 @@ pub fn default_memory() -> u64 {
 }
 
 /// Bytes held per input face besides the cells: while the input streams, its vertex arrays
-/// (positions, weld, owner, normal sums: 32 bytes a vertex, about 16 a face); while cells are
-/// built, the writer's node records and the pieces' open edges, a few bytes a face, as tops,
-/// node supports and computed normals wait in temporary files.
+/// (positions, weld, owner: 18 bytes a vertex, about 9 a face; 30 and 15 with the input's
+/// normals); while cells are built, the writer's node records and the pieces' open edges, a few
+/// bytes a face, as tops and node supports wait in temporary files.
 pub const HELD_BYTES_PER_FACE: u64 = 16;
 
 /// Faces per cell for a budget and an input of `faces` faces: the cells in flight at once take
@@ -188,8 +189,7 @@ pub fn convert(
     if budget.frugal {
         frugal_allocation();
     }
-    // Distribute: faces to cells by centroid; computed normals need every face of a vertex, so
-    // their sums are kept per input vertex and each cell looks its vertices up later.
+    // Distribute: faces to cells by centroid, noting which vertices faces of several cells use.
     progress.stage("distribute", 0);
     let mut state: Option<Distribute> = None;
     let looks = (reader.stream)(
@@ -212,8 +212,11 @@ pub fn convert(
         Encoding::V3(p) => Some(p),
         Encoding::V2 => None,
     };
-    let Distributed { grid, layout, normals: vertex_normals, shared, spooled } =
-        d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits), temp.path())?;
+    let compute_normals = d.compute_normals;
+    let Distributed { grid, layout, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
+    // Computed normals need every face of a vertex: cells sum their own vertices' faces, and the
+    // vertices several cells use are summed here from every cell file.
+    let shared_sums = compute_normals.then(|| vertex_normals::SharedSums::gather(&spooled, layout, &shared)).transpose()?;
     lap(&mut times.import_ms);
 
     // The images' levels, made while no cell is in memory; maps without UVs are dropped.
@@ -225,7 +228,7 @@ pub fn convert(
     drop(looks.images);
     let textured = !images.is_empty();
     lap(&mut times.texture_ms);
-    let attributes = Attributes { normals: layout.normals || vertex_normals.is_some(), uvs: layout.uvs, colors: layout.colors };
+    let attributes = Attributes { normals: layout.normals || compute_normals, uvs: layout.uvs, colors: layout.colors };
     // The crease angle of computed normals (unused where the input's are kept).
     let crease = opts.normals.computed(false).unwrap_or(0.0);
     let k = cell_levels(cell_faces);
@@ -260,13 +263,13 @@ pub fn convert(
         cell_levels: k,
         cell_faces,
         layout,
-        vertex_normals: vertex_normals.as_ref(),
+        shared_sums: shared_sums.as_ref(),
         shared: &shared,
         crease,
         precision,
         materials: &materials,
         textured,
-        derive_normals: vertex_normals.is_some(),
+        derive_normals: compute_normals,
         temp: temp.path(),
     };
     let (summary, cell_warnings) = if opts.dag {
@@ -275,7 +278,7 @@ pub fn convert(
         work::build(&job, &spooled, writer, budget.threads, progress)?
     };
     warnings.extend(cell_warnings);
-    drop(vertex_normals);
+    drop(shared_sums);
     drop(temp);
     lap(&mut times.simplify_ms);
     file.commit()?;
@@ -283,19 +286,18 @@ pub fn convert(
     Ok(Converted { summary, times, warnings, cells: Some(spooled.iter().filter(|(_, faces)| *faces > 0).count()) })
 }
 
-/// What the distribution pass leaves: the file's grid, the cell files' layout, computed vertex
-/// normals (octahedral, per welded input vertex), which welded vertices more than one cell uses
-/// (a bit each) and each cell's file and face count.
+/// What the distribution pass leaves: the file's grid, the cell files' layout, which welded
+/// vertices more than one cell uses (a bit each) and each cell's file and face count.
 struct Distributed {
     grid: Grid,
     layout: Layout,
-    normals: Option<vertex_normals::VertexNormals>,
     shared: Vec<u64>,
     spooled: Vec<(PathBuf, u64)>,
 }
 
-/// Marks a vertex used by faces of more than one cell in [`Distribute::owner`].
-const SHARED: u32 = u32::MAX;
+/// Marks a vertex used by faces of more than one cell in [`Distribute::owner`] (cells number
+/// fewer than [`MAX_CELLS`]).
+const SHARED: u16 = u16::MAX;
 
 /// The distribution pass's state, made when the vertices are known.
 struct Distribute {
@@ -306,9 +308,9 @@ struct Distribute {
     /// position as the in-core build welds them, before normals are summed or cells compared.
     weld: Vec<u32>,
     /// Per welded vertex: 0 unused so far, `c + 1` used by cell `c` alone, or [`SHARED`].
-    owner: Vec<u32>,
-    /// Per welded vertex, the sum of its faces' area-weighted normals (when normals are computed).
-    sums: Option<Vec<Vec3>>,
+    owner: Vec<u16>,
+    /// Whether normals are computed (from the faces around each vertex, once cells are known).
+    compute_normals: bool,
     lo: Vec3,
     hi: Vec3,
     /// Lengths of the edges of every `stride`-th face (format 3's automatic grid bits).
@@ -335,14 +337,13 @@ impl Distribute {
         };
         let spool = Spool::create(temp, cells.count, layout)?;
         let n = v.positions.len();
-        let sums = compute.then(|| vec![Vec3::ZERO; n]);
         Ok(Distribute {
             cells,
             spool,
             layout,
             weld: weld(v.positions),
             owner: vec![0; n],
-            sums,
+            compute_normals: compute,
             lo: Vec3::splat(f32::MAX),
             hi: Vec3::splat(f32::MIN),
             edges: Vec::new(),
@@ -378,19 +379,11 @@ impl Distribute {
             self.replaced_uvs += uv_count;
             let material = faces.materials.get(f).copied().unwrap_or(0);
             let welded = t.map(|i| self.weld[i as usize]);
-            if let Some(sums) = &mut self.sums {
-                let cross = crate::mesh::triangle_cross(v.positions, t).as_vec3();
-                if cross.is_finite() {
-                    for &i in &welded {
-                        sums[i as usize] += cross;
-                    }
-                }
-            }
             for &i in &welded {
                 let o = &mut self.owner[i as usize];
                 *o = match *o {
-                    0 => cell as u32 + 1,
-                    x if x == cell as u32 + 1 => x,
+                    0 => cell as u16 + 1,
+                    x if x == cell as u16 + 1 => x,
                     _ => SHARED,
                 };
             }
@@ -404,7 +397,7 @@ impl Distribute {
     /// vertex straying outside the input's bounds (pieces do not know the coarse levels' bounds
     /// beforehand) stays on the grid where it can.
     /// `bits`: the grid's bits, 0 for format 3's automatic choice from the sampled edges.
-    fn finish(mut self, bits: u32, temp: &Path) -> Result<Distributed> {
+    fn finish(mut self, bits: u32) -> Result<Distributed> {
         let extent = (self.hi - self.lo).as_dvec3().max_element();
         let bits = if bits == 0 { crate::quantize::grid_bits_for(extent, &mut self.edges) } else { bits };
         let mut grid = Grid::fit(self.lo, self.hi, bits);
@@ -413,12 +406,11 @@ impl Distribute {
             let extent = (self.hi[k] as f64 - self.lo[k] as f64).max(0.0);
             grid.origin[k] -= ((span - extent) / 2.0 / grid.step).floor() * grid.step;
         }
-        let normals = self.sums.map(|s| vertex_normals::VertexNormals::write(temp.join("normals"), &s)).transpose()?;
         let mut shared = vec![0u64; self.owner.len().div_ceil(64)];
         for (i, _) in self.owner.iter().enumerate().filter(|(_, &o)| o == SHARED) {
             shared[i / 64] |= 1 << (i % 64);
         }
-        Ok(Distributed { grid, layout: self.layout, normals, shared, spooled: self.spool.finish()? })
+        Ok(Distributed { grid, layout: self.layout, shared, spooled: self.spool.finish()? })
     }
 }
 

@@ -1,108 +1,145 @@
-//! Computed vertex normals of the partitioned build: one octahedral code per input vertex, summed
-//! over every face of the input while it streams, so known only once it has ended. They wait in a
-//! file, from which each cell reads its own vertices' codes: held in memory, they would grow the
-//! build's peak with the input (4 bytes a vertex).
+//! Computed vertex normals of the partitioned build, with nothing held per input vertex. A
+//! vertex's normal is the sum of its faces' area-weighted normals. A vertex only one cell uses
+//! has all its faces in that cell, which sums them when it loads ([`smooth`]); a vertex that
+//! faces of several cells use (a bit in `shared`) takes its sum from [`SharedSums`], gathered
+//! from every cell file in one pass once the input has streamed: such vertices lie where cells
+//! meet, a few per thousand in a large mesh.
 
-use crate::error::{Error, Result};
-use crate::format::{octa, ByteSource};
+use super::cells::{scan_cell, Layout};
+use crate::error::Result;
+use crate::mesh::triangle_cross;
 use glam::Vec3;
-use std::fs::File;
-use std::io::{BufWriter, Write};
+use rustc_hash::FxHashMap;
 use std::path::PathBuf;
 
-/// The codes in their file, vertex `i`'s at byte `4 i` (two little-endian i16s).
-pub struct VertexNormals {
-    file: File,
-    path: PathBuf,
-    count: u64,
+/// Whether the bit of welded vertex `id` is set in `shared`.
+pub fn is_shared(shared: &[u64], id: u32) -> bool {
+    shared.get(id as usize / 64).is_some_and(|w| w >> (id % 64) & 1 == 1)
 }
 
-/// Vertices encoded at once, on every core.
-const CHUNK: usize = 1 << 20;
+/// The area-weighted normal sums of the shared vertices, over every face of the input.
+#[derive(Debug, Default)]
+pub struct SharedSums(FxHashMap<u32, Vec3>);
 
-/// Ids closer than this share one read, of at most `SPAN` codes.
-const GAP: u64 = 1024;
-const SPAN: u64 = 1 << 16;
-
-impl VertexNormals {
-    /// Encode the normalized `sums` (a zero sum gets +Z) into a new file at `path`.
-    pub fn write(path: PathBuf, sums: &[Vec3]) -> Result<VertexNormals> {
+impl SharedSums {
+    /// Sum the faces of every cell file in `spooled` (file, faces) at their shared corners, the
+    /// cells on every core, their sums added in cell order (so the result does not depend on the
+    /// thread count).
+    pub fn gather(spooled: &[(PathBuf, u64)], layout: Layout, shared: &[u64]) -> Result<SharedSums> {
         use rayon::prelude::*;
-        let io = |e| Error::io(&path, e);
-        let file = File::options().read(true).write(true).create_new(true).open(&path).map_err(io)?;
-        let mut w = BufWriter::with_capacity(1 << 20, file);
-        let mut bytes = Vec::with_capacity(4 * CHUNK);
-        for chunk in sums.chunks(CHUNK) {
-            let codes: Vec<[i16; 2]> = chunk.par_iter().map(|n| octa::encode(n.normalize_or(Vec3::Z))).collect();
-            bytes.clear();
-            bytes.extend(codes.iter().flatten().flat_map(|c| c.to_le_bytes()));
-            w.write_all(&bytes).map_err(io)?;
+        let per_cell: Vec<FxHashMap<u32, Vec3>> = spooled
+            .par_iter()
+            .map(|(path, faces)| {
+                let mut sums = FxHashMap::default();
+                scan_cell(path, *faces, layout, |ids, positions| {
+                    if ids.iter().any(|&i| is_shared(shared, i)) {
+                        let cross = face_cross(&positions);
+                        if cross.is_finite() {
+                            for &i in ids.iter().filter(|&&i| is_shared(shared, i)) {
+                                *sums.entry(i).or_insert(Vec3::ZERO) += cross;
+                            }
+                        }
+                    }
+                })?;
+                Ok(sums)
+            })
+            .collect::<Result<_>>()?;
+        let mut all = FxHashMap::default();
+        for sums in per_cell {
+            for (i, s) in sums {
+                *all.entry(i).or_insert(Vec3::ZERO) += s;
+            }
         }
-        let file = w.into_inner().map_err(|e| io(e.into_error()))?;
-        Ok(VertexNormals { file, path, count: sums.len() as u64 })
+        Ok(SharedSums(all))
     }
+}
 
-    /// The codes of the vertices `ids`, in their order: read in runs of nearby ids.
-    pub fn read(&self, ids: &[u32]) -> Result<Vec<[i16; 2]>> {
-        let mut order: Vec<u32> = (0..ids.len() as u32).collect();
-        order.sort_unstable_by_key(|&k| ids[k as usize]);
-        let mut out = vec![[0i16; 2]; ids.len()];
-        let mut buf = Vec::new();
-        let mut rest = &order[..];
-        while let Some(&k) = rest.first() {
-            let first = ids[k as usize] as u64;
-            let near = |(&a, &b): (&u32, &u32)| {
-                let (a, b) = (ids[a as usize] as u64, ids[b as usize] as u64);
-                b - a <= GAP && b - first < SPAN
-            };
-            let run = rest.iter().zip(rest.iter().skip(1)).take_while(|&pair| near(pair)).count() + 1;
-            let last = ids[rest[run - 1] as usize] as u64;
-            if last >= self.count {
-                return Err(Error::invalid(&self.path, None, format!("vertex {last} of {}", self.count)));
+/// A face's area-weighted normal (twice its area long), as the whole-file import sums it.
+fn face_cross(p: &[Vec3; 3]) -> Vec3 {
+    triangle_cross(p, &[0, 1, 2]).as_vec3()
+}
+
+/// The smooth normals of a cell's vertices: `positions` and `triangles` are the cell's mesh as
+/// read, `ids` its vertices' welded input ids. Vertices in `shared` take their sums from `sums`;
+/// the others sum the cell's faces, which are all of theirs. A zero sum gives +Z.
+pub fn smooth(positions: &[Vec3], triangles: &[[u32; 3]], ids: &[u32], shared: &[u64], sums: &SharedSums) -> Vec<Vec3> {
+    let mut out = vec![Vec3::ZERO; positions.len()];
+    for t in triangles {
+        let cross = face_cross(&t.map(|v| positions[v as usize]));
+        if cross.is_finite() {
+            for &v in t {
+                out[v as usize] += cross;
             }
-            buf.resize(4 * (last - first + 1) as usize, 0);
-            self.file.read_exact_at(4 * first, &mut buf).map_err(|e| Error::io(&self.path, e))?;
-            for &k in &rest[..run] {
-                let at = 4 * (ids[k as usize] as u64 - first) as usize;
-                out[k as usize] = [i16::from_le_bytes([buf[at], buf[at + 1]]), i16::from_le_bytes([buf[at + 2], buf[at + 3]])];
-            }
-            rest = &rest[run..];
         }
-        Ok(out)
     }
+    for (n, &id) in out.iter_mut().zip(ids) {
+        if is_shared(shared, id) {
+            *n = sums.0.get(&id).copied().unwrap_or(Vec3::ZERO);
+        }
+    }
+    out.iter().map(|n| n.normalize_or(Vec3::Z)).collect()
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::cells::{FaceRecord, Spool};
     use super::*;
 
+    /// A strip of faces over two cells: the shared vertices' normals, gathered from both files,
+    /// equal the whole mesh's; the others', summed by their own cell, too.
     #[test]
-    fn codes_read_back_by_id_in_any_order() {
+    fn sums_over_two_cells_give_the_whole_meshs_normals() {
         let dir = tempfile::tempdir().unwrap();
-        let sums: Vec<Vec3> = (0..5000).map(|i| Vec3::new((i as f32).sin(), (i as f32 * 0.7).cos(), 0.3 * (i % 7) as f32 - 1.0)).collect();
-        let mut with_zero = sums.clone();
-        with_zero[17] = Vec3::ZERO;
-        let file = VertexNormals::write(dir.path().join("n"), &with_zero).unwrap();
-        let ids = [4999u32, 3, 17, 3, 2500, 0, 2501, 1200];
-        let codes = file.read(&ids).unwrap();
-        for (&id, &code) in ids.iter().zip(&codes) {
-            let want = if id == 17 { Vec3::Z } else { sums[id as usize].normalize() };
-            assert_eq!(code, octa::encode(want), "vertex {id}");
+        let layout = Layout { normals: false, uvs: false, colors: false, materials: false };
+        let grid = |i: u32| Vec3::new((i % 4) as f32, (i / 4) as f32, ((i * 7) % 5) as f32 * 0.3);
+        let positions: Vec<Vec3> = (0..16).map(grid).collect();
+        let mut triangles = Vec::new();
+        for y in 0..3 {
+            for x in 0..3 {
+                let a = y * 4 + x;
+                triangles.push([a, a + 1, a + 5]);
+                triangles.push([a, a + 5, a + 4]);
+            }
         }
-        assert!(file.read(&[]).unwrap().is_empty());
-        let e = file.read(&[1, 5000]).unwrap_err();
-        assert!(e.to_string().contains("vertex 5000 of 5000"), "{e}");
-    }
+        let cell = |t: &[u32; 3]| usize::from(t.iter().map(|&v| positions[v as usize].x).sum::<f32>() > 4.5);
+        let mut spool = Spool::create(dir.path(), 2, layout).unwrap();
+        let mut owner = [0u8; 16];
+        for t in &triangles {
+            let c = cell(t);
+            for &v in t {
+                owner[v as usize] |= 1 << c;
+            }
+            let record = FaceRecord {
+                ids: *t,
+                positions: t.map(|v| positions[v as usize]),
+                normals: [Vec3::ZERO; 3],
+                uvs: Default::default(),
+                colors: Default::default(),
+                material: 0,
+            };
+            spool.push(c, &record).unwrap();
+        }
+        let spooled = spool.finish().unwrap();
+        let mut shared = vec![0u64];
+        for (v, _) in owner.iter().enumerate().filter(|(_, &o)| o == 3) {
+            shared[0] |= 1 << v;
+        }
+        assert!(shared[0].count_ones() >= 3, "the strip crosses the cells");
+        let sums = SharedSums::gather(&spooled, layout, &shared).unwrap();
+        assert_eq!(sums.0.len(), shared[0].count_ones() as usize);
 
-    #[test]
-    fn codes_of_ids_spread_over_many_vertices_read_back_across_spans() {
-        let dir = tempfile::tempdir().unwrap();
-        let sums: Vec<Vec3> = (0..150_000).map(|i| Vec3::new(1.0, (i % 1000) as f32 * 0.001, (i / 1000) as f32 * 0.01)).collect();
-        let file = VertexNormals::write(dir.path().join("n"), &sums).unwrap();
-        let ids: Vec<u32> = (0..150_000).rev().step_by(1000).collect();
-        let codes = file.read(&ids).unwrap();
-        for (&id, &code) in ids.iter().zip(&codes) {
-            assert_eq!(code, octa::encode(sums[id as usize].normalize()), "vertex {id}");
+        let whole = smooth(&positions, &triangles, &(0..16).collect::<Vec<_>>(), &[0], &SharedSums::default());
+        for c in 0..2 {
+            let mine: Vec<[u32; 3]> = triangles.iter().filter(|t| cell(t) == c).copied().collect();
+            let mut ids: Vec<u32> = mine.iter().flatten().copied().collect();
+            ids.sort_unstable();
+            ids.dedup();
+            let local: Vec<[u32; 3]> = mine.iter().map(|t| t.map(|v| ids.binary_search(&v).unwrap() as u32)).collect();
+            let at: Vec<Vec3> = ids.iter().map(|&i| positions[i as usize]).collect();
+            let normals = smooth(&at, &local, &ids, &shared, &sums);
+            for (&id, n) in ids.iter().zip(&normals) {
+                assert!(n.distance(whole[id as usize]) < 1e-6, "cell {c}, vertex {id}: {n} against {}", whole[id as usize]);
+            }
         }
     }
 }

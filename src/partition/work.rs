@@ -15,7 +15,7 @@ use super::cells::{read_cell, Layout};
 use super::tops::{Spilled, Top};
 use crate::bounds::NodeBounds;
 use crate::error::{Error, Result};
-use crate::format::{octa, Attributes, Grid, HierarchyParams, Prepared, WriteSummary, Writer};
+use crate::format::{Attributes, Grid, HierarchyParams, Prepared, WriteSummary, Writer};
 use crate::hierarchy::{self, Hierarchy, Level};
 use crate::levels::position_key;
 use crate::levels::{self, LevelMesh, LevelMeshes, LevelParams};
@@ -55,8 +55,8 @@ pub struct Job<'a> {
     /// Faces a cell holds at most; parts are cut to about as many.
     pub cell_faces: u64,
     pub layout: Layout,
-    /// Per welded input vertex, its computed normal, when normals are computed.
-    pub vertex_normals: Option<&'a super::vertex_normals::VertexNormals>,
+    /// The sums of the shared vertices' face normals, when normals are computed.
+    pub shared_sums: Option<&'a super::vertex_normals::SharedSums>,
     /// Per welded input vertex, a bit: whether faces of more than one cell use it. Cells pin
     /// those vertices.
     pub shared: &'a [u64],
@@ -358,10 +358,10 @@ pub(super) fn load_cell(job: &Job, c: usize, path: &Path, faces: u64) -> Result<
     let (mut mesh, ids) = read_cell(path, faces, job.layout, job.materials.len())?;
     mesh.materials = job.materials.to_vec();
     let _ = std::fs::remove_file(path);
-    if let Some(vn) = job.vertex_normals {
+    if let Some(sums) = job.shared_sums {
         mesh.compute_face_geometry();
         let cos = job.crease.cos();
-        let smooth: Vec<Vec3> = vn.read(&ids)?.into_iter().map(octa::decode).collect();
+        let smooth = super::vertex_normals::smooth(&mesh.positions, &mesh.triangles, &ids, job.shared, sums);
         mesh.normals = (0..3 * mesh.triangles.len())
             .map(|i| {
                 let n = smooth[mesh.triangles[i / 3][i % 3] as usize];
@@ -377,7 +377,7 @@ pub(super) fn load_cell(job: &Job, c: usize, path: &Path, faces: u64) -> Result<
     let pinned: Pins = ids
         .iter()
         .zip(&mesh.positions)
-        .filter(|(&i, _)| job.shared.get(i as usize / 64).is_some_and(|w| w >> (i % 64) & 1 == 1))
+        .filter(|(&i, _)| super::vertex_normals::is_shared(job.shared, i))
         .map(|(_, &p)| position_key(p))
         .collect();
     drop(ids);
