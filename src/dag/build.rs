@@ -66,6 +66,10 @@ pub struct Bounds<'a> {
     pub levels: Option<usize>,
     /// Positions (as [`position_key`]s) pinned at every level: where a piece meets other pieces.
     pub pinned: Option<&'a FxHashSet<[u32; 3]>>,
+    /// Faces per node of the levels built; `None`: the median of level 0's nodes. A piece that
+    /// builds on earlier pieces' tops takes the input's level-0 size, which its own level 0 (those
+    /// tops, cut to the sizes of the cells that made them) need not have.
+    pub node_faces: Option<usize>,
 }
 
 /// [`build`] from any [`Start`], within `bounds`.
@@ -87,11 +91,7 @@ pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut d
         pieces = specks::gather(&mesh, pieces);
         sources = vec![NONE; pieces.len()];
     }
-    let median = {
-        let mut sizes: Vec<usize> = pieces.iter().map(Vec::len).collect();
-        sizes.sort_unstable();
-        sizes.get(sizes.len() / 2).copied().unwrap_or(1).max(1)
-    };
+    let median = bounds.node_faces.unwrap_or_else(|| median_size(pieces.iter().map(Vec::len))).max(1);
     let mut dag = Dag { input_faces: pieces.iter().flatten().copied().collect(), ..Dag::default() };
     let mut mesh = place(mesh, 0, pieces, &sources, &mut dag.nodes);
     // The stand-ins' outputs, renumbered as placed.
@@ -321,6 +321,13 @@ pub fn shared_vertices(mesh: &Mesh, labels: &[u32]) -> Vec<bool> {
         }
     }
     pinned
+}
+
+/// The median of node sizes `sizes` (the upper one of an even count; 1 when there are none).
+pub fn median_size(sizes: impl Iterator<Item = usize>) -> usize {
+    let mut sizes: Vec<usize> = sizes.collect();
+    sizes.sort_unstable();
+    sizes.get(sizes.len() / 2).copied().unwrap_or(1)
 }
 
 /// Reorder `mesh`'s faces so that each of `pieces` is a run, and append the pieces as nodes of

@@ -24,7 +24,7 @@ mod specks;
 mod split;
 pub mod write;
 
-pub use build::{build, build_from, shared_vertices, Bounds, DagParams, Start};
+pub use build::{build, build_from, median_size, shared_vertices, Bounds, DagParams, Start};
 
 use crate::cone::Cone;
 use crate::hierarchy::Lists;

@@ -144,3 +144,28 @@ fn selection_under_budgets_gives_cuts_of_the_dag() {
     }
     assert!(limited > 20, "{limited} selections changed by budgets or held groups");
 }
+
+/// Level 0 cut into small nodes: the next level's nodes take their size from level 0's median,
+/// unless `Bounds::node_faces` names the size (a partitioned build's merge, whose level 0 is the
+/// cells' tops).
+#[test]
+fn nodes_take_the_size_the_bounds_name() {
+    let mut mesh = crate::fixtures::noisy_sphere(70, 0.08, 1);
+    mesh.compute_face_geometry();
+    let faces = mesh.triangles.len();
+    let labels: Vec<u32> = (0..faces as u32).map(|f| f / 24).collect();
+    let level1 = |node_faces: Option<usize>| {
+        let start = Start { mesh: mesh.clone(), labels: labels.clone(), made_by: Vec::new() };
+        let dag = build_from(start, &DagParams::default(), &Bounds { levels: Some(1), pinned: None, node_faces }, &mut |_, _| {});
+        let nodes = dag.level_nodes(1);
+        let level_faces: usize = nodes.clone().map(|n| dag.nodes[n as usize].faces.len()).sum();
+        (nodes.len(), level_faces)
+    };
+    let (median, faces_1) = level1(None);
+    let (named, named_faces) = level1(Some(240));
+    assert!(faces_1 > faces / 3 && named_faces > faces / 3, "{faces} faces: {faces_1}, {named_faces} at level 1");
+    // A group of eight 24-face nodes keeps about 96 faces: four nodes of the median's size, one
+    // of the size named.
+    assert!(faces_1 / median <= 30, "level 0's median, 24 faces: {median} nodes of {faces_1} faces");
+    assert!(named * 3 <= median && named_faces / named >= 72, "240 named: {named} nodes of {named_faces} faces, against {median}");
+}

@@ -17,7 +17,7 @@ use super::work::{
     final_merge_warning, load_cell, piece_key, plan_round, poisoned, run, Gathered, Job, Loaded, Pins, Round, GROUP_BITS, MAX_PIECES,
 };
 use crate::dag::write::{write_levels, Base, Place};
-use crate::dag::{build_from, Bounds, DagParams, Group, Start};
+use crate::dag::{build_from, median_size, Bounds, DagParams, Group, Start};
 use crate::error::{Error, Result};
 use crate::format::{WriteSummary, Writer};
 use crate::hierarchy;
@@ -56,6 +56,8 @@ pub fn build<W: Write + Send>(
     if tops.is_empty() {
         return Err(Error::invalid(job.input, None, "no faces left after removing degenerate and duplicate faces"));
     }
+    let sizes = std::mem::take(&mut gathered.lock().map_err(|_| poisoned())?.node_sizes);
+    let node_faces = Some(median_size(sizes.into_iter().map(|n| n as usize)));
     let mut first = job.cell_levels;
     let mut next_piece = spooled.len();
     let mut round = 0;
@@ -73,7 +75,7 @@ pub fn build<W: Write + Send>(
             // The part's own shared positions (a smaller set to look up), as the tree's parts.
             let own: Pins =
                 part.iter().flat_map(|t| t.mesh.positions.iter().map(|&q| position_key(q))).filter(|k| pins.contains(k)).collect();
-            let shape = Shape { first, bounds: Bounds { levels: Some(levels), pinned: Some(&own) } };
+            let shape = Shape { first, bounds: Bounds { levels: Some(levels), pinned: Some(&own), node_faces } };
             spill(merge(job, part, next_piece + p, shape, &params, &writer, &gathered)?, round + 1, p)
         })?;
         drop(pins);
@@ -91,7 +93,7 @@ pub fn build<W: Write + Send>(
     }
     progress.stage("merge", 0);
     let tops = tops.into_iter().map(Spilled::load_dag).collect::<Result<Vec<DagTop>>>()?;
-    merge(job, tops, next_piece, Shape { first, bounds: Bounds::default() }, &params, &writer, &gathered)?;
+    merge(job, tops, next_piece, Shape { first, bounds: Bounds { node_faces, ..Bounds::default() } }, &params, &writer, &gathered)?;
     let mut writer = writer.into_inner().map_err(|_| poisoned())?;
     let warnings = gathered.into_inner().map_err(|_| poisoned())?.finish(&mut writer);
     Ok((writer.finish()?, warnings))
@@ -130,10 +132,10 @@ fn cell<W: Write>(
     let h = hierarchy::build_levels(&mesh, &adjacency, &job.hierarchy, Some(1));
     drop(adjacency);
     let start = Start { mesh, labels: h.levels[0].face_group.clone(), made_by: Vec::new() };
-    let shape = Shape { first: 0, bounds: Bounds { levels: Some(job.cell_levels), pinned: Some(&pinned) } };
+    let shape = Shape { first: 0, bounds: Bounds { levels: Some(job.cell_levels), pinned: Some(&pinned), node_faces: None } };
     let bad = |m: String| Error::invalid(job.input, None, format!("cell {c}: {m}"));
     let base = Base::Input { clusters: &h.clusters, pinned: Some(&pinned) };
-    piece(job, start, base, c, &[], &shape, params, writer, &bad)
+    piece(job, start, base, c, &[], &shape, params, writer, gathered, &bad)
 }
 
 /// Weld `tops` at the positions they share into one mesh and build piece `p` on it; returns its
@@ -207,7 +209,7 @@ fn merge<W: Write>(
     let start = Start { mesh, labels, made_by };
     let bad = |m: String| Error::invalid(job.input, None, format!("piece {p}: {m}"));
     let base = Base::Tops { points: &points, stored: &stored };
-    piece(job, start, base, p, &keys, &shape, params, writer, &bad)
+    piece(job, start, base, p, &keys, &shape, params, writer, gathered, &bad)
 }
 
 /// Build piece `p` from `start` and write it: nodes of levels above its base and their groups,
@@ -223,9 +225,14 @@ fn piece<W: Write>(
     shape: &Shape,
     params: &DagParams,
     writer: &Mutex<Writer<W>>,
+    gathered: &Mutex<Gathered>,
     bad: &(dyn Fn(String) -> Error + Sync),
 ) -> Result<Option<DagTop>> {
     let mut dag = build_from(start, params, &shape.bounds, &mut |_, _| {});
+    if shape.first == 0 {
+        let sizes = dag.level_nodes(0).map(|n| dag.nodes[n as usize].faces.len() as u32);
+        gathered.lock().map_err(|_| poisoned())?.node_sizes.extend(sizes);
+    }
     if dag.nodes.len().max(dag.groups.len()) >= 1 << GROUP_BITS {
         return Err(bad(format!("{} nodes and {} groups in one piece, at most {}", dag.nodes.len(), dag.groups.len(), 1 << GROUP_BITS)));
     }

@@ -103,6 +103,9 @@ pub(super) struct Gathered {
     /// Level-0 vertices of the cells, and vertices welded away since (shared by two pieces).
     pub vertices: usize,
     pub welded: usize,
+    /// Faces of each level-0 node of the cells (a DAG's build; the parts and the merge cut their
+    /// nodes to the median).
+    pub node_sizes: Vec<u32>,
 }
 
 impl Gathered {
