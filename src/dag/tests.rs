@@ -168,4 +168,7 @@ fn nodes_take_the_size_the_bounds_name() {
     // of the size named.
     assert!(faces_1 / median <= 30, "level 0's median, 24 faces: {median} nodes of {faces_1} faces");
     assert!(named * 3 <= median && named_faces / named >= 72, "240 named: {named} nodes of {named_faces} faces, against {median}");
+    // Two nodes of 48 faces from each group.
+    let (small, small_faces) = level1(Some(48));
+    assert!((34..=67).contains(&(small_faces / small)), "48 named: {small} nodes of {small_faces} faces");
 }

@@ -194,8 +194,9 @@ impl Spool {
 /// A cell's faces as an uncleaned mesh, one vertex per welded input vertex it uses (the first
 /// corner's position: corners of a vertex differ at most in the sign of a zero; [`Mesh::clean`]
 /// welds by position), with the input vertex id of each vertex. Its materials are left empty:
-/// they are the input's, which the caller holds; a face's material is checked below `materials`.
-pub fn read_cell(path: &Path, faces: u64, layout: Layout, materials: usize) -> Result<(Mesh, Vec<u32>)> {
+/// they are the input's, which the caller holds; a face's material is checked below `materials`,
+/// each vertex id below `vertices`.
+pub fn read_cell(path: &Path, faces: u64, layout: Layout, vertices: u64, materials: usize) -> Result<(Mesh, Vec<u32>)> {
     let corner = layout.corner_bytes();
     let mut r = open_cell(path, faces, layout)?;
     let n = faces as usize * 3;
@@ -210,7 +211,7 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout, materials: usize) -> R
     let mut t = [0u32; 3];
     for c in 0..n {
         r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
-        let id = u32::from_le_bytes(rec[0..4].try_into().unwrap());
+        let id = vertex_id(path, &rec, c, vertices)?;
         t[c % 3] = *local.entry(id).or_insert_with(|| {
             ids.push(id);
             mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
@@ -256,17 +257,30 @@ fn open_cell(path: &Path, faces: u64, layout: Layout) -> Result<BufReader<File>>
     Ok(BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?))
 }
 
-/// Call `f` with each face's vertex ids and corner positions in cell file `path` (of `faces`
-/// faces), in the order they were written; the file stays.
-pub fn scan_cell(path: &Path, faces: u64, layout: Layout, mut f: impl FnMut([u32; 3], [Vec3; 3])) -> Result<()> {
+/// The vertex id a corner record `rec` (corner `c` of the file) starts with, checked below
+/// `vertices`.
+fn vertex_id(path: &Path, rec: &[u8], c: usize, vertices: u64) -> Result<u32> {
+    let id = u32::from_le_bytes(rec[0..4].try_into().unwrap());
+    if id as u64 >= vertices {
+        return Err(Error::invalid(path, None, format!("face {} corner {}: vertex {id} of {vertices}", c / 3, c % 3)));
+    }
+    Ok(id)
+}
+
+/// Call `f` with each face's vertex ids (checked below `vertices`) and corner positions in cell
+/// file `path` (of `faces` faces), in the order they were written; the file stays.
+pub fn scan_cell(path: &Path, faces: u64, layout: Layout, vertices: u64, mut f: impl FnMut([u32; 3], [Vec3; 3])) -> Result<()> {
     let (corner, size) = (layout.corner_bytes(), layout.face_bytes());
     let mut r = open_cell(path, faces, layout)?;
     let mut rec = vec![0u8; size];
     let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
-    for _ in 0..faces {
+    for face in 0..faces as usize {
         r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
         let at = |k: usize| &rec[k * corner..];
-        let ids = [0, 1, 2].map(|k| u32::from_le_bytes(at(k)[0..4].try_into().unwrap()));
+        let mut ids = [0; 3];
+        for (k, id) in ids.iter_mut().enumerate() {
+            *id = vertex_id(path, at(k), 3 * face + k, vertices)?;
+        }
         let positions = [0, 1, 2].map(|k| Vec3::new(f32_at(at(k), 4), f32_at(at(k), 8), f32_at(at(k), 12)));
         f(ids, positions);
     }

@@ -57,7 +57,7 @@ pub fn build<W: Write + Send>(
         return Err(Error::invalid(job.input, None, "no faces left after removing degenerate and duplicate faces"));
     }
     let sizes = std::mem::take(&mut gathered.lock().map_err(|_| poisoned())?.node_sizes);
-    let node_faces = Some(median_size(sizes.into_iter().map(|n| n as usize)));
+    let node_faces = (!sizes.is_empty()).then(|| median_size(sizes.into_iter().map(|n| n as usize)));
     let mut first = job.cell_levels;
     let mut next_piece = spooled.len();
     let mut round = 0;
@@ -230,6 +230,7 @@ fn piece<W: Write>(
 ) -> Result<Option<DagTop>> {
     let mut dag = build_from(start, params, &shape.bounds, &mut |_, _| {});
     if shape.first == 0 {
+        // A cell: its level-0 node sizes set the size of the nodes built on the cells' tops.
         let sizes = dag.level_nodes(0).map(|n| dag.nodes[n as usize].faces.len() as u32);
         gathered.lock().map_err(|_| poisoned())?.node_sizes.extend(sizes);
     }

@@ -213,10 +213,11 @@ pub fn convert(
         Encoding::V2 => None,
     };
     let compute_normals = d.compute_normals;
-    let Distributed { grid, layout, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
+    let Distributed { grid, layout, vertices, shared, spooled } = d.finish(precision.map_or(GRID_BITS, |p| p.grid_bits))?;
     // Computed normals need every face of a vertex: cells sum their own vertices' faces, and the
     // vertices several cells use are summed here from every cell file.
-    let shared_sums = compute_normals.then(|| vertex_normals::SharedSums::gather(&spooled, layout, &shared)).transpose()?;
+    let shared_sums =
+        compute_normals.then(|| vertex_normals::SharedSums::gather(&spooled, layout, vertices, &shared, budget.threads)).transpose()?;
     lap(&mut times.import_ms);
 
     // The images' levels, made while no cell is in memory; maps without UVs are dropped.
@@ -265,6 +266,7 @@ pub fn convert(
         layout,
         shared_sums: shared_sums.as_ref(),
         shared: &shared,
+        vertices,
         crease,
         precision,
         materials: &materials,
@@ -291,13 +293,15 @@ pub fn convert(
 struct Distributed {
     grid: Grid,
     layout: Layout,
+    vertices: u64,
     shared: Vec<u64>,
     spooled: Vec<(PathBuf, u64)>,
 }
 
-/// Marks a vertex used by faces of more than one cell in [`Distribute::owner`] (cells number
-/// fewer than [`MAX_CELLS`]).
+/// Marks a vertex used by faces of more than one cell in [`Distribute::owner`] (cells number at
+/// most [`MAX_CELLS`]).
 const SHARED: u16 = u16::MAX;
+const _: () = assert!(MAX_CELLS < SHARED as u64);
 
 /// The distribution pass's state, made when the vertices are known.
 struct Distribute {
@@ -410,7 +414,7 @@ impl Distribute {
         for (i, _) in self.owner.iter().enumerate().filter(|(_, &o)| o == SHARED) {
             shared[i / 64] |= 1 << (i % 64);
         }
-        Ok(Distributed { grid, layout: self.layout, shared, spooled: self.spool.finish()? })
+        Ok(Distributed { grid, layout: self.layout, vertices: self.owner.len() as u64, shared, spooled: self.spool.finish()? })
     }
 }
 

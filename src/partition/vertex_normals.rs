@@ -1,4 +1,4 @@
-//! Computed vertex normals of the partitioned build, with nothing held per input vertex. A
+//! Computed vertex normals of the partitioned build, with no normal sum held per input vertex. A
 //! vertex's normal is the sum of its faces' area-weighted normals. A vertex only one cell uses
 //! has all its faces in that cell, which sums them when it loads ([`smooth`]); a vertex that
 //! faces of several cells use (a bit in `shared`) takes its sum from [`SharedSums`], gathered
@@ -22,36 +22,42 @@ pub fn is_shared(shared: &[u64], id: u32) -> bool {
 pub struct SharedSums(FxHashMap<u32, Vec3>);
 
 impl SharedSums {
-    /// Sum the faces of every cell file in `spooled` (file, faces) at their shared corners, the
-    /// cells on every core, their sums added in cell order (so the result does not depend on the
-    /// thread count).
-    pub fn gather(spooled: &[(PathBuf, u64)], layout: Layout, shared: &[u64]) -> Result<SharedSums> {
+    /// Sum the faces of every cell file in `spooled` (file, faces; vertex ids below `vertices`)
+    /// at their shared corners, `threads` cells at a time, their sums added in cell order (so
+    /// the result does not depend on the thread count). Nothing to read when no vertex is shared.
+    pub fn gather(spooled: &[(PathBuf, u64)], layout: Layout, vertices: u64, shared: &[u64], threads: usize) -> Result<SharedSums> {
         use rayon::prelude::*;
-        let per_cell: Vec<FxHashMap<u32, Vec3>> = spooled
-            .par_iter()
-            .map(|(path, faces)| {
-                let mut sums = FxHashMap::default();
-                scan_cell(path, *faces, layout, |ids, positions| {
-                    if ids.iter().any(|&i| is_shared(shared, i)) {
-                        let cross = face_cross(&positions);
-                        if cross.is_finite() {
-                            for &i in ids.iter().filter(|&&i| is_shared(shared, i)) {
-                                *sums.entry(i).or_insert(Vec3::ZERO) += cross;
-                            }
-                        }
-                    }
-                })?;
-                Ok(sums)
-            })
-            .collect::<Result<_>>()?;
         let mut all = FxHashMap::default();
-        for sums in per_cell {
-            for (i, s) in sums {
-                *all.entry(i).or_insert(Vec3::ZERO) += s;
+        if shared.iter().all(|&w| w == 0) {
+            return Ok(SharedSums(all));
+        }
+        for batch in spooled.chunks(threads.max(1)) {
+            let per_cell: Vec<FxHashMap<u32, Vec3>> =
+                batch.par_iter().map(|(path, faces)| cell_sums(path, *faces, layout, vertices, shared)).collect::<Result<_>>()?;
+            for sums in per_cell {
+                for (i, s) in sums {
+                    *all.entry(i).or_insert(Vec3::ZERO) += s;
+                }
             }
         }
         Ok(SharedSums(all))
     }
+}
+
+/// One cell file's sums at its shared corners.
+fn cell_sums(path: &std::path::Path, faces: u64, layout: Layout, vertices: u64, shared: &[u64]) -> Result<FxHashMap<u32, Vec3>> {
+    let mut sums = FxHashMap::default();
+    scan_cell(path, faces, layout, vertices, |ids, positions| {
+        if ids.iter().any(|&i| is_shared(shared, i)) {
+            let cross = face_cross(&positions);
+            if cross.is_finite() {
+                for &i in ids.iter().filter(|&&i| is_shared(shared, i)) {
+                    *sums.entry(i).or_insert(Vec3::ZERO) += cross;
+                }
+            }
+        }
+    })?;
+    Ok(sums)
 }
 
 /// A face's area-weighted normal (twice its area long), as the whole-file import sums it.
@@ -125,7 +131,9 @@ mod tests {
             shared[0] |= 1 << v;
         }
         assert!(shared[0].count_ones() >= 3, "the strip crosses the cells");
-        let sums = SharedSums::gather(&spooled, layout, &shared).unwrap();
+        let sums = SharedSums::gather(&spooled, layout, 16, &shared, 2).unwrap();
+        let e = SharedSums::gather(&spooled, layout, 15, &shared, 1).unwrap_err().to_string();
+        assert!(e.contains("cell-") && e.contains("vertex 15 of 15"), "{e}");
         assert_eq!(sums.0.len(), shared[0].count_ones() as usize);
 
         let whole = smooth(&positions, &triangles, &(0..16).collect::<Vec<_>>(), &[0], &SharedSums::default());

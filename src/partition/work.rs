@@ -60,6 +60,8 @@ pub struct Job<'a> {
     /// Per welded input vertex, a bit: whether faces of more than one cell use it. Cells pin
     /// those vertices.
     pub shared: &'a [u64],
+    /// Input vertices: cell files' vertex ids lie below.
+    pub vertices: u64,
     /// Corners whose face turns more than this from their vertex's normal keep the face's normal.
     pub crease: f32,
     /// Format 3's quantization, `None` for format 2.
@@ -358,7 +360,7 @@ pub(super) fn load_cell(job: &Job, c: usize, path: &Path, faces: u64) -> Result<
     if faces == 0 {
         return Ok(None);
     }
-    let (mut mesh, ids) = read_cell(path, faces, job.layout, job.materials.len())?;
+    let (mut mesh, ids) = read_cell(path, faces, job.layout, job.vertices, job.materials.len())?;
     mesh.materials = job.materials.to_vec();
     let _ = std::fs::remove_file(path);
     if let Some(sums) = job.shared_sums {
