@@ -13,7 +13,7 @@
 
 use crate::cone::{smallest_enclosing, Cone};
 use crate::group::{group_round, RoundParams, Unit};
-use crate::mesh::{Adjacency, Mesh, NO_FACE};
+use crate::mesh::{box_of, Adjacency, Mesh, NO_FACE};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -363,7 +363,7 @@ fn cluster_round(units: &[Unit], pairs: &[[u32; 2]], p: &RoundParams) -> Vec<u32
     if n <= CLUSTER_PIECE {
         return group_round(units, pairs, p);
     }
-    let (lo, hi) = units.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), u| (lo.min(u.center), hi.max(u.center)));
+    let (lo, hi) = box_of(units.iter().map(|u| u.center)).unwrap_or_default();
     let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
     let mut order: Vec<(u32, u32)> = units.iter().enumerate().map(|(i, u)| (morton((u.center - lo) * scale), i as u32)).collect();
     order.par_sort_unstable();

@@ -340,11 +340,7 @@ fn place(mesh: Mesh, level: usize, pieces: Vec<Vec<u32>>, sources: &[u32], nodes
         let faces = start..start + piece.len() as u32;
         start = faces.end;
         let tris = &mesh.triangles[faces.start as usize..faces.end as usize];
-        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        for &v in tris.iter().flatten() {
-            lo = lo.min(mesh.positions[v as usize]);
-            hi = hi.max(mesh.positions[v as usize]);
-        }
+        let (lo, hi) = box_of(tris.iter().flatten().map(|&v| mesh.positions[v as usize])).unwrap_or_default();
         let center = (lo + hi) * 0.5;
         let radius = tris.iter().flatten().map(|&v| mesh.positions[v as usize].distance(center)).fold(0.0, f32::max);
         let normals: Vec<Vec3> =

@@ -4,7 +4,7 @@
 //! Measured and not kept (notes/dag.md): cutting by face normal for narrower cones scattered the
 //! nodes; cutting with the grouping's cone rounds was mixed.
 
-use crate::mesh::Mesh;
+use crate::mesh::{box_of, Mesh};
 use glam::Vec3;
 
 /// Cut `faces` of `mesh` into `pieces` runs of about equal size, appended to `out` as face lists.
@@ -17,12 +17,7 @@ pub fn split(mesh: &Mesh, faces: &mut [u32], pieces: usize, out: &mut Vec<Vec<u3
         out.push(faces.to_vec());
         return;
     }
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &f in faces.iter() {
-        let c = centroid(f);
-        lo = lo.min(c);
-        hi = hi.max(c);
-    }
+    let (lo, hi) = box_of(faces.iter().map(|&f| centroid(f))).unwrap_or_default();
     let axis = (hi - lo).max_position();
     let left = pieces / 2;
     let at = faces.len() * left / pieces;

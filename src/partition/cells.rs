@@ -7,7 +7,7 @@
 //! has several: a cell file is the whole of its faces, so cells are built without the input.
 
 use crate::error::{Error, Result};
-use crate::mesh::Mesh;
+use crate::mesh::{box_of, Mesh};
 use glam::{Vec2, Vec3};
 use rustc_hash::FxHashMap;
 use std::fs::File;
@@ -60,7 +60,7 @@ impl Cells {
             self.count += 1;
             return LEAF | leaf;
         }
-        let (lo, hi) = pts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
+        let (lo, hi) = box_of(pts.iter().copied()).unwrap_or_default();
         let e = hi - lo;
         let axis = if e.x >= e.y && e.x >= e.z {
             0
