@@ -4,7 +4,8 @@
 //! level's sampled distance to the input, the culling cost measured on the file, node sizes
 //! (largest node of any level over level 0's median), the top level's faces, the time from
 //! opening the file to its first frame (`strata stream`) and the shape retention of fronts under
-//! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure).
+//! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure); then each
+//! partitioned build's distance over its in-core build's (tree and DAG), level by level.
 //!
 //! `cargo bench --bench partition [-- --large FACES ...] [-- --memory 1G]`; without arguments the
 //! bunny and the CT head of ../shared/meshes (partitioned at budgets that make them several
@@ -232,6 +233,19 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
                 })
                 .collect();
             println!("level {l}: {}", cells.join("  "));
+        }
+        // Issue 14's measure: each partitioned build against the in-core build of its kind.
+        let at = |name: &str| runs.iter().position(|r| r.0 == name).and_then(|i| distances.get(i));
+        for (part, core) in [("partitioned", "in-core"), ("partitioned DAG", "in-core DAG")] {
+            let (Some(p), Some(c)) = (at(part), at(core)) else { continue };
+            let ratios: Vec<f64> = p.iter().zip(c).skip(1).filter(|(_, &c)| c > 0.0).map(|(&p, &c)| p as f64 / c as f64).collect();
+            if ratios.is_empty() {
+                println!("{part} over {core}: no level above 0 in both");
+                continue;
+            }
+            let listed: Vec<String> = ratios.iter().map(|r| format!("{r:.2}")).collect();
+            let worst = ratios.iter().copied().fold(0.0, f64::max);
+            println!("{part} over {core}, levels 1–{}: {} (worst {worst:.2}; the goal: at most 1.2)", ratios.len(), listed.join(", "));
         }
     }
 }
