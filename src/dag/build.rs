@@ -91,7 +91,7 @@ pub fn build_from(start: Start, p: &DagParams, bounds: &Bounds, on_level: &mut d
         pieces = specks::gather(&mesh, pieces);
         sources = vec![NONE; pieces.len()];
     }
-    let median = bounds.node_faces.unwrap_or_else(|| median_size(pieces.iter().map(Vec::len))).max(1);
+    let median = bounds.node_faces.or_else(|| median_size(pieces.iter().map(Vec::len))).unwrap_or(1).max(1);
     let mut dag = Dag { input_faces: pieces.iter().flatten().copied().collect(), ..Dag::default() };
     let mut mesh = place(mesh, 0, pieces, &sources, &mut dag.nodes);
     // The stand-ins' outputs, renumbered as placed.
@@ -323,11 +323,11 @@ pub fn shared_vertices(mesh: &Mesh, labels: &[u32]) -> Vec<bool> {
     pinned
 }
 
-/// The median of node sizes `sizes` (the upper one of an even count; 1 when there are none).
-pub fn median_size(sizes: impl Iterator<Item = usize>) -> usize {
+/// The median of node sizes `sizes` (the upper one of an even count; `None` when there are none).
+pub fn median_size(sizes: impl Iterator<Item = usize>) -> Option<usize> {
     let mut sizes: Vec<usize> = sizes.collect();
     sizes.sort_unstable();
-    sizes.get(sizes.len() / 2).copied().unwrap_or(1)
+    sizes.get(sizes.len() / 2).copied()
 }
 
 /// Reorder `mesh`'s faces so that each of `pieces` is a run, and append the pieces as nodes of

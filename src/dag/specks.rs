@@ -23,7 +23,7 @@
 //! into nodes of the others' median size, in the Morton order of their centres, so that near ones
 //! join.
 
-use super::build::STALLED;
+use super::build::{median_size, STALLED};
 use super::gather::{centre, morton_runs};
 use crate::levels::position_key;
 use crate::mesh::{components_of, Mesh};
@@ -159,9 +159,8 @@ pub fn gather(mesh: &Mesh, pieces: Vec<Vec<u32>>) -> Vec<Vec<u32>> {
             }
         }
     }
-    let mut sizes: Vec<usize> = pieces.iter().zip(&touches).filter(|(_, &t)| t).map(|(p, _)| p.len()).collect();
-    sizes.sort_unstable();
-    let size = sizes.get(sizes.len() / 2).copied().unwrap_or(SPECK_NODE_FACES).max(1);
+    let touching = pieces.iter().zip(&touches).filter(|(_, &t)| t).map(|(p, _)| p.len());
+    let size = median_size(touching).unwrap_or(SPECK_NODE_FACES).max(1);
     let bounds = mesh.bounds().unwrap_or_default();
     let (mut kept, mut specks) = (Vec::new(), Vec::new());
     for (p, faces) in pieces.into_iter().enumerate() {

@@ -207,14 +207,13 @@ pub fn read_cell(path: &Path, faces: u64, layout: Layout, vertices: u64, materia
     mesh.positions.reserve(faces as usize / 2);
     let mut local: FxHashMap<u32, u32> = FxHashMap::with_capacity_and_hasher(faces as usize / 2, Default::default());
     let mut rec = vec![0u8; corner];
-    let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
     let mut t = [0u32; 3];
     for c in 0..n {
         r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
         let id = vertex_id(path, &rec, c, vertices)?;
         t[c % 3] = *local.entry(id).or_insert_with(|| {
             ids.push(id);
-            mesh.positions.push(Vec3::new(f32_at(&rec, 4), f32_at(&rec, 8), f32_at(&rec, 12)));
+            mesh.positions.push(corner_position(&rec));
             ids.len() as u32 - 1
         });
         let mut at = 16;
@@ -257,6 +256,16 @@ fn open_cell(path: &Path, faces: u64, layout: Layout) -> Result<BufReader<File>>
     Ok(BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?))
 }
 
+/// The little-endian f32 at byte `i` of `b`.
+fn f32_at(b: &[u8], i: usize) -> f32 {
+    f32::from_le_bytes(b[i..i + 4].try_into().unwrap())
+}
+
+/// The position a corner record `rec` holds after its vertex id.
+fn corner_position(rec: &[u8]) -> Vec3 {
+    Vec3::new(f32_at(rec, 4), f32_at(rec, 8), f32_at(rec, 12))
+}
+
 /// The vertex id a corner record `rec` (corner `c` of the file) starts with, checked below
 /// `vertices`.
 fn vertex_id(path: &Path, rec: &[u8], c: usize, vertices: u64) -> Result<u32> {
@@ -273,7 +282,6 @@ pub fn scan_cell(path: &Path, faces: u64, layout: Layout, vertices: u64, mut f: 
     let (corner, size) = (layout.corner_bytes(), layout.face_bytes());
     let mut r = open_cell(path, faces, layout)?;
     let mut rec = vec![0u8; size];
-    let f32_at = |b: &[u8], i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
     for face in 0..faces as usize {
         r.read_exact(&mut rec).map_err(|e| Error::io(path, e))?;
         let at = |k: usize| &rec[k * corner..];
@@ -281,7 +289,7 @@ pub fn scan_cell(path: &Path, faces: u64, layout: Layout, vertices: u64, mut f: 
         for (k, id) in ids.iter_mut().enumerate() {
             *id = vertex_id(path, at(k), 3 * face + k, vertices)?;
         }
-        let positions = [0, 1, 2].map(|k| Vec3::new(f32_at(at(k), 4), f32_at(at(k), 8), f32_at(at(k), 12)));
+        let positions = [0, 1, 2].map(|k| corner_position(at(k)));
         f(ids, positions);
     }
     Ok(())

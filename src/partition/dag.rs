@@ -57,7 +57,7 @@ pub fn build<W: Write + Send>(
         return Err(Error::invalid(job.input, None, "no faces left after removing degenerate and duplicate faces"));
     }
     let sizes = std::mem::take(&mut gathered.lock().map_err(|_| poisoned())?.node_sizes);
-    let node_faces = (!sizes.is_empty()).then(|| median_size(sizes.into_iter().map(|n| n as usize)));
+    let node_faces = median_size(sizes.into_iter().map(|n| n as usize));
     let mut first = job.cell_levels;
     let mut next_piece = spooled.len();
     let mut round = 0;

@@ -298,6 +298,12 @@ struct Distributed {
     spooled: Vec<(PathBuf, u64)>,
 }
 
+/// Whether the bit of welded vertex `id` is set in `shared` ([`Distributed::shared`]): faces of
+/// more than one cell use it.
+fn is_shared(shared: &[u64], id: u32) -> bool {
+    shared.get(id as usize / 64).is_some_and(|w| w >> (id % 64) & 1 == 1)
+}
+
 /// Marks a vertex used by faces of more than one cell in [`Distribute::owner`] (cells number at
 /// most [`MAX_CELLS`]).
 const SHARED: u16 = u16::MAX;

@@ -6,16 +6,12 @@
 //! meet, a few per thousand in a large mesh.
 
 use super::cells::{scan_cell, Layout};
+use super::is_shared;
 use crate::error::Result;
 use crate::mesh::triangle_cross;
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 use std::path::PathBuf;
-
-/// Whether the bit of welded vertex `id` is set in `shared`.
-pub fn is_shared(shared: &[u64], id: u32) -> bool {
-    shared.get(id as usize / 64).is_some_and(|w| w >> (id % 64) & 1 == 1)
-}
 
 /// The area-weighted normal sums of the shared vertices, over every face of the input.
 #[derive(Debug, Default)]

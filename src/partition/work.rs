@@ -379,12 +379,8 @@ pub(super) fn load_cell(job: &Job, c: usize, path: &Path, faces: u64) -> Result<
             })
             .collect();
     }
-    let pinned: Pins = ids
-        .iter()
-        .zip(&mesh.positions)
-        .filter(|(&i, _)| super::vertex_normals::is_shared(job.shared, i))
-        .map(|(_, &p)| position_key(p))
-        .collect();
+    let pinned: Pins =
+        ids.iter().zip(&mesh.positions).filter(|(&i, _)| super::is_shared(job.shared, i)).map(|(_, &p)| position_key(p)).collect();
     drop(ids);
     let (mesh, report) = mesh.clean().map_err(|_| Error::invalid(job.input, None, format!("cell {c}: a vertex is not finite")))?;
     Ok(Some(Loaded { mesh, pinned, removed: (report.degenerate_faces, report.duplicate_faces) }))
