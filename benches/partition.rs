@@ -5,7 +5,12 @@
 //! (largest node of any level over level 0's median), the top level's faces, the time from
 //! opening the file to its first frame (`strata stream`) and the shape retention of fronts under
 //! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure); then each
-//! partitioned build's distance over its in-core build's (tree and DAG), level by level.
+//! partitioned build's distance over its in-core build's (tree and DAG), level by level: at the
+//! default layout, then over three layouts (`--leaf-faces` a sixteenth below, at and above its
+//! default; each level's distances in a geometric mean), with the in-core build's own spread
+//! between layouts. On the CT head the coarse levels' distances move by more than the goal's 1.2
+//! from one layout to the next (a few long thin components leave at one level or another), so
+//! one layout's ratio there says little of the partition.
 //!
 //! `cargo bench --bench partition [-- --large FACES ...] [-- --memory 1G]`; without arguments the
 //! bunny and the CT head of ../shared/meshes (partitioned at budgets that make them several
@@ -177,7 +182,37 @@ fn first_frame_ms(file: &Path) -> Option<f64> {
         .min_by(f64::total_cmp)
 }
 
-fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &Path, Run)]) {
+/// `--leaf-faces` of the other layouts: a sixteenth below and above the default.
+fn leaf_faces_spread() -> [String; 2] {
+    let leaf = strata::hierarchy::HierarchyParams::default().leaf_faces;
+    [leaf - leaf / 16, leaf + leaf / 16].map(|n| n.to_string())
+}
+
+/// Each level's sampled distance from `file` to `input`.
+fn level_distances(file: &Path, input: &strata::Mesh) -> Vec<f32> {
+    let rd = Reader::open_path(file).expect("open");
+    (0..rd.levels().len() as u32)
+        .map(|l| strata::distance::surface_distance(&strata::assemble::to_mesh(&rd, l).expect("level"), input, 20_000, 7).mean)
+        .collect()
+}
+
+/// `a`'s distances over `b`'s at levels 1 and up present in both.
+fn level_ratios(a: &[f32], b: &[f32]) -> Vec<f64> {
+    a.iter().zip(b).skip(1).filter(|(_, &b)| b > 0.0).map(|(&a, &b)| a as f64 / b as f64).collect()
+}
+
+/// Per level that every layout has, the geometric mean of the layouts' distances.
+fn geometric_means(layouts: &[Vec<f32>]) -> Vec<f32> {
+    let levels = layouts.iter().map(Vec::len).min().unwrap_or(0);
+    (0..levels).map(|l| (layouts.iter().map(|d| (d[l] as f64).ln()).sum::<f64>() / layouts.len() as f64).exp() as f32).collect()
+}
+
+fn listed(ratios: &[f64]) -> String {
+    ratios.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(", ")
+}
+
+/// `spread`: per build named in `runs`, the files of the same build at [`leaf_faces_spread`].
+fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &Path, Run)], spread: &[(&str, Vec<PathBuf>)]) {
     println!("\n## {name} ({faces} input faces)");
     println!(
         "| build | s | M faces/s | peak MB | bytes/face | nodes | levels | top faces | largest node / level-0 median | culling cost | first frame ms | retention 10 % | 25 % |"
@@ -210,11 +245,7 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
             retention(0.25),
         );
         if let Some(m) = input {
-            distances.push(
-                (0..rd.levels().len() as u32)
-                    .map(|l| strata::distance::surface_distance(&strata::assemble::to_mesh(&rd, l).expect("level"), m, 20_000, 7).mean)
-                    .collect(),
-            );
+            distances.push(level_distances(file, m));
         }
     }
     if distances.len() >= 2 {
@@ -238,14 +269,30 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
         let at = |name: &str| runs.iter().position(|r| r.0 == name).and_then(|i| distances.get(i));
         for (part, core) in [("partitioned", "in-core"), ("partitioned DAG", "in-core DAG")] {
             let (Some(p), Some(c)) = (at(part), at(core)) else { continue };
-            let ratios: Vec<f64> = p.iter().zip(c).skip(1).filter(|(_, &c)| c > 0.0).map(|(&p, &c)| p as f64 / c as f64).collect();
+            let ratios = level_ratios(p, c);
             if ratios.is_empty() {
                 println!("{part} over {core}: no level above 0 in both");
                 continue;
             }
-            let listed: Vec<String> = ratios.iter().map(|r| format!("{r:.2}")).collect();
             let worst = ratios.iter().copied().fold(0.0, f64::max);
-            println!("{part} over {core}, levels 1–{}: {} (worst {worst:.2}; the goal: at most 1.2)", ratios.len(), listed.join(", "));
+            println!("{part} over {core}, levels 1–{}: {} (worst {worst:.2}; the goal: at most 1.2)", ratios.len(), listed(&ratios));
+            let layouts = |build: &str, default: &[f32]| -> Option<Vec<Vec<f32>>> {
+                let ((_, files), m) = (spread.iter().find(|s| s.0 == build)?, input?);
+                Some(std::iter::once(default.to_vec()).chain(files.iter().map(|f| level_distances(f, m))).collect())
+            };
+            let (Some(ps), Some(cs)) = (layouts(part, p), layouts(core, c)) else { continue };
+            let ratios = level_ratios(&geometric_means(&ps), &geometric_means(&cs));
+            let worst = ratios.iter().copied().fold(0.0, f64::max);
+            let leaves = leaf_faces_spread().join(", ");
+            println!(
+                "  over three layouts (the default and --leaf-faces {leaves}), levels 1–{}: {} (worst {worst:.2})",
+                ratios.len(),
+                listed(&ratios)
+            );
+            for (leaf, d) in leaf_faces_spread().iter().zip(&cs[1..]) {
+                let ratios = level_ratios(d, c);
+                println!("  {core}'s own spread, at --leaf-faces {leaf} over the default, levels 1–{}: {}", ratios.len(), listed(&ratios));
+            }
         }
     }
 }
@@ -285,8 +332,22 @@ fn main() {
         ];
         let files: Vec<PathBuf> = builds.iter().map(|b| out(b.1)).collect();
         let runs: Vec<(&str, &Path, Run)> = builds.iter().zip(&files).map(|(b, f)| (b.0, f.as_path(), convert(input, f, &b.2))).collect();
+        let spread: Vec<(&str, Vec<PathBuf>)> = builds
+            .iter()
+            .map(|(build, _, args)| {
+                let files = leaf_faces_spread()
+                    .iter()
+                    .map(|leaf| {
+                        let f = out(&format!("{}-leaf-{leaf}.strata", build.replace(' ', "-")));
+                        convert(input, &f, &[args.as_slice(), &["--leaf-faces", leaf.as_str()]].concat());
+                        f
+                    })
+                    .collect();
+                (*build, files)
+            })
+            .collect();
         let name = format!("{} (partitioned at --memory {budget})", input.file_name().unwrap().to_string_lossy());
-        report(&name, mesh.face_count() as u64, Some(&mesh), &runs);
+        report(&name, mesh.face_count() as u64, Some(&mesh), &runs, &spread);
     }
     for n in large {
         let ply = out(&format!("bumpy-{n}.ply"));
@@ -301,9 +362,9 @@ fn main() {
             let incore = out("large-incore.strata");
             let a = convert(&ply, &incore, &["--in-core"]);
             let mesh = strata::import::import(&ply, None).expect("import").mesh;
-            report(&name, faces, Some(&mesh), &[("in-core", &incore, a), ("partitioned", &part, b), ("partitioned DAG", &dag, c)]);
+            report(&name, faces, Some(&mesh), &[("in-core", &incore, a), ("partitioned", &part, b), ("partitioned DAG", &dag, c)], &[]);
         } else {
-            report(&name, faces, None, &[("partitioned", &part, b), ("partitioned DAG", &dag, c)]);
+            report(&name, faces, None, &[("partitioned", &part, b), ("partitioned DAG", &dag, c)], &[]);
         }
         let _ = std::fs::remove_file(&ply);
     }
