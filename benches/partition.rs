@@ -4,7 +4,8 @@
 //! level's sampled distance to the input, the culling cost measured on the file, node sizes
 //! (largest node of any level over level 0's median), the top level's faces, the time from
 //! opening the file to its first frame (`strata stream`) and the shape retention of fronts under
-//! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure); then each
+//! 10 % and 25 % of the input's faces (8 views at 512², the stream bench's measure), also over
+//! three layouts (below), whose spread the one layout's figure is read against; then each
 //! partitioned build's distance over its in-core build's (tree and DAG), level by level: at the
 //! default layout, then over three layouts (`--leaf-faces` a sixteenth below, at and above its
 //! default; each level's distances in a geometric mean), with the in-core build's own spread
@@ -201,6 +202,15 @@ fn level_ratios(a: &[f32], b: &[f32]) -> Vec<f64> {
     a.iter().zip(b).skip(1).filter(|(_, &b)| b > 0.0).map(|(&a, &b)| a as f64 / b as f64).collect()
 }
 
+/// Shaded retention of `file`'s fronts under 10 % and 25 % of its input faces over the 8 views;
+/// `None` where the top level alone exceeds the budget.
+fn shaded_retentions(file: &Path) -> [Option<f64>; 2] {
+    let input_faces = Reader::open_path(file).expect("open").header().input_faces as f64;
+    let views = retention_views::Views::of(file).expect("views");
+    let priority = strata::stream::Budgets::default().priority;
+    [0.10, 0.25].map(|share| views.retention(file, (input_faces * share) as u64, priority).expect("retention").map(|(shaded, _)| shaded))
+}
+
 /// Per level that every layout has, the geometric mean of the layouts' distances.
 fn geometric_means(layouts: &[Vec<f32>]) -> Vec<f32> {
     let levels = layouts.iter().map(Vec::len).min().unwrap_or(0);
@@ -219,19 +229,18 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut distances: Vec<Vec<f32>> = Vec::new();
+    // Per build, its retention at 10 % and 25 % in each layout (the default first).
+    let mut retentions: Vec<(&str, Vec<[Option<f64>; 2]>)> = Vec::new();
     for (build, file, run) in runs {
         let rd = Reader::open_path(file).expect("open");
         assert!(strata::format::verify_path(file).is_sound(), "{} does not verify", file.display());
         let (ratio, top) = node_sizes(&rd);
         let peak = run.peak_kb.map_or("–".to_string(), |k| format!("{:.0}", k as f64 / 1024.0));
-        let views = retention_views::Views::of(file).expect("views");
-        let retention = |share: f64| -> String {
-            let budget = (rd.header().input_faces as f64 * share) as u64;
-            match views.retention(file, budget, strata::stream::Budgets::default().priority).expect("retention") {
-                Some((shaded, _)) => format!("{shaded:.3}"),
-                None => "top too large".into(),
-            }
-        };
+        let layouts: Vec<[Option<f64>; 2]> = std::iter::once(*file)
+            .chain(spread.iter().filter(|s| s.0 == *build).flat_map(|s| s.1.iter().map(PathBuf::as_path)))
+            .map(shaded_retentions)
+            .collect();
+        let retention = |k: usize| layouts[0][k].map_or("top too large".to_string(), |r| format!("{r:.3}"));
         println!(
             "| {build} | {:.2} | {:.3} | {peak} | {:.1} | {} | {} | {top} | {ratio:.1} | {:.4} | {} | {} | {} |",
             run.seconds,
@@ -241,11 +250,29 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
             rd.levels().len(),
             culling_cost(&rd, 64),
             first_frame_ms(file).map_or("–".to_string(), |ms| format!("{ms:.1}")),
-            retention(0.10),
-            retention(0.25),
+            retention(0),
+            retention(1),
         );
+        retentions.push((build, layouts));
         if let Some(m) = input {
             distances.push(level_distances(file, m));
+        }
+    }
+    if retentions.iter().any(|(_, l)| l.len() > 1) {
+        println!(
+            "\nretention at 10 % and 25 % over three layouts (the default and --leaf-faces {}): mean (least–most)",
+            leaf_faces_spread().join(", ")
+        );
+        for (build, layouts) in &retentions {
+            let summary = |k: usize| -> String {
+                let r: Vec<f64> = layouts.iter().filter_map(|l| l[k]).collect();
+                if r.len() < layouts.len() {
+                    return "top too large in a layout".into();
+                }
+                let (lo, hi) = r.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+                format!("{:.3} ({lo:.3}–{hi:.3})", r.iter().sum::<f64>() / r.len() as f64)
+            };
+            println!("{build}: {}; {}", summary(0), summary(1));
         }
     }
     if distances.len() >= 2 {
