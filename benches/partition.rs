@@ -309,13 +309,17 @@ fn report(name: &str, faces: u64, input: Option<&strata::Mesh>, runs: &[(&str, &
             };
             let (Some(ps), Some(cs)) = (layouts(part, p), layouts(core, c)) else { continue };
             let ratios = level_ratios(&geometric_means(&ps), &geometric_means(&cs));
-            let worst = ratios.iter().copied().fold(0.0, f64::max);
             let leaves = leaf_faces_spread().join(", ");
-            println!(
-                "  over three layouts (the default and --leaf-faces {leaves}), levels 1–{}: {} (worst {worst:.2})",
-                ratios.len(),
-                listed(&ratios)
-            );
+            if ratios.is_empty() {
+                println!("  over three layouts (the default and --leaf-faces {leaves}): no level above 0 in every layout");
+            } else {
+                let worst = ratios.iter().copied().fold(0.0, f64::max);
+                println!(
+                    "  over three layouts (the default and --leaf-faces {leaves}), levels 1–{}: {} (worst {worst:.2})",
+                    ratios.len(),
+                    listed(&ratios)
+                );
+            }
             for (leaf, d) in leaf_faces_spread().iter().zip(&cs[1..]) {
                 let ratios = level_ratios(d, c);
                 println!("  {core}'s own spread, at --leaf-faces {leaf} over the default, levels 1–{}: {}", ratios.len(), listed(&ratios));

@@ -131,10 +131,11 @@ pub fn streaming(input: &Path, format: Option<Format>) -> Option<&'static Stream
 /// is streamed (systems allow about a thousand open files by default).
 pub const MAX_CELLS: u64 = 960;
 
-/// Node levels each cell builds for cells of `faces` faces: while the cell's top keeps at least
-/// 64·√faces faces: its locked border stays at full detail and grows as √faces, so it stays a
-/// small part of the top. With 24·√faces the CT head's cells' top level was 1.24 times the in-core
-/// build's distance to the input; with 64, 1.07 (notes/partition.md).
+/// Node levels each cell builds for cells of `faces` faces (at least one): while the cell's top
+/// keeps at least 64·√faces faces. Its locked border stays at full detail and grows as √faces, so
+/// it stays a small part of the top. With 24·√faces, the CT head's partitioned DAG read 1.24
+/// times the in-core DAG's distance to the input at level 4, its cells' top; with 64 (two levels
+/// in the cells instead of four), 1.07 there (notes/dag.md).
 pub fn cell_levels(faces: u64) -> usize {
     (((faces as f64).sqrt() / 64.0).log2().floor() as i64).clamp(1, 12) as usize
 }
